@@ -1,0 +1,686 @@
+#!/usr/bin/env python3
+"""Deterministic generator for the wsoft USD test scenes.
+
+Usage::
+
+    python usd_scenes/generate.py [--out DIR] [--only NAME ...]
+
+NAME is one of: box_plane, contact, multi_light, cutout, city (a file name
+with extension is accepted too).  The default output folder is the folder
+holding this script.  Every run with the same arguments writes byte-identical
+files: all randomness uses fixed seeds and nothing time-dependent is written.
+
+Only pxr (usd-core), numpy and Pillow are used.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import sys
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+from PIL import Image
+from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdShade, Vt
+
+# ---------------------------------------------------------------------------
+# Geometry helpers.  A "mesh tuple" is (points (N,3) float64, counts, indices).
+# All closed meshes are wound counter-clockwise seen from outside (normals out).
+# ---------------------------------------------------------------------------
+
+MeshData = Tuple[np.ndarray, List[int], List[int]]
+
+
+def box_mesh(lo: Sequence[float], hi: Sequence[float]) -> MeshData:
+    """Axis-aligned box as 6 outward-facing quads (8 shared points)."""
+    lo = np.asarray(lo, dtype=np.float64)
+    hi = np.asarray(hi, dtype=np.float64)
+    pts = np.empty((8, 3), dtype=np.float64)
+    for i in range(8):  # bit 0 -> x, bit 1 -> y, bit 2 -> z
+        pts[i] = [hi[0] if i & 1 else lo[0],
+                  hi[1] if i & 2 else lo[1],
+                  hi[2] if i & 4 else lo[2]]
+    faces = [
+        (0, 2, 3, 1),  # -Z
+        (4, 5, 7, 6),  # +Z
+        (0, 1, 5, 4),  # -Y
+        (2, 6, 7, 3),  # +Y
+        (0, 4, 6, 2),  # -X
+        (1, 3, 7, 5),  # +X
+    ]
+    return pts, [4] * 6, [i for f in faces for i in f]
+
+
+def quad_mesh(corners: Sequence[Sequence[float]]) -> MeshData:
+    """Single quad from 4 corners given in counter-clockwise order."""
+    return np.asarray(corners, dtype=np.float64), [4], [0, 1, 2, 3]
+
+
+def uv_sphere_y(radius: float, segments: int, stacks: int) -> MeshData:
+    """Triangle UV sphere centred at the origin with its poles on the Y axis.
+
+    The bottom pole is a vertex at (0, -radius, 0), so the sphere touches a
+    ground plane y = -radius in exactly one point.
+    """
+    pts = [(0.0, radius, 0.0)]
+    for k in range(1, stacks):
+        phi = math.pi * k / stacks  # from +Y (0) to -Y (pi)
+        y = radius * math.cos(phi)
+        r = radius * math.sin(phi)
+        for s in range(segments):
+            th = 2.0 * math.pi * s / segments
+            pts.append((r * math.cos(th), y, -r * math.sin(th)))
+    pts.append((0.0, -radius, 0.0))
+    top, bottom = 0, len(pts) - 1
+
+    def ring(k: int, s: int) -> int:  # k in 1..stacks-1
+        return 1 + (k - 1) * segments + (s % segments)
+
+    idx: List[int] = []
+    for s in range(segments):
+        idx += [top, ring(1, s), ring(1, s + 1)]
+    for k in range(1, stacks - 1):
+        for s in range(segments):
+            a, b = ring(k, s), ring(k, s + 1)
+            c, d = ring(k + 1, s + 1), ring(k + 1, s)
+            idx += [a, d, c, a, c, b]
+    for s in range(segments):
+        idx += [bottom, ring(stacks - 1, s + 1), ring(stacks - 1, s)]
+    return np.asarray(pts, dtype=np.float64), [3] * (len(idx) // 3), idx
+
+
+def prism_z(n: int, radius: float, z0: float, z1: float,
+            center: Sequence[float] = (0.0, 0.0), phase: float = 0.0) -> MeshData:
+    """Right prism with regular n-gon caps (n-gon faces kept as single faces)."""
+    cx, cy = center
+    th = [phase + 2.0 * math.pi * k / n for k in range(n)]
+    bot = [(cx + radius * math.cos(t), cy + radius * math.sin(t), z0) for t in th]
+    top = [(cx + radius * math.cos(t), cy + radius * math.sin(t), z1) for t in th]
+    pts = np.asarray(bot + top, dtype=np.float64)
+    counts: List[int] = []
+    idx: List[int] = []
+    counts.append(n)
+    idx += list(range(n))[::-1]  # bottom cap, facing -Z
+    counts.append(n)
+    idx += [n + k for k in range(n)]  # top cap, facing +Z
+    for k in range(n):
+        k1 = (k + 1) % n
+        counts.append(4)
+        idx += [k, k1, n + k1, n + k]
+    return pts, counts, idx
+
+
+def torus_z(major: float, minor: float, nu: int, nv: int) -> MeshData:
+    """Quad torus around the Z axis, centred at the origin."""
+    pts = []
+    for i in range(nu):
+        u = 2.0 * math.pi * i / nu
+        for j in range(nv):
+            v = 2.0 * math.pi * j / nv
+            rr = major + minor * math.cos(v)
+            pts.append((rr * math.cos(u), rr * math.sin(u), minor * math.sin(v)))
+    idx: List[int] = []
+    for i in range(nu):
+        for j in range(nv):
+            a = i * nv + j
+            b = ((i + 1) % nu) * nv + j
+            c = ((i + 1) % nu) * nv + (j + 1) % nv
+            d = i * nv + (j + 1) % nv
+            idx += [a, b, c, d]
+    return np.asarray(pts, dtype=np.float64), [4] * (nu * nv), idx
+
+
+def translate_mesh(m: MeshData, t: Sequence[float]) -> MeshData:
+    return m[0] + np.asarray(t, dtype=np.float64), m[1], m[2]
+
+
+def merge_meshes(parts: Sequence[MeshData]) -> MeshData:
+    pts, counts, idx, off = [], [], [], 0
+    for p, c, i in parts:
+        pts.append(p)
+        counts += list(c)
+        idx += [k + off for k in i]
+        off += len(p)
+    return np.concatenate(pts, axis=0), counts, idx
+
+
+def weld(m: MeshData) -> MeshData:
+    """Merge points with bit-identical float32 coordinates (deterministic)."""
+    p32 = m[0].astype(np.float32)
+    uniq, inverse = np.unique(p32, axis=0, return_inverse=True)
+    inverse = inverse.reshape(-1)
+    idx = [int(inverse[i]) for i in m[2]]
+    return uniq.astype(np.float64), list(m[1]), idx
+
+
+def triangle_count(counts: Sequence[int]) -> int:
+    return int(sum(c - 2 for c in counts))
+
+
+def signed_volume(m: MeshData) -> float:
+    p, counts, idx = m
+    vol, o = 0.0, 0
+    for c in counts:
+        f = idx[o:o + c]
+        for k in range(1, c - 1):
+            vol += float(np.dot(p[f[0]], np.cross(p[f[k]], p[f[k + 1]])))
+        o += c
+    return vol / 6.0
+
+
+# ---------------------------------------------------------------------------
+# USD helpers
+# ---------------------------------------------------------------------------
+
+
+def new_stage(path: str, up_axis: str) -> Usd.Stage:
+    if os.path.exists(path):
+        os.remove(path)
+    stage = Usd.Stage.CreateNew(path)
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z if up_axis == "Z" else UsdGeom.Tokens.y)
+    world = UsdGeom.Xform.Define(stage, "/World")
+    stage.SetDefaultPrim(world.GetPrim())
+    return stage
+
+
+def make_material(stage: Usd.Stage, path: str, color: Sequence[float],
+                  roughness: float = 0.7) -> UsdShade.Material:
+    looks = Sdf.Path(path).GetParentPath()
+    if not stage.GetPrimAtPath(looks):
+        UsdGeom.Scope.Define(stage, looks)
+    mat = UsdShade.Material.Define(stage, path)
+    shader = UsdShade.Shader.Define(stage, path + "/PreviewSurface")
+    shader.CreateIdAttr("UsdPreviewSurface")
+    shader.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(*color))
+    shader.CreateInput("roughness", Sdf.ValueTypeNames.Float).Set(float(roughness))
+    shader.CreateInput("metallic", Sdf.ValueTypeNames.Float).Set(0.0)
+    mat.CreateSurfaceOutput().ConnectToSource(shader.ConnectableAPI(), "surface")
+    return mat
+
+
+def bind(prim: Usd.Prim, mat: UsdShade.Material) -> None:
+    UsdShade.MaterialBindingAPI.Apply(prim).Bind(mat)
+
+
+def make_mesh(stage: Usd.Stage, path: str, m: MeshData, double_sided: bool,
+              material: Optional[UsdShade.Material] = None) -> UsdGeom.Mesh:
+    pts, counts, idx = m
+    mesh = UsdGeom.Mesh.Define(stage, path)
+    p32 = np.ascontiguousarray(pts, dtype=np.float32)
+    mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(p32))
+    mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.asarray(counts, dtype=np.int32)))
+    mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(np.asarray(idx, dtype=np.int32)))
+    mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+    mesh.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)
+    mesh.CreateDoubleSidedAttr(bool(double_sided))
+    lo, hi = p32.min(axis=0), p32.max(axis=0)
+    mesh.CreateExtentAttr(Vt.Vec3fArray([Gf.Vec3f(*map(float, lo)), Gf.Vec3f(*map(float, hi))]))
+    if material is not None:
+        bind(mesh.GetPrim(), material)
+    return mesh
+
+
+def look_at_xform(eye: Sequence[float], target: Sequence[float],
+                  up: Sequence[float]) -> Gf.Matrix4d:
+    """Local-to-world matrix of an object at `eye` whose local -Z looks at
+    `target` with local +Y as close as possible to `up`."""
+    view = Gf.Matrix4d().SetLookAt(Gf.Vec3d(*eye), Gf.Vec3d(*target), Gf.Vec3d(*up))
+    return view.GetInverse()
+
+
+def make_camera(stage: Usd.Stage, eye, target, up, aspect: str = "4:3",
+                focal: float = 24.0, clip=(0.1, 1000.0)) -> UsdGeom.Camera:
+    cam = UsdGeom.Camera.Define(stage, "/World/Camera")
+    cam.CreateProjectionAttr(UsdGeom.Tokens.perspective)
+    cam.CreateFocalLengthAttr(float(focal))
+    if aspect == "1:1":
+        cam.CreateHorizontalApertureAttr(24.0)
+        cam.CreateVerticalApertureAttr(24.0)
+    else:
+        cam.CreateHorizontalApertureAttr(36.0)
+        cam.CreateVerticalApertureAttr(27.0)
+    cam.CreateClippingRangeAttr(Gf.Vec2f(float(clip[0]), float(clip[1])))
+    cam.AddTransformOp().Set(look_at_xform(eye, target, up))
+    return cam
+
+
+def world_dir(prim: Usd.Prim, d=(0.0, 0.0, -1.0)) -> Gf.Vec3d:
+    m = UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(Usd.TimeCode.Default())
+    return m.TransformDir(Gf.Vec3d(*d)).GetNormalized()
+
+
+def check_points_down(prim: Usd.Prim, down: Sequence[float], min_cos: float = 0.5) -> None:
+    d = world_dir(prim)
+    c = float(Gf.Dot(d, Gf.Vec3d(*down)))
+    if c < min_cos:
+        raise RuntimeError("%s: world -Z = %s does not point down (cos=%.3f)"
+                           % (prim.GetPath(), d, c))
+
+
+def set_doc_attr(prim: Usd.Prim, name: str, value: float) -> None:
+    attr = prim.CreateAttribute(name, Sdf.ValueTypeNames.Double, custom=True)
+    attr.Set(float(value))
+
+
+# ---------------------------------------------------------------------------
+# Scenes
+# ---------------------------------------------------------------------------
+
+
+def scene_box_plane(out_dir: str) -> Dict[str, object]:
+    path = os.path.join(out_dir, "box_plane.usda")
+    stage = new_stage(path, "Z")
+    world = stage.GetPrimAtPath("/World")
+    set_doc_attr(world, "wsoft:analytic:occluder_height", 1.0)
+    set_doc_attr(world, "wsoft:analytic:light_height", 3.0)
+    set_doc_attr(world, "wsoft:analytic:occluder_half", 1.0)
+    set_doc_attr(world, "wsoft:analytic:light_half", 0.5)
+
+    ground_mat = make_material(stage, "/World/Looks/GroundMat", (0.8, 0.8, 0.8))
+    occ_mat = make_material(stage, "/World/Looks/OccluderMat", (0.8, 0.25, 0.2))
+    ground = quad_mesh([(-10, -10, 0), (10, -10, 0), (10, 10, 0), (-10, 10, 0)])
+    occluder = quad_mesh([(-1, -1, 1), (1, -1, 1), (1, 1, 1), (-1, 1, 1)])
+    make_mesh(stage, "/World/Ground", ground, False, ground_mat)
+    make_mesh(stage, "/World/Occluder", occluder, True, occ_mat)
+
+    light = UsdLux.RectLight.Define(stage, "/World/Light")
+    light.CreateWidthAttr(1.0)
+    light.CreateHeightAttr(1.0)
+    light.CreateIntensityAttr(10.0)
+    light.AddTranslateOp().Set(Gf.Vec3d(0.0, 0.0, 3.0))  # identity rotation: emits -Z
+    check_points_down(light.GetPrim(), (0, 0, -1), 0.999)
+
+    make_camera(stage, (0.0, -6.0, 9.0), (0.0, 0.0, 0.0), (0.0, 0.0, 1.0), clip=(0.1, 100.0))
+    stage.GetRootLayer().Save()
+    return {"file": path, "triangles": triangle_count(ground[1]) + triangle_count(occluder[1])}
+
+
+def scene_contact(out_dir: str) -> Dict[str, object]:
+    path = os.path.join(out_dir, "contact.usda")
+    stage = new_stage(path, "Y")
+    tris = 0
+
+    ground = quad_mesh([(-6, 0, 6), (6, 0, 6), (6, 0, -6), (-6, 0, -6)])  # faces +Y
+    make_mesh(stage, "/World/Ground", ground, False,
+              make_material(stage, "/World/Looks/GroundMat", (0.8, 0.8, 0.8)))
+    tris += triangle_count(ground[1])
+
+    # Unit cube, bottom face on y = 0, occupying x in [1, 2], z in [-0.5, 0.5].
+    cube = box_mesh((-0.5, -0.5, -0.5), (0.5, 0.5, 0.5))
+    cube_prim = make_mesh(stage, "/World/Cube", cube, False,
+                          make_material(stage, "/World/Looks/CubeMat", (0.2, 0.4, 0.8)))
+    cube_prim.AddTranslateOp().Set(Gf.Vec3d(1.5, 0.5, 0.0))
+    tris += triangle_count(cube[1])
+
+    # Sphere of radius 0.6 whose bottom pole vertex touches y = 0.
+    sphere = uv_sphere_y(0.6, 32, 16)
+    sph = make_mesh(stage, "/World/Sphere", sphere, False,
+                    make_material(stage, "/World/Looks/SphereMat", (0.85, 0.6, 0.2)))
+    # float32(0.6) so the float32 pole vertex lands exactly on y = 0
+    sph.AddTranslateOp().Set(Gf.Vec3d(-0.8, float(np.float32(0.6)), 1.1))
+    tris += triangle_count(sphere[1])
+
+    # Plank 3 x 0.1 x 0.5: local box x in [0, 3], y in [0, 0.1].  Its lower
+    # bottom edge lies on the ground at x = P0 and its bottom face rests on
+    # the cube's top edge (x = 1, y = 1) at distance s along the plank.
+    length, thick, depth, s = 3.0, 0.1, 0.5, 2.2
+    alpha = math.asin(1.0 / s)
+    p0x = 1.0 - s * math.cos(alpha)
+    plank = box_mesh((0.0, 0.0, -depth / 2), (length, thick, depth / 2))
+    pl = make_mesh(stage, "/World/Plank", plank, False,
+                   make_material(stage, "/World/Looks/PlankMat", (0.6, 0.45, 0.3)))
+    pl.AddTranslateOp().Set(Gf.Vec3d(p0x, 0.0, 0.0))
+    pl.AddRotateZOp(UsdGeom.XformOp.PrecisionDouble).Set(math.degrees(alpha))
+    tris += triangle_count(plank[1])
+
+    # RectLight above; rotateX(-90) maps local -Z to world -Y (down).
+    light = UsdLux.RectLight.Define(stage, "/World/Light")
+    light.CreateWidthAttr(1.5)
+    light.CreateHeightAttr(1.5)
+    light.CreateIntensityAttr(10.0)
+    light.AddTranslateOp().Set(Gf.Vec3d(1.0, 5.0, 1.0))
+    light.AddRotateXOp().Set(-90.0)
+    check_points_down(light.GetPrim(), (0, -1, 0), 0.999)
+
+    make_camera(stage, (0.5, 4.0, 7.0), (0.3, 0.4, 0.3), (0.0, 1.0, 0.0), clip=(0.1, 100.0))
+    stage.GetRootLayer().Save()
+    return {"file": path, "triangles": tris}
+
+
+def scene_multi_light(out_dir: str) -> Dict[str, object]:
+    path = os.path.join(out_dir, "multi_light.usda")
+    stage = new_stage(path, "Z")
+    tris = 0
+
+    def add(name: str, m: MeshData, color, double_sided=False):
+        nonlocal tris
+        mat = make_material(stage, "/World/Looks/%sMat" % name, color)
+        make_mesh(stage, "/World/%s" % name, m, double_sided, mat)
+        tris += triangle_count(m[1])
+
+    add("Ground", quad_mesh([(-8, -8, 0), (8, -8, 0), (8, 8, 0), (-8, 8, 0)]), (0.8, 0.8, 0.8))
+    stage.DefinePrim("/World/Occluders", "Xform")
+    add("Occluders/BoxA", box_mesh((-3.5, -2.5, 0.0), (-2.5, -1.5, 1.0)), (0.7, 0.3, 0.3))
+    add("Occluders/BoxB", box_mesh((-0.3, -0.3, 0.0), (0.3, 0.3, 2.0)), (0.3, 0.7, 0.3))
+    add("Occluders/FloatingBox", box_mesh((1.5, -2.8, 1.2), (2.7, -2.2, 1.5)), (0.3, 0.3, 0.7))
+    # Hexagonal prism (hexagon faces kept as 6-gons), floating above ground.
+    add("Occluders/HexPrism", prism_z(6, 0.7, 1.2, 2.0, center=(-2.0, 2.0)), (0.8, 0.7, 0.2))
+    # Pentagonal prism standing on the ground.
+    add("Occluders/PentPrism", prism_z(5, 0.5, 0.0, 1.4, center=(0.0, -3.5), phase=math.pi / 2),
+        (0.6, 0.3, 0.7))
+    # Cylinder with 16-gon caps.
+    add("Occluders/Cylinder", prism_z(16, 0.4, 0.0, 1.6, center=(3.5, 0.5)), (0.2, 0.6, 0.7))
+    # Quad torus lying flat, floating.
+    add("Occluders/Torus", translate_mesh(torus_z(1.0, 0.25, 32, 12), (2.0, 3.0, 1.0)),
+        (0.75, 0.5, 0.35))
+
+    stage.DefinePrim("/World/Lights", "Xform")
+    rect = UsdLux.RectLight.Define(stage, "/World/Lights/Rect")
+    rect.CreateWidthAttr(1.2)
+    rect.CreateHeightAttr(0.8)
+    rect.CreateIntensityAttr(20.0)
+    rect.AddTransformOp().Set(look_at_xform((-2.5, -1.0, 5.0), (-2.5, -1.5, 0.0), (0, 1, 0)))
+    check_points_down(rect.GetPrim(), (0, 0, -1), 0.9)
+
+    disk = UsdLux.DiskLight.Define(stage, "/World/Lights/Disk")
+    disk.CreateRadiusAttr(0.5)
+    disk.CreateIntensityAttr(20.0)
+    disk.AddTransformOp().Set(look_at_xform((2.5, -1.0, 4.5), (2.0, -2.5, 0.0), (0, 1, 0)))
+    check_points_down(disk.GetPrim(), (0, 0, -1), 0.9)
+
+    sphere = UsdLux.SphereLight.Define(stage, "/World/Lights/Sphere")
+    sphere.CreateRadiusAttr(0.3)
+    sphere.CreateIntensityAttr(30.0)
+    sphere.AddTranslateOp().Set(Gf.Vec3d(-1.5, 2.5, 3.5))
+
+    sun = UsdLux.DistantLight.Define(stage, "/World/Lights/Sun")
+    sun.CreateAngleAttr(2.0)
+    sun.CreateIntensityAttr(2.0)
+    sun.AddRotateXYZOp().Set(Gf.Vec3f(35.0, 0.0, 30.0))
+    check_points_down(sun.GetPrim(), (0, 0, -1), 0.7)
+
+    noshadow = UsdLux.SphereLight.Define(stage, "/World/Lights/NoShadow")
+    noshadow.CreateRadiusAttr(0.2)
+    noshadow.CreateIntensityAttr(10.0)
+    noshadow.AddTranslateOp().Set(Gf.Vec3d(3.0, 2.0, 2.5))
+    UsdLux.ShadowAPI.Apply(noshadow.GetPrim()).CreateShadowEnableAttr(False)
+
+    dome = UsdLux.DomeLight.Define(stage, "/World/Lights/Dome")
+    dome.CreateIntensityAttr(0.2)
+
+    make_camera(stage, (0.0, -11.0, 9.0), (0.0, 0.0, 0.5), (0.0, 0.0, 1.0), clip=(0.1, 200.0))
+    stage.GetRootLayer().Save()
+    return {"file": path, "triangles": tris}
+
+
+def write_checker_png(path: str, size: int = 64, cells: int = 8) -> None:
+    """RGBA checker: cell (row, col) of the *image* (row 0 = top) is opaque
+    (alpha 255, orange) when (row + col) is even, else transparent (alpha 0)."""
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    cell = size // cells
+    yy, xx = np.mgrid[0:size, 0:size]
+    opaque = ((yy // cell + xx // cell) % 2) == 0
+    img = np.zeros((size, size, 4), dtype=np.uint8)
+    img[opaque] = (230, 120, 40, 255)
+    img[~opaque] = (0, 0, 0, 0)
+    Image.fromarray(img, "RGBA").save(path, format="PNG", optimize=False)
+
+
+def scene_cutout(out_dir: str) -> Dict[str, object]:
+    path = os.path.join(out_dir, "cutout.usda")
+    write_checker_png(os.path.join(out_dir, "textures", "checker_alpha.png"))
+    stage = new_stage(path, "Z")
+    tris = 0
+
+    ground = quad_mesh([(-5, -5, 0), (5, -5, 0), (5, 5, 0), (-5, 5, 0)])
+    make_mesh(stage, "/World/Ground", ground, False,
+              make_material(stage, "/World/Looks/GroundMat", (0.8, 0.8, 0.8)))
+    tris += triangle_count(ground[1])
+
+    # Cutout material: opacity <- texture alpha, opacityThreshold 0.5.
+    UsdGeom.Scope.Define(stage, "/World/Looks")
+    mat = UsdShade.Material.Define(stage, "/World/Looks/FenceMat")
+    surf = UsdShade.Shader.Define(stage, "/World/Looks/FenceMat/PreviewSurface")
+    surf.CreateIdAttr("UsdPreviewSurface")
+    surf.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(0.9, 0.47, 0.16))
+    surf.CreateInput("roughness", Sdf.ValueTypeNames.Float).Set(0.7)
+    surf.CreateInput("opacityThreshold", Sdf.ValueTypeNames.Float).Set(0.5)
+    reader = UsdShade.Shader.Define(stage, "/World/Looks/FenceMat/StReader")
+    reader.CreateIdAttr("UsdPrimvarReader_float2")
+    reader.CreateInput("varname", Sdf.ValueTypeNames.String).Set("st")
+    reader.CreateOutput("result", Sdf.ValueTypeNames.Float2)
+    tex = UsdShade.Shader.Define(stage, "/World/Looks/FenceMat/AlphaTexture")
+    tex.CreateIdAttr("UsdUVTexture")
+    tex.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(Sdf.AssetPath("textures/checker_alpha.png"))
+    tex.CreateInput("wrapS", Sdf.ValueTypeNames.Token).Set("repeat")
+    tex.CreateInput("wrapT", Sdf.ValueTypeNames.Token).Set("repeat")
+    tex.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set("raw")
+    tex.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(
+        reader.ConnectableAPI(), "result")
+    tex.CreateOutput("rgb", Sdf.ValueTypeNames.Float3)
+    tex.CreateOutput("a", Sdf.ValueTypeNames.Float)
+    surf.CreateInput("opacity", Sdf.ValueTypeNames.Float).ConnectToSource(
+        tex.ConnectableAPI(), "a")
+    mat.CreateSurfaceOutput().ConnectToSource(surf.ConnectableAPI(), "surface")
+
+    fence = quad_mesh([(-1, -1, 1), (1, -1, 1), (1, 1, 1), (-1, 1, 1)])
+    fmesh = make_mesh(stage, "/World/Fence", fence, True, mat)
+    st = UsdGeom.PrimvarsAPI(fmesh).CreatePrimvar(
+        "st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.faceVarying)
+    st.Set(Vt.Vec2fArray([Gf.Vec2f(0, 0), Gf.Vec2f(1, 0), Gf.Vec2f(1, 1), Gf.Vec2f(0, 1)]))
+    tris += triangle_count(fence[1])
+
+    leaf = box_mesh((2.0, -0.5, 0.6), (3.0, 0.5, 1.2))
+    make_mesh(stage, "/World/Leaf", leaf, False,
+              make_material(stage, "/World/Looks/LeafMat", (0.3, 0.6, 0.25)))
+    tris += triangle_count(leaf[1])
+
+    light = UsdLux.RectLight.Define(stage, "/World/Light")
+    light.CreateWidthAttr(0.5)
+    light.CreateHeightAttr(0.5)
+    light.CreateIntensityAttr(20.0)
+    light.AddTranslateOp().Set(Gf.Vec3d(0.0, 0.0, 4.0))
+    check_points_down(light.GetPrim(), (0, 0, -1), 0.999)
+
+    make_camera(stage, (0.5, -2.5, 8.0), (0.5, 0.0, 0.0), (0.0, 0.0, 1.0), aspect="1:1",
+                clip=(0.1, 100.0))
+    stage.GetRootLayer().Save()
+    return {"file": path, "triangles": tris}
+
+
+# --- city -------------------------------------------------------------------
+
+
+def facade_wall(origin, u, count: int, floors: int, cell_w: float, floor_h: float,
+                win_u: Tuple[float, float], win_v: Tuple[float, float],
+                inset: float) -> MeshData:
+    """Wall of count x floors cells, each with a recessed window.
+
+    The wall spans origin + [0, count*cell_w] * u + [0, floors*floor_h] * Z and
+    faces n = u x Z.  Each cell: 4 frame quads around the window opening,
+    4 reveal quads and 1 recessed back quad (9 quads = 18 triangles).
+    """
+    o = np.asarray(origin, dtype=np.float64)
+    u = np.asarray(u, dtype=np.float64)
+    v = np.array([0.0, 0.0, 1.0])
+    n = np.cross(u, v)
+    pts: List[np.ndarray] = []
+    idx: List[int] = []
+    for j in range(floors):
+        for i in range(count):
+            base = len(pts)
+
+            def P(a: float, b: float, d: float = 0.0) -> np.ndarray:
+                return o + a * u + b * v - d * n
+
+            x0, x1 = i * cell_w, (i + 1) * cell_w
+            y0, y1 = j * floor_h, (j + 1) * floor_h
+            wx0, wx1 = x0 + win_u[0] * cell_w, x0 + win_u[1] * cell_w
+            wy0, wy1 = y0 + win_v[0] * floor_h, y0 + win_v[1] * floor_h
+            pts += [P(x0, y0), P(x1, y0), P(x1, y1), P(x0, y1),                  # O 0..3
+                    P(wx0, wy0), P(wx1, wy0), P(wx1, wy1), P(wx0, wy1),          # I 4..7
+                    P(wx0, wy0, inset), P(wx1, wy0, inset),
+                    P(wx1, wy1, inset), P(wx0, wy1, inset)]                      # B 8..11
+            for k in range(4):
+                k1 = (k + 1) % 4
+                idx += [base + k, base + k1, base + 4 + k1, base + 4 + k]        # frame
+                idx += [base + 4 + k, base + 4 + k1, base + 8 + k1, base + 8 + k]  # reveal
+            idx += [base + 8, base + 9, base + 10, base + 11]                    # back
+    return np.asarray(pts), [4] * (len(idx) // 4), idx
+
+
+def building_mesh(cx: int, cy: int, floors: int, cell_w: float, floor_h: float,
+                  win_u, win_v, inset: float, roof_box: Tuple[float, float, float]) -> MeshData:
+    W, D, H = cx * cell_w, cy * cell_w, floors * floor_h
+    walls = [
+        facade_wall((-W / 2, -D / 2, 0), (1, 0, 0), cx, floors, cell_w, floor_h, win_u, win_v, inset),
+        facade_wall((W / 2, -D / 2, 0), (0, 1, 0), cy, floors, cell_w, floor_h, win_u, win_v, inset),
+        facade_wall((W / 2, D / 2, 0), (-1, 0, 0), cx, floors, cell_w, floor_h, win_u, win_v, inset),
+        facade_wall((-W / 2, D / 2, 0), (0, -1, 0), cy, floors, cell_w, floor_h, win_u, win_v, inset),
+    ]
+    roof = quad_mesh([(-W / 2, -D / 2, H), (W / 2, -D / 2, H), (W / 2, D / 2, H), (-W / 2, D / 2, H)])
+    rw, rd, rh = roof_box
+    pent = box_mesh((-rw / 2, -rd / 2, H), (rw / 2, rd / 2, H + rh))
+    # drop the penthouse bottom face (first quad, -Z): it lies on the roof
+    pent = (pent[0], pent[1][1:], pent[2][4:])
+    return weld(merge_meshes(walls + [roof, pent]))
+
+
+CITY_PROTOTYPES = [
+    # (cells x, cells y, floors, cell width, floor height)
+    (3, 3, 10, 3.0, 3.5),
+    (4, 4, 10, 3.0, 3.5),
+    (4, 3, 12, 3.0, 3.5),
+    (5, 3, 10, 3.0, 3.5),
+    (5, 5, 8, 3.0, 4.0),
+    (3, 2, 20, 3.0, 3.5),
+    (6, 4, 8, 3.0, 3.0),
+    (4, 4, 13, 3.0, 3.5),
+    (6, 3, 7, 3.0, 4.0),
+    (3, 3, 16, 3.0, 3.5),
+    (5, 4, 9, 3.0, 3.5),
+    (2, 2, 25, 3.5, 3.5),
+]
+
+
+def scene_city(out_dir: str) -> Dict[str, object]:
+    path = os.path.join(out_dir, "city.usdc")
+    stage = new_stage(path, "Z")
+    rng = np.random.default_rng(20240611)
+
+    # Prototypes: a class root (abstract, never rendered itself).
+    proto_root = stage.CreateClassPrim("/Prototypes")
+    proto_root.SetTypeName("Scope")
+    proto_tris: List[int] = []
+    for k, (cx, cy, fl, cw, fh) in enumerate(CITY_PROTOTYPES):
+        ppath = "/Prototypes/Building%02d" % k
+        stage.DefinePrim(ppath, "Xform")
+        win_u = (0.2 + 0.05 * (k % 3), 0.8 - 0.05 * (k % 3))
+        win_v = (0.25, 0.8 - 0.05 * (k % 2))
+        inset = 0.25 + 0.05 * (k % 4)
+        roof_box = (cx * cw * 0.4, cy * cw * 0.4, 2.0 + (k % 3))
+        m = building_mesh(cx, cy, fl, cw, fh, win_u, win_v, inset, roof_box)
+        grey = 0.45 + 0.04 * (k % 6)
+        tint = ((k * 37) % 11) / 100.0
+        mat = make_material(stage, ppath + "/Looks/Facade",
+                            (grey + tint, grey, grey - tint * 0.5))
+        make_mesh(stage, ppath + "/Mesh", m, False, mat)
+        proto_tris.append(triangle_count(m[1]))
+
+    ground = quad_mesh([(-400, -400, 0), (400, -400, 0), (400, 400, 0), (-400, 400, 0)])
+    make_mesh(stage, "/World/Ground", ground, False,
+              make_material(stage, "/World/Looks/GroundMat", (0.35, 0.35, 0.33)))
+    total = triangle_count(ground[1])
+
+    stage.DefinePrim("/World/City", "Xform")
+    n_side, spacing = 19, 32.0
+    n_inst = 0
+    for r in range(n_side):
+        for c in range(n_side):
+            skip = rng.random() < 0.06
+            proto = int(rng.integers(0, len(CITY_PROTOTYPES)))
+            rot = 90.0 * int(rng.integers(0, 4))
+            hscale = float(np.round(rng.uniform(0.7, 1.5), 3))
+            jitter = np.round(rng.uniform(-2.0, 2.0, size=2), 3)
+            if skip:  # open plaza
+                continue
+            x = (c - (n_side - 1) / 2) * spacing + float(jitter[0])
+            y = (r - (n_side - 1) / 2) * spacing + float(jitter[1])
+            inst = UsdGeom.Xform.Define(stage, "/World/City/B_%02d_%02d" % (r, c))
+            prim = inst.GetPrim()
+            prim.GetReferences().AddInternalReference(
+                Sdf.Path("/Prototypes/Building%02d" % proto))
+            prim.SetInstanceable(True)
+            inst.AddTranslateOp().Set(Gf.Vec3d(x, y, 0.0))
+            inst.AddRotateZOp().Set(rot)
+            inst.AddScaleOp().Set(Gf.Vec3f(1.0, 1.0, hscale))
+            total += proto_tris[proto]
+            n_inst += 1
+
+    stage.DefinePrim("/World/Lights", "Xform")
+    sun = UsdLux.DistantLight.Define(stage, "/World/Lights/Sun")
+    sun.CreateAngleAttr(1.0)
+    sun.CreateIntensityAttr(3.0)
+    sun.AddRotateXYZOp().Set(Gf.Vec3f(40.0, 0.0, 35.0))
+    check_points_down(sun.GetPrim(), (0, 0, -1), 0.7)
+
+    rect = UsdLux.RectLight.Define(stage, "/World/Lights/Rect")
+    rect.CreateWidthAttr(4.0)
+    rect.CreateHeightAttr(4.0)
+    rect.CreateIntensityAttr(5000.0)
+    rect.AddTranslateOp().Set(Gf.Vec3d(0.0, 0.0, 250.0))
+    check_points_down(rect.GetPrim(), (0, 0, -1), 0.999)
+
+    make_camera(stage, (-450.0, -540.0, 330.0), (15.0, 25.0, 0.0), (0.0, 0.0, 1.0),
+                focal=26.0, clip=(1.0, 5000.0))
+    stage.GetRootLayer().Save()
+    return {"file": path, "triangles": total, "instances": n_inst,
+            "prototype_triangles": proto_tris}
+
+
+SCENES: Dict[str, Callable[[str], Dict[str, object]]] = {
+    "box_plane": scene_box_plane,
+    "contact": scene_contact,
+    "multi_light": scene_multi_light,
+    "cutout": scene_cutout,
+    "city": scene_city,
+}
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    here = os.path.dirname(os.path.abspath(__file__))
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default=here, help="output folder (default: this script's folder)")
+    ap.add_argument("--only", nargs="+", metavar="NAME",
+                    help="generate only these scenes: " + ", ".join(SCENES))
+    args = ap.parse_args(argv)
+
+    names = list(SCENES)
+    if args.only:
+        names = []
+        for n in args.only:
+            key = os.path.splitext(os.path.basename(n))[0]
+            if key not in SCENES:
+                ap.error("unknown scene %r (choose from %s)" % (n, ", ".join(SCENES)))
+            if key not in names:
+                names.append(key)
+    out_dir = os.path.abspath(args.out)
+    os.makedirs(out_dir, exist_ok=True)
+
+    for name in names:
+        info = SCENES[name](out_dir)
+        extra = ""
+        if "instances" in info:
+            extra = "  (%d instances of %d prototypes)" % (
+                info["instances"], len(info["prototype_triangles"]))
+        print("%-12s %-40s %9d triangles%s" % (name, info["file"], info["triangles"], extra))
+        if name == "city":
+            print("city total triangle count: %d" % info["triangles"])
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

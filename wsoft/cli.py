@@ -1,0 +1,152 @@
+"""``wsoft`` command line: render, plan, techniques, bench.
+
+Bad input prints one line naming the file and prim and exits with code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+
+
+def _parse_sets(items: list[str] | None) -> dict[str, str]:
+    from wsoft.errors import ParameterError
+
+    out = {}
+    for item in items or []:
+        if "=" not in item:
+            raise ParameterError(f"--set expects key=value, got {item!r}")
+        k, v = item.split("=", 1)
+        out[k.strip()] = v.strip()
+    return out
+
+
+def cmd_render(args) -> int:
+    import wsoft
+
+    scene = wsoft.load_scene(args.scene, time=args.time)
+    params = _parse_sets(args.set)
+    frame = wsoft.render(
+        scene, args.technique, width=args.width, height=args.height, camera=args.camera, light=args.light,
+        device=args.device, pixel_samples=args.pixel_samples, **params,
+    )
+    frame.write_exr(args.out)
+    if args.png:
+        frame.write_png(args.png)
+    if args.stats:
+        os.makedirs(os.path.dirname(os.path.abspath(args.stats)), exist_ok=True)
+        with open(args.stats, "w") as f:
+            json.dump(frame.stats, f, indent=2, default=str)
+    for w in scene.warnings:
+        print(f"warning: {w}", file=sys.stderr)
+    st = frame.stats
+    print(f"{st['technique']} on {os.path.basename(scene.path)} ({args.width}x{args.height}, {st['device']}): "
+          f"{st['timings_ms']['total']:.1f} ms, passes: {', '.join(st['passes'])}")
+    print(f"wrote {args.out}" + (f", {args.png}" if args.png else "") + (f", {args.stats}" if args.stats else ""))
+    return 0
+
+
+def cmd_plan(args) -> int:
+    import wsoft
+
+    scene = wsoft.load_scene(args.scene, time=args.time)
+    techs = args.technique or None
+    p = wsoft.plan(scene, techs, light=args.light)
+    if args.json:
+        print(json.dumps(p, indent=2))
+        return 0
+    print(f"scene {p['scene']}: {p['triangles']} triangles, up {p['up_axis']}, {p['meters_per_unit']:g} m/unit")
+    print("shadow-casting lights:")
+    for l in p["lights"] or [{"path": "(none)", "kind": "", "size": ""}]:
+        print(f"  {l['path']:<32} {l['kind']:<8} {l['size']}")
+    print("lights skipped:")
+    for l in p["skipped_lights"] or [{"path": "(none)", "kind": "", "reason": ""}]:
+        print(f"  {l['path']:<32} {l['kind']:<12} {l['reason']}")
+    print("cutout (perforated) materials:")
+    for m in p["cutout_materials"] or [{"path": "(none)", "triangles": ""}]:
+        print(f"  {m['path']:<32} {m['triangles']} triangles")
+    for w in p["warnings"]:
+        print(f"warning: {w}")
+    for name, passes in p["techniques"].items():
+        print(f"{name}: {' -> '.join(passes)}")
+    return 0
+
+
+def cmd_techniques(args) -> int:
+    from wsoft.techniques import TECHNIQUES
+
+    desc = [TECHNIQUES[n].describe() for n in sorted(TECHNIQUES)]
+    if args.json:
+        print(json.dumps(desc, indent=2, default=str))
+        return 0
+    for d in desc:
+        print(f"{d['name']}: {d['summary']}")
+        print(f"  reads: {', '.join(d['reads'])}; writes: {', '.join(d['writes'])}")
+        for p in d["parameters"]:
+            print(f"  {p['name']:<16} {p['type']:<6} default {p['default']!s:<8} {p['meaning']}")
+    return 0
+
+
+def cmd_bench(args) -> int:
+    from bench.harness import run_sweep
+
+    return run_sweep(args.sweep, quick=args.quick, device=args.device, out_dir=args.out_dir, fresh=args.fresh)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="wsoft", description="Soft-shadow techniques in Warp on USD stages.")
+    sub = ap.add_subparsers(dest="cmd", required=True)
+
+    r = sub.add_parser("render", help="render a stage with a technique, write EXR (and PNG, stats)")
+    r.add_argument("scene")
+    r.add_argument("--technique", "-t", required=True)
+    r.add_argument("--set", action="append", metavar="KEY=VALUE", help="technique parameter (repeatable)")
+    r.add_argument("--width", type=int, default=640)
+    r.add_argument("--height", type=int, default=480)
+    r.add_argument("--camera", help="camera prim path (default: the stage's first camera, else automatic)")
+    r.add_argument("--light", help="light path or name for V (default: every shadow-casting light; V = the first)")
+    r.add_argument("--time", type=float, help="USD time code (default: the stage's start time)")
+    r.add_argument("--device", help="cpu or cuda:N (default: cuda:0 when available, else cpu)")
+    r.add_argument("--pixel-samples", type=int, default=1, help="G-buffer samples per pixel")
+    r.add_argument("--out", required=True, help="output EXR")
+    r.add_argument("--stats", help="stats JSON")
+    r.add_argument("--png", help="shaded PNG")
+    r.set_defaults(fn=cmd_render)
+
+    p = sub.add_parser("plan", help="lights, cutouts and the passes each technique would run")
+    p.add_argument("scene")
+    p.add_argument("--technique", "-t", action="append")
+    p.add_argument("--light")
+    p.add_argument("--time", type=float)
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(fn=cmd_plan)
+
+    t = sub.add_parser("techniques", help="techniques and their parameters")
+    t.add_argument("--json", action="store_true")
+    t.set_defaults(fn=cmd_techniques)
+
+    b = sub.add_parser("bench", help="run a benchmark sweep; rows go to reports/<sweep>.jsonl")
+    b.add_argument("sweep")
+    b.add_argument("--quick", action="store_true", help="the CI-sized version")
+    b.add_argument("--device", action="append", help="device(s) to sweep (default: the default device)")
+    b.add_argument("--out-dir", default="reports")
+    b.add_argument("--fresh", action="store_true", help="discard earlier rows instead of resuming")
+    b.set_defaults(fn=cmd_bench)
+
+    args = ap.parse_args(argv)
+    from wsoft.errors import WsoftError
+
+    try:
+        return int(args.fn(args) or 0)
+    except WsoftError as exc:
+        print(f"wsoft: error: {exc.line()}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("wsoft: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,30 @@
+"""Errors a user sees as one clear line (the CLI prints them and exits with code 2)."""
+
+from __future__ import annotations
+
+
+class WsoftError(Exception):
+    """A problem with the user's input, worded for the user.
+
+    ``file`` and ``prim`` name where the problem is; the message is printed as
+    ``FILE: PRIM: message`` with no traceback by the CLI.
+    """
+
+    def __init__(self, message: str, *, file: str | None = None, prim: str | None = None):
+        self.file = file
+        self.prim = prim
+        self.message = message
+        super().__init__(self.line())
+
+    def line(self) -> str:
+        parts = [p for p in (self.file, self.prim) if p]
+        parts.append(self.message)
+        return ": ".join(parts)
+
+
+class SceneError(WsoftError):
+    """The USD stage cannot be turned into a scene (broken file, bad mesh, no light...)."""
+
+
+class ParameterError(WsoftError):
+    """An unknown technique, unknown parameter key or a bad parameter value."""

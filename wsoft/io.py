@@ -1,0 +1,56 @@
+"""Writing frames: EXR (OpenEXR, float32 channels) and PNG (Pillow)."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+
+def write_exr(path: str, channels: dict[str, np.ndarray]) -> None:
+    """Write float32 channels (no NaN/inf: they are replaced by 0) to an EXR file."""
+    import OpenEXR
+
+    data = {}
+    for name, arr in channels.items():
+        if name.startswith("_"):
+            continue
+        a = np.ascontiguousarray(np.nan_to_num(np.asarray(arr, np.float32), nan=0.0, posinf=0.0, neginf=0.0))
+        data[name] = a
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    with OpenEXR.File(header, data) as f:
+        f.write(path)
+
+
+def read_exr(path: str) -> dict[str, np.ndarray]:
+    import OpenEXR
+
+    with OpenEXR.File(path) as f:
+        return {k: np.array(v.pixels) for k, v in f.channels().items()}
+
+
+def to_srgb8(x: np.ndarray) -> np.ndarray:
+    x = np.clip(np.nan_to_num(x), 0.0, 1.0)
+    s = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+    return (s * 255.0 + 0.5).astype(np.uint8)
+
+
+def write_png(path: str, channels: dict[str, np.ndarray]) -> None:
+    """PNG of the shaded image (R G B), or of ``V`` when there is no colour."""
+    from PIL import Image
+
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    if all(c in channels for c in "RGB"):
+        img = np.stack([to_srgb8(channels[c]) for c in "RGB"], -1)
+        Image.fromarray(img, "RGB").save(path)
+    else:
+        Image.fromarray(to_srgb8(channels["V"]), "L").save(path)
+
+
+def write_gray_png(path: str, v: np.ndarray) -> None:
+    """A single channel in [0, 1] as an 8-bit grey PNG (linear, no gamma)."""
+    from PIL import Image
+
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    Image.fromarray((np.clip(np.nan_to_num(v), 0, 1) * 255 + 0.5).astype(np.uint8), "L").save(path)

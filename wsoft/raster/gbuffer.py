@@ -1,0 +1,170 @@
+"""Eye-view G-buffer: world position, normal, camera distance, primitive id, uv per sample.
+
+Primary visibility is resolved by casting one camera ray per sample against the scene's
+BVH (alpha-tested through cutouts), which gives exact positions for the shadow passes.
+``k`` samples per pixel use a fixed MSAA-like pattern.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+
+from wsoft.parallel import launch_chunked
+from wsoft.raster.camera import CameraGPU
+from wsoft.scene.device import Cutouts, DeviceScene, surface_present
+
+
+@wp.func
+def radical_inverse2(i: int) -> float:
+    r = float(0.0)
+    f = float(0.5)
+    n = i
+    while n > 0:
+        if n % 2 == 1:
+            r += f
+        f *= 0.5
+        n = n // 2
+    return r
+
+
+@wp.kernel
+def trace_gbuffer(
+    offset: int,
+    mesh: wp.uint64,
+    cut: Cutouts,
+    has_cutouts: int,
+    cam: CameraGPU,
+    width: int,
+    height: int,
+    spp: int,
+    # outputs
+    pos: wp.array[wp.vec3],
+    nrm: wp.array[wp.vec3],
+    dist: wp.array[float],
+    prim: wp.array[wp.int32],
+    uv: wp.array[wp.vec2],
+):
+    idx = wp.tid() + offset
+    npix = width * height
+    s = idx // npix
+    pix = idx - s * npix
+    row = pix // width
+    col = pix - row * width
+    sx = float(0.5)
+    sy = float(0.5)
+    if spp > 1:
+        sx = (float(s) + 0.5) / float(spp)
+        sy = wp.mod(radical_inverse2(s) + 0.5 / float(spp), 1.0)
+    ndc_x = (float(col) + sx) / float(width) * 2.0 - 1.0
+    ndc_y = 1.0 - (float(row) + sy) / float(height) * 2.0
+    wx = ndc_x * cam.tan_half[0] + cam.offset[0]
+    wy = ndc_y * cam.tan_half[1] + cam.offset[1]
+    o = cam.origin
+    d = wp.normalize(cam.ax * wx + cam.ay * wy - cam.az)
+    t0 = cam.near / wp.max(wp.dot(d, -cam.az), 1.0e-6)
+    t1 = cam.far / wp.max(wp.dot(d, -cam.az), 1.0e-6)
+    if cam.ortho != 0:
+        o = cam.origin + cam.ax * wx + cam.ay * wy
+        d = -cam.az
+        t0 = cam.near
+        t1 = cam.far
+    start = o + d * t0
+    remaining = t1 - t0
+    travelled = t0
+    found = int(0)
+    face = int(-1)
+    bu = float(0.0)
+    bv = float(0.0)
+    n = wp.vec3(0.0)
+    for _k in range(64):
+        if found == 0 and remaining > 0.0:
+            q = wp.mesh_query_ray(mesh, start, d, remaining)
+            if not q.result:
+                remaining = -1.0
+            else:
+                ok = True
+                if has_cutouts != 0:
+                    ok = surface_present(cut, q.face, q.u, q.v, 1.0 - q.u - q.v)
+                if ok:
+                    found = 1
+                    face = q.face
+                    bu = q.u
+                    bv = q.v
+                    n = q.normal
+                    travelled += q.t
+                else:
+                    step = q.t + 1.0e-5 * (1.0 + q.t)
+                    start = start + d * step
+                    travelled += step
+                    remaining -= step
+    if found == 1:
+        p = o + d * travelled
+        if wp.dot(n, d) > 0.0:
+            n = -n
+        pos[idx] = p
+        nrm[idx] = n
+        dist[idx] = wp.length(p - o)
+        prim[idx] = face
+        uv[idx] = cut.tri_uv[3 * face] * bu + cut.tri_uv[3 * face + 1] * bv + cut.tri_uv[3 * face + 2] * (1.0 - bu - bv)
+    else:
+        pos[idx] = wp.vec3(0.0)
+        nrm[idx] = wp.vec3(0.0)
+        dist[idx] = 0.0
+        prim[idx] = -1
+        uv[idx] = wp.vec2(0.0)
+
+
+@dataclass
+class GBuffer:
+    """Eye-view samples, flat arrays of length ``spp*height*width`` (sample-major).
+
+    ``pos``/``nrm`` vec3 world position and viewer-facing unit normal; ``dist`` float32 camera
+    distance; ``prim`` int32 triangle index (-1 = background); ``uv`` vec2 texture coordinates.
+    """
+
+    width: int
+    height: int
+    spp: int
+    pos: wp.array
+    nrm: wp.array
+    dist: wp.array
+    prim: wp.array
+    uv: wp.array
+
+    @property
+    def count(self) -> int:
+        return self.width * self.height * self.spp
+
+    def arrays(self) -> dict[str, wp.array]:
+        return {"gbuffer.pos": self.pos, "gbuffer.nrm": self.nrm, "gbuffer.dist": self.dist, "gbuffer.prim": self.prim, "gbuffer.uv": self.uv}
+
+    def host(self, name: str) -> np.ndarray:
+        """A field as numpy, shape [spp, H, W(, C)]."""
+        a = getattr(self, name).numpy()
+        return a.reshape((self.spp, self.height, self.width) + a.shape[1:])
+
+
+def render_gbuffer(ds: DeviceScene, cam: CameraGPU, width: int, height: int, spp: int, alpha_tested: bool) -> GBuffer:
+    n = width * height * spp
+    dev = ds.device
+    g = GBuffer(
+        width,
+        height,
+        spp,
+        pos=wp.empty(n, dtype=wp.vec3, device=dev),
+        nrm=wp.empty(n, dtype=wp.vec3, device=dev),
+        dist=wp.empty(n, dtype=float, device=dev),
+        prim=wp.empty(n, dtype=wp.int32, device=dev),
+        uv=wp.empty(n, dtype=wp.vec2, device=dev),
+    )
+    launch_chunked(
+        trace_gbuffer,
+        n,
+        inputs=[ds.mesh.id, ds.cutouts, int(alpha_tested and ds.has_cutouts), cam, width, height, spp],
+        outputs=[g.pos, g.nrm, g.dist, g.prim, g.uv],
+        device=dev,
+    )
+    return g

@@ -1,0 +1,464 @@
+"""Light-space views and the software depth rasterizer.
+
+A :class:`LightView` is a perspective frustum from a local light's centre (rect, disk,
+sphere, point) or an orthographic box along a distant light, fitted to the receivers the
+camera sees. :func:`rasterize_depth` fills a ``[H, W]`` map of light-space *linear* depth
+(distance along the view axis) by scan-converting every triangle in Warp: near-plane
+clipping, perspective-correct depth and uv, alpha test for cutouts, and an optional
+conservative mode that writes every texel a triangle touches.
+
+On CPU the map is split into bands of rows that run on the thread pool (each band only
+writes its own rows); on CUDA all bands run in one launch with ``atomic_min``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+
+from wsoft.parallel import cpu_threads, ensure_loaded, launch_chunked, run_tasks
+from wsoft.scene.device import Cutouts, DeviceScene, surface_present
+from wsoft.scene.types import LIGHT_DISTANT, LIGHT_SPHERE, LIGHT_POINT, Light
+
+DEPTH_CLEAR = 1.0e30  # value of texels no triangle covers (finite on purpose)
+MAX_TAN = math.tan(math.radians(80.0))  # widest half-angle a perspective light view may open
+
+
+@wp.struct
+class LightViewGPU:
+    origin: wp.vec3
+    ax: wp.vec3
+    ay: wp.vec3
+    az: wp.vec3  # view axis (depth grows along it)
+    persp: int
+    window: wp.vec4  # l, r, b, t (tangents for perspective, world units for orthographic)
+    near: float
+    far: float
+    width: int
+    height: int
+
+
+@dataclass
+class LightView:
+    """Where a light looks: frame, window and depth range. Texel (0, 0) is at (l, b)."""
+
+    light_path: str
+    persp: bool
+    origin: np.ndarray
+    axes: np.ndarray  # 3x3 columns: x, y, view axis
+    window: tuple[float, float, float, float]
+    near: float
+    far: float
+    width: int
+    height: int
+    receivers_outside: int = 0
+
+    def gpu(self) -> LightViewGPU:
+        g = LightViewGPU()
+        g.origin = wp.vec3(*self.origin)
+        g.ax = wp.vec3(*self.axes[:, 0])
+        g.ay = wp.vec3(*self.axes[:, 1])
+        g.az = wp.vec3(*self.axes[:, 2])
+        g.persp = int(self.persp)
+        g.window = wp.vec4(*self.window)
+        g.near = float(self.near)
+        g.far = float(self.far)
+        g.width = int(self.width)
+        g.height = int(self.height)
+        return g
+
+    def texel_size(self, depth: float = 1.0) -> float:
+        """World size of the larger texel side at view depth ``depth`` (orthographic: any depth)."""
+        l, r, b, t = self.window
+        s = max((r - l) / self.width, (t - b) / self.height)
+        return s * depth if self.persp else s
+
+    def to_view(self, p: np.ndarray) -> np.ndarray:
+        return (np.asarray(p, np.float64) - self.origin) @ self.axes
+
+
+def _basis_from_axis(z: np.ndarray) -> np.ndarray:
+    z = z / np.linalg.norm(z)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    x = np.cross(helper, z)
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    return np.stack([x, y, z], axis=1)
+
+
+def fit_light_view(
+    light: Light,
+    receivers: np.ndarray,
+    scene_lo: np.ndarray,
+    scene_hi: np.ndarray,
+    size: int,
+    margin: float = 0.0,
+    margin_texels: float = 1.0,
+) -> LightView:
+    """Fit a view of ``light`` to ``receivers`` (world points [N, 3], the camera's visible surface).
+
+    ``margin`` widens the window by a world distance at the receivers (soft techniques pass
+    the light's extent so blockers of the whole light are inside); ``margin_texels`` keeps a
+    border of texels. Perspective windows are clamped to ±80° around the view axis; receivers
+    beyond are counted in ``receivers_outside``.
+    """
+    if not 256 <= size <= 8192:
+        from wsoft.errors import ParameterError
+
+        raise ParameterError(f"shadow_map_size {size} out of range [256, 8192]")
+    diag = float(np.linalg.norm(scene_hi - scene_lo)) or 1.0
+    center = 0.5 * (scene_lo + scene_hi)
+    rec = np.asarray(receivers, np.float64).reshape(-1, 3)
+    if len(rec) == 0:
+        rec = np.stack([scene_lo, scene_hi])
+    if light.kind == LIGHT_DISTANT:
+        axes = np.stack([light.frame[:, 0], light.frame[:, 1], -light.frame[:, 2]], axis=1)  # view along emission
+        corners = np.array([[x, y, z] for x in (scene_lo[0], scene_hi[0]) for y in (scene_lo[1], scene_hi[1]) for z in (scene_lo[2], scene_hi[2])])
+        origin = center - axes[:, 2] * diag
+        vr = (rec - origin) @ axes
+        vc = (corners - origin) @ axes
+        pad = margin + 1e-4 * diag
+        l, r = vr[:, 0].min() - pad, vr[:, 0].max() + pad
+        b, t = vr[:, 1].min() - pad, vr[:, 1].max() + pad
+        near = max(vc[:, 2].min() - 1e-3 * diag, 0.0)
+        far = vc[:, 2].max() + 1e-3 * diag
+        persp, outside = False, 0
+    else:
+        origin = np.asarray(light.position, np.float64)
+        if light.kind in (LIGHT_SPHERE, LIGHT_POINT):
+            d = rec.mean(axis=0) - origin
+            axes = _basis_from_axis(d if np.linalg.norm(d) > 1e-9 else -light.frame[:, 2])
+        else:
+            axes = np.stack([light.frame[:, 0], -light.frame[:, 1], -light.frame[:, 2]], axis=1)  # right-handed, view along −Z
+        vr = (rec - origin) @ axes
+        zmin_ok = 1e-6 * diag
+        ok = vr[:, 2] > zmin_ok
+        tx = vr[ok, 0] / vr[ok, 2]
+        ty = vr[ok, 1] / vr[ok, 2]
+        # widen by the margin seen at each receiver's depth
+        mz = margin / np.maximum(vr[ok, 2], zmin_ok) if margin > 0 else 0.0
+        inside = ok.copy()
+        if ok.any():
+            l, r = float(np.min(tx - mz)), float(np.max(tx + mz))
+            b, t = float(np.min(ty - mz)), float(np.max(ty + mz))
+            inside[ok] = (np.abs(tx) <= MAX_TAN) & (np.abs(ty) <= MAX_TAN)
+        else:
+            l, r, b, t = -1.0, 1.0, -1.0, 1.0
+        l, r = max(l, -MAX_TAN), min(r, MAX_TAN)
+        b, t = max(b, -MAX_TAN), min(t, MAX_TAN)
+        outside = int(np.count_nonzero(~inside))
+        zr = vr[ok, 2]
+        near = max(1e-4 * diag, 1e-7)
+        if len(zr):
+            near = min(near, 0.5 * float(zr.min()))
+        far = (float(zr.max()) if len(zr) else diag) * 1.01 + 1e-3 * diag
+        persp = True
+    # keep a border of texels and avoid a zero-area window
+    w = max(r - l, 1e-6)
+    h = max(t - b, 1e-6)
+    ex = w * margin_texels / max(size - 2 * margin_texels, 1)
+    ey = h * margin_texels / max(size - 2 * margin_texels, 1)
+    window = (l - ex, l + w + ex, b - ey, b + h + ey)
+    return LightView(
+        light_path=light.path, persp=persp, origin=origin, axes=axes, window=window,
+        near=float(near), far=float(far), width=size, height=size, receivers_outside=outside,
+    )
+
+
+@wp.func
+def view_of(lv: LightViewGPU, p: wp.vec3) -> wp.vec3:
+    d = p - lv.origin
+    return wp.vec3(wp.dot(d, lv.ax), wp.dot(d, lv.ay), wp.dot(d, lv.az))
+
+
+@wp.func
+def texel_of(lv: LightViewGPU, v: wp.vec3) -> wp.vec2:
+    """Continuous texel coordinates of a view-space point (texel centres at integer + 0.5)."""
+    x = v[0]
+    y = v[1]
+    if lv.persp != 0:
+        x = x / v[2]
+        y = y / v[2]
+    return wp.vec2(
+        (x - lv.window[0]) / (lv.window[1] - lv.window[0]) * float(lv.width),
+        (y - lv.window[2]) / (lv.window[3] - lv.window[2]) * float(lv.height),
+    )
+
+
+@wp.kernel
+def setup_triangles(
+    offset: int,
+    points: wp.array[wp.vec3],
+    indices: wp.array[wp.int32],
+    lv: LightViewGPU,
+    # outputs
+    view_pts: wp.array[wp.vec3],
+    row_range: wp.array[wp.vec2i],
+):
+    """Per triangle: view-space corners and the rows it may touch (empty range = culled)."""
+    tri = wp.tid() + offset
+    a = view_of(lv, points[indices[3 * tri]])
+    b = view_of(lv, points[indices[3 * tri + 1]])
+    c = view_of(lv, points[indices[3 * tri + 2]])
+    view_pts[3 * tri] = a
+    view_pts[3 * tri + 1] = b
+    view_pts[3 * tri + 2] = c
+    zmax = wp.max(a[2], wp.max(b[2], c[2]))
+    zmin = wp.min(a[2], wp.min(b[2], c[2]))
+    lo = int(0)
+    hi = int(-1)
+    if zmax >= lv.near and (zmin <= lv.far or lv.persp == 0):
+        if zmin < lv.near:
+            lo = 0  # crosses the near plane: clipped later, rows unknown here
+            hi = lv.height - 1
+        else:
+            ta = texel_of(lv, a)
+            tb = texel_of(lv, b)
+            tc = texel_of(lv, c)
+            ymin = wp.min(ta[1], wp.min(tb[1], tc[1]))
+            ymax = wp.max(ta[1], wp.max(tb[1], tc[1]))
+            xmin = wp.min(ta[0], wp.min(tb[0], tc[0]))
+            xmax = wp.max(ta[0], wp.max(tb[0], tc[0]))
+            if xmax >= 0.0 and xmin <= float(lv.width) and ymax >= 0.0 and ymin <= float(lv.height):
+                lo = wp.max(int(wp.floor(ymin)) - 1, 0)
+                hi = wp.min(int(wp.floor(ymax)) + 1, lv.height - 1)
+    row_range[tri] = wp.vec2i(lo, hi)
+
+
+@wp.func
+def edge(ax: float, ay: float, bx: float, by: float, px: float, py: float) -> float:
+    return (bx - ax) * (py - ay) - (by - ay) * (px - ax)
+
+
+@wp.func
+def raster_triangle(
+    lv: LightViewGPU,
+    tri: int,
+    va: wp.vec3,
+    vb: wp.vec3,
+    vc: wp.vec3,
+    wa: wp.vec3,
+    wb: wp.vec3,
+    wc: wp.vec3,
+    row0: int,
+    row1: int,
+    cut: Cutouts,
+    alpha: int,
+    conservative: int,
+    depth: wp.array2d[float],
+):
+    """Scan-convert one (clipped) triangle into rows [row0, row1). wa/wb/wc: corners' weights of the original triangle."""
+    ta = texel_of(lv, va)
+    tb = texel_of(lv, vb)
+    tc = texel_of(lv, vc)
+    area = edge(ta[0], ta[1], tb[0], tb[1], tc[0], tc[1])
+    if wp.abs(area) < 1.0e-12:
+        return
+    inv_area = 1.0 / area
+    # interpolated quantity: q = 1/z (perspective) or z (orthographic); both affine in texel space
+    qa = va[2]
+    qb = vb[2]
+    qc = vc[2]
+    if lv.persp != 0:
+        qa = 1.0 / va[2]
+        qb = 1.0 / vb[2]
+        qc = 1.0 / vc[2]
+    # gradients of the barycentrics (l0 from edge b->c, l1 from c->a, l2 from a->b)
+    g0x = -(tc[1] - tb[1]) * inv_area
+    g0y = (tc[0] - tb[0]) * inv_area
+    g1x = -(ta[1] - tc[1]) * inv_area
+    g1y = (ta[0] - tc[0]) * inv_area
+    g2x = -(tb[1] - ta[1]) * inv_area
+    g2y = (tb[0] - ta[0]) * inv_area
+    qx = g0x * qa + g1x * qb + g2x * qc
+    qy = g0y * qa + g1y * qb + g2y * qc
+    qmin = wp.min(qa, wp.min(qb, qc))
+    qmax = wp.max(qa, wp.max(qb, qc))
+    xmin = wp.min(ta[0], wp.min(tb[0], tc[0]))
+    xmax = wp.max(ta[0], wp.max(tb[0], tc[0]))
+    ymin = wp.min(ta[1], wp.min(tb[1], tc[1]))
+    ymax = wp.max(ta[1], wp.max(tb[1], tc[1]))
+    x0 = int(0)
+    x1 = int(0)
+    y0 = int(0)
+    y1 = int(0)
+    if conservative != 0:
+        x0 = int(wp.floor(xmin))
+        x1 = int(wp.floor(xmax))
+        y0 = int(wp.floor(ymin))
+        y1 = int(wp.floor(ymax))
+    else:
+        x0 = int(wp.ceil(xmin - 0.5))
+        x1 = int(wp.floor(xmax - 0.5))
+        y0 = int(wp.ceil(ymin - 0.5))
+        y1 = int(wp.floor(ymax - 0.5))
+    x0 = wp.max(x0, 0)
+    x1 = wp.min(x1, lv.width - 1)
+    y0 = wp.max(y0, row0)
+    y1 = wp.min(y1, row1 - 1)
+    hx0 = 0.5 * (wp.abs(g0x) + wp.abs(g0y))
+    hx1 = 0.5 * (wp.abs(g1x) + wp.abs(g1y))
+    hx2 = 0.5 * (wp.abs(g2x) + wp.abs(g2y))
+    for y in range(y0, y1 + 1):
+        py = float(y) + 0.5
+        for x in range(x0, x1 + 1):
+            px = float(x) + 0.5
+            l0 = edge(tb[0], tb[1], tc[0], tc[1], px, py) * inv_area
+            l1 = edge(tc[0], tc[1], ta[0], ta[1], px, py) * inv_area
+            l2 = 1.0 - l0 - l1
+            covered = False
+            q = l0 * qa + l1 * qb + l2 * qc
+            if conservative != 0:
+                covered = l0 + hx0 >= 0.0 and l1 + hx1 >= 0.0 and l2 + hx2 >= 0.0
+                # nearest depth over the texel square, kept within the triangle's range
+                if lv.persp != 0:
+                    q = wp.min(q + 0.5 * (wp.abs(qx) + wp.abs(qy)), qmax)
+                else:
+                    q = wp.max(q - 0.5 * (wp.abs(qx) + wp.abs(qy)), qmin)
+                q = wp.clamp(q, qmin, qmax)
+            else:
+                covered = l0 >= 0.0 and l1 >= 0.0 and l2 >= 0.0
+            if covered and alpha != 0:
+                c0 = wp.max(l0, 0.0)
+                c1 = wp.max(l1, 0.0)
+                c2 = wp.max(l2, 0.0)
+                if lv.persp != 0:  # perspective-correct weights
+                    c0 = c0 * qa
+                    c1 = c1 * qb
+                    c2 = c2 * qc
+                s = c0 + c1 + c2
+                if s > 0.0:
+                    w = (wa * c0 + wb * c1 + wc * c2) / s
+                    covered = surface_present(cut, tri, w[0], w[1], w[2])
+            if covered:
+                z = q
+                if lv.persp != 0:
+                    z = 1.0 / wp.max(q, 1.0e-30)
+                wp.atomic_min(depth, y, x, z)
+
+
+@wp.func
+def clip_point(p: wp.vec3, q: wp.vec3, wp_: wp.vec3, wq: wp.vec3, near: float) -> wp.vec4:
+    """Parameter of the near-plane crossing on segment p->q (returned as w of a vec4 with the point)."""
+    s = (near - p[2]) / (q[2] - p[2])
+    r = p + (q - p) * s
+    return wp.vec4(r[0], r[1], r[2], s)
+
+
+@wp.kernel
+def rasterize_depth(
+    band_start: int,
+    band_rows: int,
+    view_pts: wp.array[wp.vec3],
+    row_range: wp.array[wp.vec2i],
+    lv: LightViewGPU,
+    cut: Cutouts,
+    alpha: int,
+    conservative: int,
+    # outputs
+    depth: wp.array2d[float],
+):
+    band, tri = wp.tid()
+    row0 = (band_start + band) * band_rows
+    row1 = wp.min(row0 + band_rows, lv.height)
+    rr = row_range[tri]
+    if rr[1] < row0 or rr[0] >= row1:
+        return
+    if alpha != 0 and cut.tri_cut[tri] >= 0:
+        alpha_on = 1
+    else:
+        alpha_on = 0
+    a = view_pts[3 * tri]
+    b = view_pts[3 * tri + 1]
+    c = view_pts[3 * tri + 2]
+    ea = wp.vec3(1.0, 0.0, 0.0)
+    eb = wp.vec3(0.0, 1.0, 0.0)
+    ec = wp.vec3(0.0, 0.0, 1.0)
+    if lv.persp == 0 or (a[2] >= lv.near and b[2] >= lv.near and c[2] >= lv.near):
+        raster_triangle(lv, tri, a, b, c, ea, eb, ec, row0, row1, cut, alpha_on, conservative, depth)
+        return
+    # Sutherland-Hodgman against z >= near: 1 or 2 triangles
+    n_in = int(0)
+    if a[2] >= lv.near:
+        n_in += 1
+    if b[2] >= lv.near:
+        n_in += 1
+    if c[2] >= lv.near:
+        n_in += 1
+    # rotate so that the odd vertex is first
+    p0 = a
+    p1 = b
+    p2 = c
+    w0 = ea
+    w1 = eb
+    w2 = ec
+    odd_in = n_in == 1
+    if (b[2] >= lv.near) == odd_in:
+        p0 = b
+        p1 = c
+        p2 = a
+        w0 = eb
+        w1 = ec
+        w2 = ea
+    elif (c[2] >= lv.near) == odd_in:
+        p0 = c
+        p1 = a
+        p2 = b
+        w0 = ec
+        w1 = ea
+        w2 = eb
+    k01 = clip_point(p0, p1, w0, w1, lv.near)
+    k02 = clip_point(p0, p2, w0, w2, lv.near)
+    q01 = wp.vec3(k01[0], k01[1], k01[2])
+    q02 = wp.vec3(k02[0], k02[1], k02[2])
+    u01 = w0 + (w1 - w0) * k01[3]
+    u02 = w0 + (w2 - w0) * k02[3]
+    if odd_in:  # only p0 in front: one triangle p0, q01, q02
+        raster_triangle(lv, tri, p0, q01, q02, w0, u01, u02, row0, row1, cut, alpha_on, conservative, depth)
+    else:  # p0 behind: quad q01, p1, p2, q02
+        raster_triangle(lv, tri, q01, p1, p2, u01, w1, w2, row0, row1, cut, alpha_on, conservative, depth)
+        raster_triangle(lv, tri, q01, p2, q02, u01, w2, u02, row0, row1, cut, alpha_on, conservative, depth)
+
+
+@dataclass
+class DepthMap:
+    """Light-space linear depth, shape ``[height, width]`` float32; ``DEPTH_CLEAR`` where empty."""
+
+    view: LightView
+    depth: wp.array
+    alpha_tested: bool
+    conservative: bool
+
+    def arrays(self) -> dict[str, wp.array]:
+        return {"light_depth": self.depth}
+
+
+def rasterize(ds: DeviceScene, view: LightView, alpha_tested: bool, conservative: bool = False) -> DepthMap:
+    """Rasterize the whole scene into a depth map for ``view``."""
+    dev = ds.device
+    lv = view.gpu()
+    ntri = ds.indices.shape[0] // 3
+    view_pts = wp.empty(3 * ntri, dtype=wp.vec3, device=dev)
+    row_range = wp.empty(ntri, dtype=wp.vec2i, device=dev)
+    launch_chunked(setup_triangles, ntri, inputs=[ds.points, ds.indices, lv], outputs=[view_pts, row_range], device=dev, min_chunk=4096)
+    depth = wp.full((view.height, view.width), DEPTH_CLEAR, dtype=float, device=dev)
+    alpha = int(alpha_tested and ds.has_cutouts)
+    cons = int(conservative)
+    ensure_loaded(rasterize_depth, dev)
+    if dev.startswith("cpu"):
+        nb = max(1, min(view.height, cpu_threads() * 4))
+        rows = (view.height + nb - 1) // nb
+        nb = (view.height + rows - 1) // rows
+
+        def band(i):
+            return lambda: wp.launch(rasterize_depth, dim=(1, ntri), inputs=[i, rows, view_pts, row_range, lv, ds.cutouts, alpha, cons], outputs=[depth], device=dev)
+
+        run_tasks([band(i) for i in range(nb)], dev)
+    else:
+        rows = 32
+        nb = (view.height + rows - 1) // rows
+        wp.launch(rasterize_depth, dim=(nb, ntri), inputs=[0, rows, view_pts, row_range, lv, ds.cutouts, alpha, cons], outputs=[depth], device=dev)
+    return DepthMap(view=view, depth=depth, alpha_tested=bool(alpha), conservative=conservative)

@@ -1,0 +1,6 @@
+"""Scenes: USD stages turned into world-space triangles, materials, lights and cameras."""
+
+from wsoft.scene.types import Camera, Light, Material, Scene, SkippedLight, Texture
+from wsoft.scene.usd import auto_camera, load_scene
+
+__all__ = ["Camera", "Light", "Material", "Scene", "SkippedLight", "Texture", "auto_camera", "load_scene"]

@@ -1,0 +1,200 @@
+"""The scene on a Warp device: BVH, triangles, cutout materials and their alpha textures.
+
+Kernels take a :class:`Cutouts` struct and call :func:`surface_present` to alpha-test a
+point on a triangle; scenes without cutouts pass ``has_cutouts = 0`` and never sample.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+
+from wsoft.scene.types import Scene
+
+
+@wp.struct
+class Cutouts:
+    """Per-triangle cutout data. ``tri_cut[t]`` is a cutout index or -1 (opaque)."""
+
+    tri_cut: wp.array[wp.int32]  # [T]
+    tri_uv: wp.array[wp.vec2]  # [3T] texture coordinates per triangle corner
+    threshold: wp.array[wp.float32]  # [C] opacityThreshold
+    opacity: wp.array[wp.float32]  # [C] constant opacity (used when tex < 0)
+    tex: wp.array[wp.int32]  # [C] texture index or -1
+    tex_offset: wp.array[wp.int32]  # [X] start of each texture in tex_data
+    tex_w: wp.array[wp.int32]
+    tex_h: wp.array[wp.int32]
+    tex_wrap_s: wp.array[wp.int32]
+    tex_wrap_t: wp.array[wp.int32]
+    tex_data: wp.array[wp.float32]  # all textures, rows bottom-up
+
+
+@wp.func
+def wrap_coord(i: int, n: int, mode: int) -> int:
+    """Texel index under a UsdUVTexture wrap mode (0 repeat, 1 mirror, 2 clamp, 3 black: -1)."""
+    if mode == 0:
+        r = i % n
+        if r < 0:
+            r += n
+        return r
+    if mode == 1:
+        p = 2 * n
+        r = i % p
+        if r < 0:
+            r += p
+        if r >= n:
+            r = p - 1 - r
+        return r
+    if mode == 2:
+        return wp.clamp(i, 0, n - 1)
+    if i < 0 or i >= n:
+        return -1
+    return i
+
+
+@wp.func
+def texel_value(cut: Cutouts, t: int, x: int, y: int) -> float:
+    w = cut.tex_w[t]
+    h = cut.tex_h[t]
+    xi = wrap_coord(x, w, cut.tex_wrap_s[t])
+    yi = wrap_coord(y, h, cut.tex_wrap_t[t])
+    if xi < 0 or yi < 0:
+        return 0.0
+    return cut.tex_data[cut.tex_offset[t] + yi * w + xi]
+
+
+@wp.func
+def sample_alpha(cut: Cutouts, t: int, st: wp.vec2) -> float:
+    """Bilinear sample of texture ``t`` at ``st`` (st=(0,0) is the image's lower-left corner)."""
+    fx = st[0] * float(cut.tex_w[t]) - 0.5
+    fy = st[1] * float(cut.tex_h[t]) - 0.5
+    x0 = int(wp.floor(fx))
+    y0 = int(wp.floor(fy))
+    ax = fx - float(x0)
+    ay = fy - float(y0)
+    a = texel_value(cut, t, x0, y0) * (1.0 - ax) + texel_value(cut, t, x0 + 1, y0) * ax
+    b = texel_value(cut, t, x0, y0 + 1) * (1.0 - ax) + texel_value(cut, t, x0 + 1, y0 + 1) * ax
+    return a * (1.0 - ay) + b * ay
+
+
+@wp.func
+def surface_present(cut: Cutouts, tri: int, w0: float, w1: float, w2: float) -> bool:
+    """Alpha test at barycentric weights (w0, w1, w2) of triangle ``tri``'s corners."""
+    c = cut.tri_cut[tri]
+    if c < 0:
+        return True
+    t = cut.tex[c]
+    alpha = cut.opacity[c]
+    if t >= 0:
+        st = cut.tri_uv[3 * tri] * w0 + cut.tri_uv[3 * tri + 1] * w1 + cut.tri_uv[3 * tri + 2] * w2
+        alpha = sample_alpha(cut, t, st)
+    return alpha >= cut.threshold[c]
+
+
+@wp.func
+def occluded(mesh: wp.uint64, cut: Cutouts, has_cutouts: int, origin: wp.vec3, dir: wp.vec3, max_t: float) -> bool:
+    """Is the segment origin + t*dir, t in (0, max_t), blocked? Any-hit, alpha-tested through cutouts."""
+    if has_cutouts == 0:
+        return wp.mesh_query_ray_anyhit(mesh, origin, dir, max_t)
+    o = origin
+    remaining = max_t
+    for _k in range(64):
+        q = wp.mesh_query_ray(mesh, o, dir, remaining)
+        if not q.result:
+            return False
+        # warp: p = p0*u + p1*v + p2*(1-u-v)
+        if surface_present(cut, q.face, q.u, q.v, 1.0 - q.u - q.v):
+            return True
+        step = q.t + 1.0e-5 * (1.0 + q.t)
+        o = o + dir * step
+        remaining = remaining - step
+        if remaining <= 0.0:
+            return False
+    return True
+
+
+@dataclass
+class DeviceScene:
+    """Arrays of one scene on one device (built by the ``upload_scene`` pass)."""
+
+    device: str
+    mesh: wp.Mesh
+    points: wp.array
+    indices: wp.array  # flat [3T] int32
+    cutouts: Cutouts
+    has_cutouts: int
+    tri_albedo: wp.array  # [T] vec3
+    diagonal: float
+    lo: np.ndarray
+    hi: np.ndarray
+
+    def arrays(self) -> dict[str, wp.array]:
+        c = self.cutouts
+        return {
+            "scene.points": self.points,
+            "scene.indices": self.indices,
+            "scene.tri_albedo": self.tri_albedo,
+            "scene.tri_uv": c.tri_uv,
+            "scene.tex_data": c.tex_data,
+        }
+
+
+def upload_scene(scene: Scene, device: str) -> DeviceScene:
+    """Copy the scene's triangles, cutouts and textures to ``device`` and build a BVH."""
+    if scene.triangle_count == 0:
+        from wsoft.errors import SceneError
+
+        raise SceneError("the stage has no visible mesh triangles", file=scene.path)
+    pts = wp.array(scene.points.astype(np.float32), dtype=wp.vec3, device=device)
+    idx = wp.array(scene.triangles.reshape(-1).astype(np.int32), dtype=wp.int32, device=device)
+    mesh = wp.Mesh(points=pts, indices=idx)
+
+    cut_ids = {}
+    for i, m in enumerate(scene.materials):
+        if m.is_cutout:
+            cut_ids[i] = len(cut_ids)
+    lut = np.full(max(len(scene.materials), 1), -1, np.int32)
+    for i, c in cut_ids.items():
+        lut[i] = c
+    tri_cut = lut[scene.tri_material] if scene.triangle_count else np.zeros(0, np.int32)
+    cut_mats = [scene.materials[i] for i in cut_ids]
+    tex_offsets, off = [], 0
+    for t in scene.textures:
+        tex_offsets.append(off)
+        off += t.data.size
+    tex_data = np.concatenate([t.data.reshape(-1) for t in scene.textures]) if scene.textures else np.zeros(1, np.float32)
+
+    def arr(a, dtype):
+        a = np.asarray(a)
+        if a.size == 0:
+            a = np.zeros(1, dtype=np.int32 if dtype == wp.int32 else np.float32)
+        return wp.array(a, dtype=dtype, device=device)
+
+    cut = Cutouts()
+    cut.tri_cut = arr(tri_cut.astype(np.int32), wp.int32)
+    cut.tri_uv = wp.array(scene.tri_uv.reshape(-1, 2).astype(np.float32), dtype=wp.vec2, device=device)
+    cut.threshold = arr([m.opacity_threshold for m in cut_mats], wp.float32)
+    cut.opacity = arr([m.opacity for m in cut_mats], wp.float32)
+    cut.tex = arr([m.texture for m in cut_mats], wp.int32)
+    cut.tex_offset = arr(tex_offsets, wp.int32)
+    cut.tex_w = arr([t.data.shape[1] for t in scene.textures], wp.int32)
+    cut.tex_h = arr([t.data.shape[0] for t in scene.textures], wp.int32)
+    cut.tex_wrap_s = arr([t.wrap_s for t in scene.textures], wp.int32)
+    cut.tex_wrap_t = arr([t.wrap_t for t in scene.textures], wp.int32)
+    cut.tex_data = wp.array(tex_data.astype(np.float32), dtype=wp.float32, device=device)
+    albedo = np.array([m.albedo for m in scene.materials], np.float32)[scene.tri_material]
+    lo, hi = scene.bounds
+    return DeviceScene(
+        device=device,
+        mesh=mesh,
+        points=pts,
+        indices=idx,
+        cutouts=cut,
+        has_cutouts=int(bool(cut_ids) and bool(np.any(tri_cut >= 0))),
+        tri_albedo=wp.array(albedo, dtype=wp.vec3, device=device),
+        diagonal=scene.diagonal,
+        lo=lo,
+        hi=hi,
+    )

@@ -1,0 +1,208 @@
+"""Host-side scene: flat triangle soup in world space, materials, lights and cameras.
+
+Everything here is plain numpy so a scene can be built without USD (tests do) and
+handed to any device. Arrays are float32/int32, world space, right-handed winding.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+# light kinds (the integers are what kernels see)
+LIGHT_RECT = 0
+LIGHT_DISK = 1
+LIGHT_SPHERE = 2
+LIGHT_DISTANT = 3
+LIGHT_POINT = 4  # SphereLight with treatAsPoint or radius 0
+LIGHT_KIND_NAMES = {LIGHT_RECT: "rect", LIGHT_DISK: "disk", LIGHT_SPHERE: "sphere", LIGHT_DISTANT: "distant", LIGHT_POINT: "point"}
+
+WRAP_REPEAT = 0
+WRAP_MIRROR = 1
+WRAP_CLAMP = 2
+WRAP_BLACK = 3
+WRAP_NAMES = {"repeat": WRAP_REPEAT, "mirror": WRAP_MIRROR, "clamp": WRAP_CLAMP, "black": WRAP_BLACK, "useMetadata": WRAP_REPEAT}
+
+
+@dataclass
+class Texture:
+    """A single-channel (alpha) texture, rows stored bottom-up so st=(0,0) is element [0, 0]."""
+
+    asset: str
+    data: np.ndarray  # shape [h, w], float32 in [0, 1]
+    wrap_s: int = WRAP_REPEAT
+    wrap_t: int = WRAP_REPEAT
+
+
+@dataclass
+class Material:
+    """What shadows need of a UsdPreviewSurface: albedo for shading and the cutout (alpha) test."""
+
+    path: str
+    albedo: tuple[float, float, float] = (0.8, 0.8, 0.8)
+    opacity: float = 1.0  # constant opacity (used when texture is None)
+    opacity_threshold: float = 0.0  # > 0 makes the material a cutout (UsdPreviewSurface rule)
+    texture: int = -1  # index into Scene.textures of the opacity texture, -1 = constant
+
+    @property
+    def is_cutout(self) -> bool:
+        return self.opacity_threshold > 0.0 and (self.texture >= 0 or self.opacity < self.opacity_threshold)
+
+
+@dataclass
+class Light:
+    """A shadow-casting light in world space.
+
+    ``frame`` is a 3x3 matrix whose columns are the light's world-space X, Y and Z axes,
+    unit length. Rect lights span ``±half_size`` along X/Y and emit along −Z; disk lights
+    have radius ``radius`` in the XY plane; sphere lights a radius about ``position``;
+    distant lights shine along −Z with a cone of full angle ``angle_deg``.
+    """
+
+    path: str
+    kind: int
+    position: np.ndarray  # world position (unused for distant)
+    frame: np.ndarray  # 3x3, columns = X, Y, Z axes (unit)
+    half_size: tuple[float, float] = (0.0, 0.0)  # rect half width / half height (world units)
+    radius: float = 0.0  # disk / sphere radius (world units)
+    angle_deg: float = 0.0  # distant light full cone angle
+    intensity: float = 1.0
+    color: tuple[float, float, float] = (1.0, 1.0, 1.0)
+
+    @property
+    def name(self) -> str:
+        return self.path.rstrip("/").split("/")[-1] or self.path
+
+    @property
+    def kind_name(self) -> str:
+        return LIGHT_KIND_NAMES[self.kind]
+
+    @property
+    def direction(self) -> np.ndarray:
+        """World direction the light emits along (its −Z axis)."""
+        return -self.frame[:, 2]
+
+    @property
+    def is_local(self) -> bool:
+        return self.kind != LIGHT_DISTANT
+
+    def size_description(self) -> str:
+        if self.kind == LIGHT_RECT:
+            return f"{2 * self.half_size[0]:g} x {2 * self.half_size[1]:g}"
+        if self.kind in (LIGHT_DISK, LIGHT_SPHERE):
+            return f"radius {self.radius:g}"
+        if self.kind == LIGHT_DISTANT:
+            return f"angle {self.angle_deg:g} deg"
+        return "point"
+
+    def extent(self) -> float:
+        """Radius of the light's emitting region (world units; radians for distant)."""
+        if self.kind == LIGHT_RECT:
+            return math.hypot(*self.half_size)
+        if self.kind in (LIGHT_DISK, LIGHT_SPHERE):
+            return self.radius
+        if self.kind == LIGHT_DISTANT:
+            return math.radians(self.angle_deg) * 0.5
+        return 0.0
+
+
+@dataclass
+class SkippedLight:
+    path: str
+    kind: str
+    reason: str
+
+
+@dataclass
+class Camera:
+    """A pinhole or orthographic camera. ``to_world`` is 4x4 (column vectors); looks down −Z.
+
+    ``tan_half`` = (tan of half the horizontal field, tan of half the vertical field) for
+    perspective; half extents in world units for orthographic. ``offset`` shifts the window
+    in the same units.
+    """
+
+    path: str
+    to_world: np.ndarray
+    orthographic: bool = False
+    tan_half: tuple[float, float] = (0.4, 0.3)
+    offset: tuple[float, float] = (0.0, 0.0)
+    clip: tuple[float, float] = (1e-3, 1e7)
+
+    @property
+    def position(self) -> np.ndarray:
+        return self.to_world[:3, 3].copy()
+
+
+@dataclass
+class Scene:
+    """A loaded stage as a world-space triangle soup plus lights and cameras."""
+
+    path: str
+    points: np.ndarray  # [V, 3] float32
+    triangles: np.ndarray  # [T, 3] int32, counter-clockwise seen from the front
+    tri_prim: np.ndarray  # [T] int32 -> prims
+    tri_material: np.ndarray  # [T] int32 -> materials
+    tri_uv: np.ndarray  # [T, 3, 2] float32 texture coordinates (0 where the mesh has none)
+    tri_double_sided: np.ndarray  # [T] bool
+    prims: list[str] = field(default_factory=list)
+    materials: list[Material] = field(default_factory=list)
+    textures: list[Texture] = field(default_factory=list)
+    lights: list[Light] = field(default_factory=list)  # shadow-casting lights
+    unshadowed_lights: list[Light] = field(default_factory=list)  # shadow:enable = false
+    skipped_lights: list[SkippedLight] = field(default_factory=list)
+    cameras: list[Camera] = field(default_factory=list)
+    up_axis: str = "Y"
+    meters_per_unit: float = 0.01
+    time: float | None = None
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def triangle_count(self) -> int:
+        return int(self.triangles.shape[0])
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        if len(self.points) == 0:
+            return np.zeros(3), np.zeros(3)
+        used = self.points[np.unique(self.triangles)] if self.triangle_count else self.points
+        return used.min(axis=0).astype(np.float64), used.max(axis=0).astype(np.float64)
+
+    @property
+    def diagonal(self) -> float:
+        lo, hi = self.bounds
+        return max(float(np.linalg.norm(hi - lo)), 1e-6)
+
+    def cutout_triangle_counts(self) -> dict[str, int]:
+        """Material path -> number of triangles using that cutout material."""
+        counts = np.bincount(self.tri_material, minlength=len(self.materials)) if self.triangle_count else []
+        return {m.path: int(counts[i]) for i, m in enumerate(self.materials) if m.is_cutout and counts[i] > 0}
+
+    @property
+    def has_cutouts(self) -> bool:
+        return bool(self.cutout_triangle_counts())
+
+    def find_light(self, path_or_name: str) -> Light:
+        for light in self.lights:
+            if path_or_name in (light.path, light.name):
+                return light
+        known = [l.path for l in self.lights]
+        off = [l.path for l in self.unshadowed_lights] + [s.path for s in self.skipped_lights]
+        msg = f"no shadow-casting light {path_or_name!r}; shadow-casting lights: {', '.join(known) or 'none'}"
+        if path_or_name in off or any(p.endswith("/" + path_or_name) for p in off):
+            msg += " (that light casts no shadow or is not handled; see `wsoft plan`)"
+        from wsoft.errors import ParameterError
+
+        raise ParameterError(msg, file=self.path)
+
+    def find_camera(self, path: str) -> Camera:
+        for cam in self.cameras:
+            if cam.path == path:
+                return cam
+        from wsoft.errors import ParameterError
+
+        raise ParameterError(
+            f"no camera {path!r}; cameras: {', '.join(c.path for c in self.cameras) or 'none'}", file=self.path
+        )

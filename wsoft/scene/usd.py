@@ -1,0 +1,460 @@
+"""USD stage -> :class:`wsoft.scene.types.Scene`.
+
+Reads any file usd-core opens (.usda/.usdc/.usdz, sublayers, references, payloads,
+variant selections, instances through instance proxies) at one time code.
+Problems with the input raise :class:`SceneError` naming the file and the prim;
+features that are ignored become warnings on the scene.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import warnings as _warnings
+
+import numpy as np
+
+from wsoft.errors import SceneError
+from wsoft.scene.types import (
+    LIGHT_DISK,
+    LIGHT_DISTANT,
+    LIGHT_POINT,
+    LIGHT_RECT,
+    LIGHT_SPHERE,
+    WRAP_NAMES,
+    Camera,
+    Light,
+    Material,
+    Scene,
+    SkippedLight,
+    Texture,
+)
+
+_HANDLED_LIGHTS = ("RectLight", "DiskLight", "SphereLight", "DistantLight")
+_UNHANDLED_REASONS = {
+    "DomeLight": "environment (dome) lighting has no finite emitter to shadow-map; not handled",
+    "CylinderLight": "cylinder lights are not handled by any technique",
+    "GeometryLight": "mesh (geometry) lights are not handled by any technique",
+    "PortalLight": "portal lights only shape a DomeLight; not handled",
+    "PluginLight": "plugin lights have no known shape; not handled",
+}
+
+
+def _pxr():
+    try:
+        from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade  # noqa: F401
+    except ImportError as exc:  # pragma: no cover - install problem
+        raise SceneError(f"usd-core is not installed ({exc}); run `pip install usd-core`") from None
+    return Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade
+
+
+def load_scene(path_or_stage, time: float | None = None) -> Scene:
+    """Load a USD stage (a file path or an open ``Usd.Stage``) at ``time``.
+
+    ``time=None`` uses the stage's start time code when it has an authored time range,
+    else the default time. Returns a :class:`Scene` with world-space triangles.
+    """
+    Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = _pxr()
+    if isinstance(path_or_stage, Usd.Stage):
+        stage = path_or_stage
+        file = stage.GetRootLayer().realPath or stage.GetRootLayer().identifier
+    else:
+        file = os.fspath(path_or_stage)
+        if not os.path.exists(file):
+            raise SceneError("file not found", file=file)
+        try:
+            stage = Usd.Stage.Open(file)
+        except Exception as exc:  # Tf.ErrorException: first line is the useful one
+            first = str(exc).strip().splitlines()
+            detail = next((ln.strip() for ln in first if ln.strip() and not ln.strip().startswith("Error in")), "unreadable")
+            raise SceneError(f"cannot open USD stage: {detail}", file=file) from None
+        if stage is None:
+            raise SceneError("cannot open USD stage", file=file)
+    return _StageReader(stage, file, time).read()
+
+
+class _StageReader:
+    def __init__(self, stage, file: str, time: float | None):
+        Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = _pxr()
+        self.stage = stage
+        self.file = file
+        if time is None:
+            self.timecode = stage.GetStartTimeCode() if stage.HasAuthoredTimeCodeRange() else Usd.TimeCode.Default()
+        else:
+            self.timecode = Usd.TimeCode(float(time))
+        self.time = None if self.timecode.IsDefault() else float(self.timecode.GetValue())
+        self.xf = UsdGeom.XformCache(self.timecode)
+        self.warnings: list[str] = []
+        self.materials: list[Material] = []
+        self.material_index: dict[str, int] = {"": 0}
+        self.materials.append(Material(path="(default)"))
+        self.textures: list[Texture] = []
+        self.texture_index: dict[tuple, int] = {}
+
+    # -- helpers -----------------------------------------------------------------
+    def warn(self, prim, msg: str):
+        where = f"{self.file}: {prim.GetPath()}: " if prim is not None else f"{self.file}: "
+        self.warnings.append(where + msg)
+
+    def err(self, prim, msg: str) -> SceneError:
+        return SceneError(msg, file=self.file, prim=str(prim.GetPath()) if prim is not None else None)
+
+    def world(self, prim) -> np.ndarray:
+        m = self.xf.GetLocalToWorldTransform(prim)
+        return np.array(m, dtype=np.float64).T  # column-vector convention
+
+    def get(self, attr, default=None):
+        if not attr or not attr.HasAuthoredValue() and attr.Get(self.timecode) is None:
+            return default
+        v = attr.Get(self.timecode)
+        return default if v is None else v
+
+    # -- main --------------------------------------------------------------------
+    def read(self) -> Scene:
+        Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = _pxr()
+        pts, tris, tri_prim, tri_mat, tri_uv, tri_ds, prims = [], [], [], [], [], [], []
+        lights, unshadowed, skipped, cameras = [], [], [], []
+        nverts = 0
+        it = iter(Usd.PrimRange.Stage(self.stage, Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)))
+        for prim in it:
+            if prim.IsA(UsdGeom.Imageable):
+                img = UsdGeom.Imageable(prim)
+                if img.ComputeVisibility(self.timecode) == UsdGeom.Tokens.invisible:
+                    it.PruneChildren()
+                    continue
+                purpose = img.ComputePurpose()
+                if purpose in (UsdGeom.Tokens.guide, UsdGeom.Tokens.proxy):
+                    it.PruneChildren()
+                    continue
+            type_name = prim.GetTypeName()
+            if prim.IsA(UsdGeom.Mesh):
+                mesh = self.read_mesh(prim)
+                if mesh is None:
+                    continue
+                p, t, m, uv, ds = mesh
+                prims.append(str(prim.GetPath()))
+                pts.append(p)
+                tris.append(t + nverts)
+                nverts += len(p)
+                tri_prim.append(np.full(len(t), len(prims) - 1, np.int32))
+                tri_mat.append(m)
+                tri_uv.append(uv)
+                tri_ds.append(np.full(len(t), ds, bool))
+            elif prim.IsA(UsdGeom.Gprim) and not prim.IsA(UsdGeom.Mesh):
+                self.warn(prim, f"{type_name} is not a Mesh; ignored (convert it to a mesh to cast shadows)")
+            elif type_name in _HANDLED_LIGHTS:
+                light = self.read_light(prim, type_name)
+                if light is None:
+                    continue
+                enabled = UsdLux.ShadowAPI(prim).GetShadowEnableAttr().Get(self.timecode)
+                (unshadowed if enabled is False else lights).append(light)
+            elif prim.HasAPI(UsdLux.LightAPI) or type_name.endswith("Light"):
+                reason = _UNHANDLED_REASONS.get(type_name, f"{type_name or 'this light'} is not handled")
+                skipped.append(SkippedLight(str(prim.GetPath()), type_name or "light", reason))
+            elif prim.IsA(UsdGeom.Camera):
+                cameras.append(self.read_camera(prim))
+
+        if pts:
+            points = np.concatenate(pts).astype(np.float32)
+            triangles = np.concatenate(tris).astype(np.int32)
+        else:
+            points = np.zeros((0, 3), np.float32)
+            triangles = np.zeros((0, 3), np.int32)
+        scene = Scene(
+            path=self.file,
+            points=points,
+            triangles=triangles,
+            tri_prim=np.concatenate(tri_prim) if tri_prim else np.zeros(0, np.int32),
+            tri_material=np.concatenate(tri_mat).astype(np.int32) if tri_mat else np.zeros(0, np.int32),
+            tri_uv=np.concatenate(tri_uv).astype(np.float32) if tri_uv else np.zeros((0, 3, 2), np.float32),
+            tri_double_sided=np.concatenate(tri_ds) if tri_ds else np.zeros(0, bool),
+            prims=prims,
+            materials=self.materials,
+            textures=self.textures,
+            lights=lights,
+            unshadowed_lights=unshadowed,
+            skipped_lights=skipped,
+            cameras=cameras,
+            up_axis=str(UsdGeom.GetStageUpAxis(self.stage)),
+            meters_per_unit=float(UsdGeom.GetStageMetersPerUnit(self.stage)),
+            time=self.time,
+            warnings=self.warnings,
+        )
+        return scene
+
+    # -- meshes ------------------------------------------------------------------
+    def read_mesh(self, prim):
+        Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = _pxr()
+        mesh = UsdGeom.Mesh(prim)
+        points = self.get(mesh.GetPointsAttr())
+        counts = self.get(mesh.GetFaceVertexCountsAttr())
+        indices = self.get(mesh.GetFaceVertexIndicesAttr())
+        if points is None or counts is None or indices is None or len(points) == 0 or len(counts) == 0:
+            self.warn(prim, "mesh has no points or faces; ignored")
+            return None
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        counts = np.asarray(counts, dtype=np.int64)
+        idx = np.asarray(indices, dtype=np.int64)
+        if not np.all(np.isfinite(p)):
+            bad = int(np.argwhere(~np.isfinite(p).all(axis=1))[0, 0])
+            raise self.err(prim, f"points[{bad}] is not finite (NaN or inf)")
+        if counts.sum() != len(idx):
+            raise self.err(prim, f"faceVertexCounts sum to {int(counts.sum())} but faceVertexIndices has {len(idx)} entries")
+        if len(idx) and (idx.min() < 0 or idx.max() >= len(p)):
+            bad = int(np.argmax((idx < 0) | (idx >= len(p))))
+            raise self.err(prim, f"faceVertexIndices[{bad}] = {int(idx[bad])} is out of range for {len(p)} points")
+        if np.any(counts < 3):
+            self.warn(prim, f"{int(np.sum(counts < 3))} faces with fewer than 3 vertices ignored")
+
+        # fan triangulation: face f with n vertices -> (v0, vi, vi+1), i = 1..n-2
+        starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        ntri_face = np.maximum(counts - 2, 0)
+        face_of_tri = np.repeat(np.arange(len(counts)), ntri_face)
+        k = np.arange(ntri_face.sum()) - np.repeat(np.cumsum(ntri_face) - ntri_face, ntri_face)
+        c0 = starts[face_of_tri]
+        corners = np.stack([c0, c0 + k + 1, c0 + k + 2], axis=1)  # face-vertex (corner) indices
+        orient = self.get(mesh.GetOrientationAttr(), UsdGeom.Tokens.rightHanded)
+        if orient == UsdGeom.Tokens.leftHanded:
+            corners = corners[:, [0, 2, 1]]
+        tris = idx[corners]
+
+        # world transform
+        M = self.world(prim)
+        pw = p @ M[:3, :3].T + M[:3, 3]
+        if np.linalg.det(M[:3, :3]) < 0:  # mirroring transform flips the winding
+            corners = corners[:, [0, 2, 1]]
+            tris = tris[:, [0, 2, 1]]
+
+        uv = self.read_st(prim, mesh, corners, face_of_tri, tris)
+        mat = self.bind_materials(prim, mesh, len(counts), face_of_tri)
+        ds = bool(self.get(mesh.GetDoubleSidedAttr(), False))
+        return pw, tris.astype(np.int32), mat, uv, ds
+
+    def read_st(self, prim, mesh, corners, face_of_tri, tris, name: str = "st"):
+        Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = _pxr()
+        out = np.zeros((len(tris), 3, 2), np.float32)
+        pv = UsdGeom.PrimvarsAPI(prim).GetPrimvar(name)
+        if not pv or not pv.HasValue():
+            return out
+        vals = pv.ComputeFlattened(self.timecode)
+        if vals is None or len(vals) == 0:
+            return out
+        v = np.asarray(vals, dtype=np.float32).reshape(-1, 2)
+        interp = pv.GetInterpolation()
+        try:
+            if interp == UsdGeom.Tokens.faceVarying:
+                out = v[corners]
+            elif interp in (UsdGeom.Tokens.vertex, UsdGeom.Tokens.varying):
+                out = v[tris]
+            elif interp == UsdGeom.Tokens.uniform:
+                out = np.repeat(v[face_of_tri][:, None, :], 3, axis=1)
+            else:  # constant
+                out = np.broadcast_to(v[0], (len(tris), 3, 2)).copy()
+        except IndexError:
+            raise self.err(prim, f"primvars:{name} has {len(v)} values, too few for {interp} interpolation") from None
+        return out.astype(np.float32)
+
+    def bind_materials(self, prim, mesh, nfaces: int, face_of_tri):
+        Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = _pxr()
+        face_mat = np.full(nfaces, self.material_for(prim), np.int32)
+        subsets = UsdShade.MaterialBindingAPI(prim).GetMaterialBindSubsets()
+        for subset in subsets:
+            ind = self.get(subset.GetIndicesAttr())
+            if ind is None:
+                continue
+            ind = np.asarray(ind, dtype=np.int64)
+            if len(ind) and (ind.min() < 0 or ind.max() >= nfaces):
+                raise self.err(subset.GetPrim(), f"GeomSubset face index out of range for {nfaces} faces")
+            face_mat[ind] = self.material_for(subset.GetPrim())
+        return face_mat[face_of_tri]
+
+    def material_for(self, prim) -> int:
+        Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = _pxr()
+        material, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()
+        if not material:
+            color = self.display_color(prim)
+            if color is None:
+                return 0
+            key = f"(displayColor){color}"
+            if key not in self.material_index:
+                self.material_index[key] = len(self.materials)
+                self.materials.append(Material(path=key, albedo=color))
+            return self.material_index[key]
+        mpath = str(material.GetPath())
+        if mpath not in self.material_index:
+            self.material_index[mpath] = len(self.materials)
+            self.materials.append(self.read_material(material))
+        return self.material_index[mpath]
+
+    def display_color(self, prim):
+        Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = _pxr()
+        if not prim.IsA(UsdGeom.Gprim):
+            return None
+        pv = UsdGeom.Gprim(prim).GetDisplayColorPrimvar()
+        if pv and pv.HasValue():
+            v = pv.ComputeFlattened(self.timecode)
+            if v is not None and len(v):
+                c = np.asarray(v, dtype=np.float64).reshape(-1, 3).mean(axis=0)
+                return tuple(float(x) for x in np.clip(c, 0, 1))
+        return None
+
+    def read_material(self, material) -> Material:
+        Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = _pxr()
+        mat = Material(path=str(material.GetPath()))
+        shader = material.ComputeSurfaceSource()[0]
+        if not shader:
+            return mat
+        sid = shader.GetIdAttr().Get() if shader.GetIdAttr() else None
+        if sid != "UsdPreviewSurface":
+            self.warn(material.GetPrim(), f"surface shader {sid!r} is not UsdPreviewSurface; treated as opaque grey")
+            return mat
+        diffuse = shader.GetInput("diffuseColor")
+        if diffuse and not diffuse.HasConnectedSource():
+            v = diffuse.Get(self.timecode)
+            if v is not None:
+                mat.albedo = tuple(float(x) for x in v)
+        thr = shader.GetInput("opacityThreshold")
+        mat.opacity_threshold = float(thr.Get(self.timecode) or 0.0) if thr else 0.0
+        op = shader.GetInput("opacity")
+        if not op:
+            return mat
+        if op.HasConnectedSource():
+            src, out_name, _ = op.GetConnectedSource()
+            tex_shader = UsdShade.Shader(src.GetPrim())
+            tid = tex_shader.GetIdAttr().Get() if tex_shader and tex_shader.GetIdAttr() else None
+            if tid != "UsdUVTexture":
+                self.warn(material.GetPrim(), f"opacity is connected to {tid!r}, not a UsdUVTexture; treated as opaque")
+                return mat
+            if mat.opacity_threshold <= 0.0:
+                self.warn(material.GetPrim(), "textured opacity without opacityThreshold (translucency) is not modelled; opaque")
+                return mat
+            mat.texture = self.read_texture(tex_shader, str(out_name), material.GetPrim())
+        else:
+            v = op.Get(self.timecode)
+            mat.opacity = float(v) if v is not None else 1.0
+            if mat.opacity < 1.0 and mat.opacity_threshold <= 0.0:
+                self.warn(material.GetPrim(), f"constant opacity {mat.opacity:g} (translucency) is not modelled; opaque")
+        return mat
+
+    def read_texture(self, tex_shader, channel: str, mat_prim) -> int:
+        Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = _pxr()
+        file_in = tex_shader.GetInput("file")
+        asset = file_in.Get(self.timecode) if file_in else None
+        if asset is None:
+            self.warn(tex_shader.GetPrim(), "UsdUVTexture has no file; surface is opaque")
+            return -1
+        resolved = asset.resolvedPath or ""
+        wraps = []
+        for nm in ("wrapS", "wrapT"):
+            w = tex_shader.GetInput(nm)
+            wv = str(w.Get(self.timecode)) if w and w.Get(self.timecode) is not None else "useMetadata"
+            wraps.append(WRAP_NAMES.get(wv, 0))
+        key = (resolved or asset.path, channel, tuple(wraps))
+        if key in self.texture_index:
+            return self.texture_index[key]
+        if not resolved or not os.path.exists(resolved):
+            self.warn(tex_shader.GetPrim(), f"texture {asset.path!r} not found; surface is opaque")
+            return -1
+        try:
+            from PIL import Image
+
+            with Image.open(resolved) as im:
+                rgba = np.asarray(im.convert("RGBA"), dtype=np.float32) / 255.0
+        except Exception as exc:
+            self.warn(tex_shader.GetPrim(), f"texture {asset.path!r} cannot be read ({exc}); surface is opaque")
+            return -1
+        ch = {"r": 0, "g": 1, "b": 2, "a": 3}.get(channel, 3)
+        data = np.ascontiguousarray(rgba[::-1, :, ch])  # bottom-up rows: st (0,0) = lower-left
+        self.textures.append(Texture(asset=asset.path, data=data, wrap_s=wraps[0], wrap_t=wraps[1]))
+        self.texture_index[key] = len(self.textures) - 1
+        return len(self.textures) - 1
+
+    # -- lights ------------------------------------------------------------------
+    def read_light(self, prim, type_name: str) -> Light | None:
+        Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = _pxr()
+        M = self.world(prim)
+        axes = M[:3, :3]
+        scale = np.linalg.norm(axes, axis=0)
+        if np.any(scale < 1e-12) or not np.all(np.isfinite(M)):
+            raise self.err(prim, "light transform is singular or not finite")
+        frame = axes / scale
+        # re-orthonormalise (shear would make the frame skew)
+        u, _, vt = np.linalg.svd(frame)
+        frame = u @ vt
+        pos = M[:3, 3].copy()
+        lux = UsdLux.LightAPI(prim)
+        intensity = float(self.get(lux.GetIntensityAttr(), 1.0)) * 2.0 ** float(self.get(lux.GetExposureAttr(), 0.0))
+        color = tuple(float(c) for c in self.get(lux.GetColorAttr(), (1.0, 1.0, 1.0)))
+        common = dict(path=str(prim.GetPath()), position=pos, frame=frame, intensity=intensity, color=color)
+        if type_name == "RectLight":
+            lt = UsdLux.RectLight(prim)
+            w = float(self.get(lt.GetWidthAttr(), 1.0)) * scale[0]
+            h = float(self.get(lt.GetHeightAttr(), 1.0)) * scale[1]
+            if w < 0 or h < 0:
+                raise self.err(prim, "RectLight width/height must be >= 0")
+            if w == 0 and h == 0:
+                return Light(kind=LIGHT_POINT, **common)
+            return Light(kind=LIGHT_RECT, half_size=(0.5 * w, 0.5 * h), **common)
+        if type_name == "DiskLight":
+            r = float(self.get(UsdLux.DiskLight(prim).GetRadiusAttr(), 0.5)) * 0.5 * (scale[0] + scale[1])
+            return Light(kind=LIGHT_DISK if r > 0 else LIGHT_POINT, radius=max(r, 0.0), **common)
+        if type_name == "SphereLight":
+            lt = UsdLux.SphereLight(prim)
+            r = float(self.get(lt.GetRadiusAttr(), 0.5)) * float(np.mean(scale))
+            if bool(self.get(lt.GetTreatAsPointAttr(), False)) or r <= 0:
+                return Light(kind=LIGHT_POINT, **common)
+            return Light(kind=LIGHT_SPHERE, radius=r, **common)
+        angle = float(self.get(UsdLux.DistantLight(prim).GetAngleAttr(), 0.53))
+        if not (0.0 <= angle < 180.0):
+            raise self.err(prim, f"DistantLight angle {angle} must be in [0, 180) degrees")
+        return Light(kind=LIGHT_DISTANT, angle_deg=angle, **common)
+
+    # -- cameras -----------------------------------------------------------------
+    def read_camera(self, prim) -> Camera:
+        Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = _pxr()
+        cam = UsdGeom.Camera(prim).GetCamera(self.timecode)
+        M = np.array(cam.transform, dtype=np.float64).T
+        axes = M[:3, :3]
+        scale = np.linalg.norm(axes, axis=0)
+        if np.any(scale < 1e-12) or not np.all(np.isfinite(M)):
+            raise self.err(prim, "camera transform is singular or not finite")
+        M[:3, :3] = axes / scale
+        clip = (float(cam.clippingRange.min), float(cam.clippingRange.max))
+        ortho = cam.projection == Gf.Camera.Orthographic
+        ha, va = float(cam.horizontalAperture), float(cam.verticalAperture)
+        ho, vo = float(cam.horizontalApertureOffset), float(cam.verticalApertureOffset)
+        if ha <= 0 or va <= 0:
+            raise self.err(prim, "camera apertures must be > 0")
+        if ortho:
+            # apertures are in tenths of a scene unit
+            tan_half = (0.05 * ha, 0.05 * va)
+            offset = (0.1 * ho, 0.1 * vo)
+        else:
+            f = float(cam.focalLength)
+            if f <= 0:
+                raise self.err(prim, "camera focalLength must be > 0")
+            tan_half = (0.5 * ha / f, 0.5 * va / f)
+            offset = (ho / f, vo / f)
+        return Camera(path=str(prim.GetPath()), to_world=M, orthographic=ortho, tan_half=tan_half, offset=offset, clip=clip)
+
+
+def auto_camera(scene: Scene, aspect: float = 4.0 / 3.0) -> Camera:
+    """A perspective camera framing the scene's bounds from above and to the side (up axis aware)."""
+    lo, hi = scene.bounds
+    center = 0.5 * (lo + hi)
+    radius = 0.5 * scene.diagonal
+    up = np.array([0.0, 0.0, 1.0]) if scene.up_axis == "Z" else np.array([0.0, 1.0, 0.0])
+    side = np.array([1.0, 0.0, 0.0])
+    fwd_h = np.cross(up, side)  # horizontal direction
+    view_dir = -(0.55 * up + 0.6 * fwd_h + 0.35 * side)
+    view_dir /= np.linalg.norm(view_dir)
+    tan_h = math.tan(math.radians(25.0))
+    dist = radius / math.sin(math.atan(tan_h / max(aspect, 1.0) if aspect >= 1 else tan_h)) * 1.05
+    eye = center - view_dir * dist
+    z = -view_dir
+    x = np.cross(up, z)
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    M = np.eye(4)
+    M[:3, 0], M[:3, 1], M[:3, 2], M[:3, 3] = x, y, z, eye
+    return Camera(path="(automatic)", to_world=M, tan_half=(tan_h, tan_h / aspect), clip=(dist * 1e-3, dist + 4 * radius))
