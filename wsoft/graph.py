@@ -83,10 +83,13 @@ def buffer_bytes(resources: dict[str, Any]) -> dict[str, int]:
     """Bytes of every device array held by the resources, named ``resource.field``."""
     out: dict[str, int] = {}
     for key, val in resources.items():
-        arrays = val.arrays() if hasattr(val, "arrays") else ({key: val} if isinstance(val, (wp.array, np.ndarray)) else {})
+        if hasattr(val, "arrays"):
+            arrays = val.arrays()
+        elif isinstance(val, (wp.array, np.ndarray)):
+            arrays = {"data": val}
+        else:
+            continue
         for name, arr in arrays.items():
-            full = name if name.startswith(key.split("[")[0]) else f"{key}.{name}"
-            if "[" in key and "[" not in full:
-                full = f"{full}{key[key.index('['):]}"
-            out[full] = int(arr.size * (arr.dtype.itemsize if isinstance(arr, np.ndarray) else wp.types.type_size_in_bytes(arr.dtype)))
+            itemsize = arr.dtype.itemsize if isinstance(arr, np.ndarray) else wp.types.type_size_in_bytes(arr.dtype)
+            out[f"{key}.{name}"] = int(arr.size * itemsize)
     return out

@@ -26,7 +26,7 @@ def write_exr(path: str, channels: dict[str, np.ndarray]) -> None:
 def read_exr(path: str) -> dict[str, np.ndarray]:
     import OpenEXR
 
-    with OpenEXR.File(path) as f:
+    with OpenEXR.File(path, separate_channels=True) as f:
         return {k: np.array(v.pixels) for k, v in f.channels().items()}
 
 

@@ -24,14 +24,16 @@ _INIT = False
 _LOAD_LOCK = threading.Lock()
 
 # Warp's per-module compile messages are noise for users; WSOFT_WARP_VERBOSE=1 shows them.
-wp.config.quiet = os.environ.get("WSOFT_WARP_VERBOSE", "") != "1"
+if os.environ.get("WSOFT_WARP_VERBOSE", "") != "1":
+    wp.config.log_level = 30  # warnings and errors only
+# wsoft never differentiates through its kernels: skip adjoint code (halves compile time)
+wp.config.enable_backward = False
 
 
 def init_warp() -> None:
     """Initialise Warp once, quietly (honours ``WARP_CACHE_PATH``)."""
     global _INIT
     if not _INIT:
-        wp.config.quiet = True
         wp.init()
         _INIT = True
 

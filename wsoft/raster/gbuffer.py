@@ -139,7 +139,7 @@ class GBuffer:
         return self.width * self.height * self.spp
 
     def arrays(self) -> dict[str, wp.array]:
-        return {"gbuffer.pos": self.pos, "gbuffer.nrm": self.nrm, "gbuffer.dist": self.dist, "gbuffer.prim": self.prim, "gbuffer.uv": self.uv}
+        return {"pos": self.pos, "nrm": self.nrm, "dist": self.dist, "prim": self.prim, "uv": self.uv}
 
     def host(self, name: str) -> np.ndarray:
         """A field as numpy, shape [spp, H, W(, C)]."""

@@ -433,7 +433,7 @@ class DepthMap:
     conservative: bool
 
     def arrays(self) -> dict[str, wp.array]:
-        return {"light_depth": self.depth}
+        return {"depth": self.depth}
 
 
 def rasterize(ds: DeviceScene, view: LightView, alpha_tested: bool, conservative: bool = False) -> DepthMap:

@@ -133,11 +133,12 @@ class DeviceScene:
     def arrays(self) -> dict[str, wp.array]:
         c = self.cutouts
         return {
-            "scene.points": self.points,
-            "scene.indices": self.indices,
-            "scene.tri_albedo": self.tri_albedo,
-            "scene.tri_uv": c.tri_uv,
-            "scene.tex_data": c.tex_data,
+            "points": self.points,
+            "indices": self.indices,
+            "tri_albedo": self.tri_albedo,
+            "tri_cut": c.tri_cut,
+            "tri_uv": c.tri_uv,
+            "tex_data": c.tex_data,
         }
 
 

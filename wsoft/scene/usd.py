@@ -79,7 +79,7 @@ class _StageReader:
         self.stage = stage
         self.file = file
         if time is None:
-            self.timecode = stage.GetStartTimeCode() if stage.HasAuthoredTimeCodeRange() else Usd.TimeCode.Default()
+            self.timecode = Usd.TimeCode(stage.GetStartTimeCode()) if stage.HasAuthoredTimeCodeRange() else Usd.TimeCode.Default()
         else:
             self.timecode = Usd.TimeCode(float(time))
         self.time = None if self.timecode.IsDefault() else float(self.timecode.GetValue())

@@ -1,0 +1,294 @@
+"""Scene loading from in-memory stages: axes, n-gons, winding, instancing, materials, lights."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import add_camera, add_quad, add_rect_light, make_stage
+
+import wsoft
+from wsoft.errors import SceneError
+from wsoft.scene.types import LIGHT_DISK, LIGHT_DISTANT, LIGHT_POINT, LIGHT_RECT, LIGHT_SPHERE
+
+
+def tri_normals(scene):
+    p = scene.points[scene.triangles]
+    return np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+
+
+def test_up_axis_and_units():
+    for up in ("Y", "Z"):
+        st = make_stage(up)
+        add_quad(st, "/World/Q", (0, 0, 0), 1)
+        add_rect_light(st, "/World/L", (0, 0, 3), 1, 1)
+        s = wsoft.load_scene(st)
+        assert s.up_axis == up
+        assert s.meters_per_unit == 1.0
+
+
+def test_ngon_triangulation_area():
+    from pxr import UsdGeom
+
+    st = make_stage()
+    m = UsdGeom.Mesh.Define(st, "/World/Hex")
+    ang = np.linspace(0, 2 * np.pi, 7)[:-1]
+    m.CreatePointsAttr([(float(np.cos(a)), float(np.sin(a)), 0.0) for a in ang])
+    m.CreateFaceVertexCountsAttr([6])
+    m.CreateFaceVertexIndicesAttr(list(range(6)))
+    s = wsoft.load_scene(st)
+    assert s.triangle_count == 4
+    area = 0.5 * np.linalg.norm(tri_normals(s), axis=1).sum()
+    assert area == pytest.approx(3 * np.sqrt(3) / 2, rel=1e-5)
+    assert np.all(tri_normals(s)[:, 2] > 0)  # counter-clockwise from +Z stays facing +Z
+
+
+def test_left_handed_flips_winding():
+    st = make_stage()
+    add_quad(st, "/World/R", (0, 0, 0), 1)
+    q = add_quad(st, "/World/L", (5, 0, 0), 1)
+    q.CreateOrientationAttr("leftHanded")
+    s = wsoft.load_scene(st)
+    n = tri_normals(s)
+    right = s.tri_prim == s.prims.index("/World/R")
+    assert np.all(n[right][:, 2] > 0) and np.all(n[~right][:, 2] < 0)
+
+
+def test_mirroring_transform_keeps_facing():
+    from pxr import Gf, UsdGeom
+
+    st = make_stage()
+    q = add_quad(st, "/World/Q", (0, 0, 0), 1)
+    UsdGeom.XformCommonAPI(q).SetScale(Gf.Vec3f(-1, 1, 1))
+    s = wsoft.load_scene(st)
+    assert np.all(tri_normals(s)[:, 2] > 0)
+
+
+def test_instancing_through_instance_proxies():
+    from pxr import Gf, UsdGeom
+
+    st = make_stage()
+    proto = st.CreateClassPrim("/Protos")
+    add_quad(st, "/Protos/Tile/Q", (0, 0, 0), 0.5)
+    for i, x in enumerate((0.0, 3.0, 6.0)):
+        inst = UsdGeom.Xform.Define(st, f"/World/Inst{i}")
+        inst.GetPrim().GetReferences().AddInternalReference("/Protos/Tile")
+        inst.GetPrim().SetInstanceable(True)
+        UsdGeom.XformCommonAPI(inst).SetTranslate(Gf.Vec3d(x, 0, 0))
+    assert proto
+    s = wsoft.load_scene(st)
+    assert s.triangle_count == 6
+    xs = sorted(round(float(s.points[s.triangles[s.tri_prim == i]].reshape(-1, 3).mean(axis=0)[0]), 3) for i in range(len(s.prims)))
+    assert xs == [0.0, 3.0, 6.0]
+
+
+def test_invisible_and_guide_prims_skipped():
+    from pxr import UsdGeom
+
+    st = make_stage()
+    add_quad(st, "/World/Seen", (0, 0, 0), 1)
+    add_quad(st, "/World/Hidden", (3, 0, 0), 1).CreateVisibilityAttr("invisible")
+    add_quad(st, "/World/Guide", (6, 0, 0), 1).CreatePurposeAttr(UsdGeom.Tokens.guide)
+    add_quad(st, "/World/Proxy", (9, 0, 0), 1).CreatePurposeAttr(UsdGeom.Tokens.proxy)
+    s = wsoft.load_scene(st)
+    assert s.prims == ["/World/Seen"]
+
+
+def _texture(tmp_path, name="alpha.png", pattern="checker", n=8, size=64):
+    from PIL import Image
+
+    yy, xx = np.mgrid[0:size, 0:size] * n // size
+    if pattern == "checker":
+        a = ((xx + yy) % 2 == 0)
+    elif pattern == "quarter":  # opaque where both cell indices are even: 1/4 opaque
+        a = (xx % 2 == 0) & (yy % 2 == 0)
+    else:  # top half of the image opaque
+        a = np.mgrid[0:size, 0:size][0] < size // 2
+    rgba = np.zeros((size, size, 4), np.uint8)
+    rgba[..., 0] = 200
+    rgba[..., 3] = np.where(a, 255, 0)
+    path = tmp_path / name
+    Image.fromarray(rgba, "RGBA").save(path)
+    return str(path)
+
+
+def add_cutout_material(stage, mesh, tex_file: str, path="/World/Looks/Cut", threshold=0.5, wrap="repeat"):
+    from pxr import Sdf, UsdShade
+
+    mat = UsdShade.Material.Define(stage, path)
+    sh = UsdShade.Shader.Define(stage, path + "/Surface")
+    sh.CreateIdAttr("UsdPreviewSurface")
+    tex = UsdShade.Shader.Define(stage, path + "/Tex")
+    tex.CreateIdAttr("UsdUVTexture")
+    tex.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(tex_file)
+    tex.CreateInput("wrapS", Sdf.ValueTypeNames.Token).Set(wrap)
+    tex.CreateInput("wrapT", Sdf.ValueTypeNames.Token).Set(wrap)
+    reader = UsdShade.Shader.Define(stage, path + "/St")
+    reader.CreateIdAttr("UsdPrimvarReader_float2")
+    reader.CreateInput("varname", Sdf.ValueTypeNames.String).Set("st")
+    tex.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(reader.ConnectableAPI(), "result")
+    alpha_out = tex.CreateOutput("a", Sdf.ValueTypeNames.Float)
+    sh.CreateInput("opacity", Sdf.ValueTypeNames.Float).ConnectToSource(alpha_out)
+    sh.CreateInput("opacityThreshold", Sdf.ValueTypeNames.Float).Set(threshold)
+    mat.CreateSurfaceOutput().ConnectToSource(sh.ConnectableAPI(), "surface")
+    UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(mat)
+    return mat
+
+
+def test_cutout_material_and_texture_orientation(tmp_path):
+    st = make_stage()
+    q = add_quad(st, "/World/Fence", (0, 0, 1), 1, st=True)
+    add_cutout_material(st, q, _texture(tmp_path, pattern="top"))
+    add_quad(st, "/World/Ground", (0, 0, 0), 5)
+    s = wsoft.load_scene(st)
+    assert s.has_cutouts
+    assert s.cutout_triangle_counts() == {"/World/Looks/Cut": 2}
+    tex = s.textures[0]
+    # image top half opaque -> st.t near 1 (row 0 after flipping is the image's bottom) is opaque
+    assert tex.data[-1, 0] == 1.0 and tex.data[0, 0] == 0.0
+    fence = s.tri_prim == s.prims.index("/World/Fence")
+    assert np.allclose(s.tri_uv[fence].reshape(-1, 2).min(axis=0), 0) and np.allclose(s.tri_uv[fence].reshape(-1, 2).max(axis=0), 1)
+
+
+def test_face_varying_indexed_st_and_geomsubset_binding(tmp_path):
+    from pxr import Sdf, UsdGeom, UsdShade, Vt
+
+    st = make_stage()
+    m = UsdGeom.Mesh.Define(st, "/World/Two")
+    m.CreatePointsAttr([(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (2, 0, 0), (2, 1, 0)])
+    m.CreateFaceVertexCountsAttr([4, 4])
+    m.CreateFaceVertexIndicesAttr([0, 1, 2, 3, 1, 4, 5, 2])
+    pv = UsdGeom.PrimvarsAPI(m).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.faceVarying)
+    pv.Set(Vt.Vec2fArray([(0, 0), (1, 0), (1, 1), (0, 1)]))
+    pv.SetIndices(Vt.IntArray([0, 1, 2, 3, 0, 1, 2, 3]))
+    subset = UsdGeom.Subset.CreateGeomSubset(m, "right", UsdGeom.Tokens.face, Vt.IntArray([1]), "materialBind")
+    add_cutout_material(st, subset, _texture(tmp_path))
+    plain = UsdShade.Material.Define(st, "/World/Looks/Plain")
+    UsdShade.MaterialBindingAPI.Apply(m.GetPrim()).Bind(plain)
+    s = wsoft.load_scene(st)
+    assert s.triangle_count == 4
+    cut = [s.materials[i].is_cutout for i in s.tri_material]
+    assert cut == [False, False, True, True]
+    assert np.allclose(s.tri_uv[2], [(0, 0), (1, 0), (1, 1)])
+
+
+def test_missing_texture_is_a_warning_and_opaque(tmp_path):
+    st = make_stage()
+    q = add_quad(st, "/World/Fence", (0, 0, 1), 1, st=True)
+    add_cutout_material(st, q, str(tmp_path / "nope.png"))
+    s = wsoft.load_scene(st)
+    assert not s.has_cutouts
+    assert any("nope.png" in w and "not found" in w for w in s.warnings)
+
+
+def test_each_light_kind_and_shadow_disable():
+    from pxr import Gf, UsdGeom, UsdLux
+
+    st = make_stage()
+    add_quad(st, "/World/G", (0, 0, 0), 5)
+    add_rect_light(st, "/World/Rect", (0, 0, 3), 2.0, 1.0)
+    d = UsdLux.DiskLight.Define(st, "/World/Disk")
+    d.CreateRadiusAttr(0.25)
+    sp = UsdLux.SphereLight.Define(st, "/World/Sphere")
+    sp.CreateRadiusAttr(0.5)
+    UsdGeom.XformCommonAPI(sp).SetTranslate(Gf.Vec3d(1, 1, 4))
+    pt = UsdLux.SphereLight.Define(st, "/World/Point")
+    pt.CreateTreatAsPointAttr(True)
+    sun = UsdLux.DistantLight.Define(st, "/World/Sun")
+    sun.CreateAngleAttr(4.0)
+    off = add_rect_light(st, "/World/Off", (0, 0, 5), 1, 1, shadow=False)
+    UsdLux.DomeLight.Define(st, "/World/Dome")
+    assert off
+    s = wsoft.load_scene(st)
+    kinds = {l.name: l.kind for l in s.lights}
+    assert kinds == {"Rect": LIGHT_RECT, "Disk": LIGHT_DISK, "Sphere": LIGHT_SPHERE, "Point": LIGHT_POINT, "Sun": LIGHT_DISTANT}
+    rect = s.find_light("Rect")
+    assert rect.half_size == pytest.approx((1.0, 0.5))
+    assert np.allclose(rect.direction, [0, 0, -1])
+    assert s.find_light("Disk").radius == pytest.approx(0.25)
+    assert s.find_light("Sphere").radius == pytest.approx(0.5)
+    assert np.allclose(s.find_light("Sphere").position, [1, 1, 4])
+    assert s.find_light("Sun").angle_deg == pytest.approx(4.0)
+    assert [l.path for l in s.unshadowed_lights] == ["/World/Off"]
+    assert [(x.path, x.kind) for x in s.skipped_lights] == [("/World/Dome", "DomeLight")]
+    assert "not handled" in s.skipped_lights[0].reason
+
+
+def test_camera_perspective_and_orthographic():
+    from pxr import UsdGeom
+
+    st = make_stage()
+    add_camera(st, "/World/Cam", (0, -5, 5), (0, 0, 0), focal=20.955 / 2)
+    o = add_camera(st, "/World/Ortho", (0, 0, 10), (0, 0, 0), up=(0, 1, 0))
+    o.CreateProjectionAttr(UsdGeom.Tokens.orthographic)
+    s = wsoft.load_scene(st)
+    cam, ortho = s.cameras
+    assert cam.tan_half[0] == pytest.approx(1.0)  # aperture = 2 * focal -> 90 degrees
+    assert np.allclose(cam.position, [0, -5, 5])
+    fwd = -cam.to_world[:3, 2]
+    assert np.allclose(fwd, np.array([0, 5, -5]) / np.sqrt(50), atol=1e-6)
+    assert ortho.orthographic and ortho.tan_half[0] == pytest.approx(20.955 / 20)
+
+
+def test_time_code_selects_samples():
+    from pxr import Gf, UsdGeom
+
+    st = make_stage()
+    q = add_quad(st, "/World/Q", (0, 0, 0), 1)
+    op = UsdGeom.Xformable(q).AddTranslateOp()
+    op.Set(Gf.Vec3d(0, 0, 0), 1.0)
+    op.Set(Gf.Vec3d(0, 0, 10), 2.0)
+    st.SetStartTimeCode(1)
+    st.SetEndTimeCode(2)
+    assert wsoft.load_scene(st).points[:, 2].max() == pytest.approx(0)
+    assert wsoft.load_scene(st, time=2).points[:, 2].max() == pytest.approx(10)
+
+
+# -- bad input -------------------------------------------------------------------------------
+
+
+def test_broken_file(tmp_path):
+    bad = tmp_path / "broken.usda"
+    bad.write_text("#usda 1.0\n( this is not usd\n")
+    with pytest.raises(SceneError) as e:
+        wsoft.load_scene(str(bad))
+    assert str(bad) in e.value.line() and "\n" not in e.value.line()
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(SceneError, match="file not found"):
+        wsoft.load_scene(str(tmp_path / "none.usda"))
+
+
+def test_out_of_range_face_index():
+    from pxr import UsdGeom
+
+    st = make_stage()
+    m = UsdGeom.Mesh.Define(st, "/World/Bad")
+    m.CreatePointsAttr([(0, 0, 0), (1, 0, 0), (0, 1, 0)])
+    m.CreateFaceVertexCountsAttr([3])
+    m.CreateFaceVertexIndicesAttr([0, 1, 7])
+    with pytest.raises(SceneError) as e:
+        wsoft.load_scene(st)
+    assert "/World/Bad" in e.value.line() and "out of range" in e.value.line()
+
+
+def test_nan_points():
+    from pxr import UsdGeom
+
+    st = make_stage()
+    m = UsdGeom.Mesh.Define(st, "/World/Nan")
+    m.CreatePointsAttr([(0, 0, 0), (1, float("nan"), 0), (0, 1, 0)])
+    m.CreateFaceVertexCountsAttr([3])
+    m.CreateFaceVertexIndicesAttr([0, 1, 2])
+    with pytest.raises(SceneError) as e:
+        wsoft.load_scene(st)
+    assert "/World/Nan" in e.value.line() and "points[1]" in e.value.line()
+
+
+def test_no_shadow_casting_light_is_an_error():
+    st = make_stage()
+    add_quad(st, "/World/G", (0, 0, 0), 1)
+    add_rect_light(st, "/World/Off", (0, 0, 2), 1, 1, shadow=False)
+    s = wsoft.load_scene(st)
+    with pytest.raises(SceneError, match="no shadow-casting light"):
+        wsoft.render(s, "hard", width=8, height=8, device="cpu")

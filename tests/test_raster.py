@@ -1,0 +1,120 @@
+"""The light-view rasterizer against one BVH ray per texel, and the conservative mode."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import scene_path
+
+import wsoft
+from wsoft.raster.lightview import DEPTH_CLEAR, fit_light_view, rasterize
+from wsoft.raster.raycast import raycast_depth
+from wsoft.scene.device import upload_scene
+
+CASES = [("multi_light.usda", "Rect"), ("multi_light.usda", "Sphere"), ("multi_light.usda", "Sun"), ("cutout.usda", "Light"), ("contact.usda", "Light")]
+
+
+def _view(scene, light_name, size=256):
+    light = scene.find_light(light_name)
+    lo, hi = scene.bounds
+    return fit_light_view(light, scene.points, lo, hi, size)
+
+
+@pytest.mark.parametrize("file,light", CASES)
+def test_depth_matches_ray_per_texel(device, file, light):
+    scene = wsoft.load_scene(scene_path(file))
+    ds = upload_scene(scene, device)
+    view = _view(scene, light)
+    a = rasterize(ds, view, alpha_tested=True).depth.numpy()
+    b = raycast_depth(ds, view, alpha_tested=True).depth.numpy()
+    ha, hb = a < DEPTH_CLEAR, b < DEPTH_CLEAR
+    assert ha.mean() > 0.3  # the map really holds geometry
+    assert (ha != hb).mean() < 1e-3  # coverage differs at most on a few edge texels
+    both = ha & hb
+    rel = np.abs(a - b)[both] / b[both]
+    # float32 precision: worst at 80 degrees off the axis of a wide perspective view
+    assert np.median(rel) < 2e-5 and np.percentile(rel, 99) < 2e-4 and rel.max() < 5e-3
+    if scene.has_cutouts:
+        opaque_only = rasterize(ds, view, alpha_tested=False).depth.numpy()
+        assert (opaque_only < a * (1 - 1e-3)).mean() > 0.01  # the alpha test really let texels through
+
+
+def _triangle_samples(scene, n_per_tri=64, seed=0):
+    rng = np.random.default_rng(seed)
+    p = scene.points[scene.triangles].astype(np.float64)  # [T, 3, 3]
+    u = rng.random((len(p), n_per_tri, 2))
+    flip = u.sum(-1) > 1
+    u[flip] = 1 - u[flip]
+    w = np.concatenate([1 - u.sum(-1, keepdims=True), u], -1)  # [T, n, 3]
+    return np.einsum("tnk,tkd->tnd", w, p).reshape(-1, 3)
+
+
+@pytest.mark.parametrize("file,light", [("multi_light.usda", "Rect"), ("multi_light.usda", "Sun"), ("contact.usda", "Light")])
+def test_conservative_covers_every_touched_texel(device, file, light):
+    scene = wsoft.load_scene(scene_path(file))
+    ds = upload_scene(scene, device)
+    view = _view(scene, light)
+    std = rasterize(ds, view, alpha_tested=False).depth.numpy()
+    cons = rasterize(ds, view, alpha_tested=False, conservative=True).depth.numpy()
+    assert np.all(cons <= std * (1 + 1e-6))  # superset, never farther
+    assert (cons < DEPTH_CLEAR).sum() > (std < DEPTH_CLEAR).sum()  # it really added texels
+    # every point on every triangle lands in a texel whose conservative depth is not behind it
+    pts = _triangle_samples(scene)
+    v = view.to_view(pts)
+    l, r, b, t = view.window
+    if view.persp:
+        keep = v[:, 2] > view.near
+        v = v[keep]
+        x, y = v[:, 0] / v[:, 2], v[:, 1] / v[:, 2]
+    else:
+        x, y = v[:, 0], v[:, 1]
+    tx = np.floor((x - l) / (r - l) * view.width).astype(int)
+    ty = np.floor((y - b) / (t - b) * view.height).astype(int)
+    inside = (tx >= 0) & (ty >= 0) & (tx < view.width) & (ty < view.height)
+    assert inside.sum() > 1000
+    d = cons[ty[inside], tx[inside]]
+    assert np.all(d <= v[inside, 2] * (1 + 1e-4) + 1e-6)
+
+
+def test_light_inside_the_scene_stays_finite(device):
+    """A point light between objects: triangles behind it are clipped at the near plane."""
+    from pxr import Gf, UsdGeom, UsdLux
+
+    from conftest import add_quad, make_stage
+
+    st = make_stage()
+    add_quad(st, "/World/G", (0, 0, 0), 5)
+    add_quad(st, "/World/Roof", (0, 0, 4), 5)  # a ceiling above the light: entirely behind it
+    UsdGeom.Cube.Define(st, "/World/NotMesh")
+    from pxr import Vt
+
+    wall = UsdGeom.Mesh.Define(st, "/World/Wall")  # crosses the light's plane
+    wall.CreatePointsAttr([(-1, 1, 0), (1, 1, 0), (1, 1, 4), (-1, 1, 4)])
+    wall.CreateFaceVertexCountsAttr(Vt.IntArray([4]))
+    wall.CreateFaceVertexIndicesAttr(Vt.IntArray([0, 1, 2, 3]))
+    lt = UsdLux.SphereLight.Define(st, "/World/Bulb")
+    lt.CreateRadiusAttr(0.1)
+    UsdGeom.XformCommonAPI(lt).SetTranslate(Gf.Vec3d(0, 0, 2))
+    scene = wsoft.load_scene(st)
+    assert any("Cube is not a Mesh" in w for w in scene.warnings)
+    f = wsoft.render(scene, "hard", width=48, height=48, device=device, camera=None)
+    assert np.all(np.isfinite(f.V)) and f.V.min() >= 0 and f.V.max() <= 1
+    ref = wsoft.render(scene, "reference", width=48, height=48, device=device, samples=1, jitter=False)
+    cov = f["A"] > 0
+    assert np.mean(f.V[cov] == ref.V[cov]) > 0.97
+
+
+def test_sizes_out_of_range_rejected():
+    scene = wsoft.load_scene(scene_path("box_plane.usda"))
+    with pytest.raises(wsoft.ParameterError, match="shadow_map_size"):
+        wsoft.render(scene, "hard", width=8, height=8, device="cpu", shadow_map_size=128)
+    with pytest.raises(wsoft.ParameterError, match="shadow_map_size"):
+        wsoft.render(scene, "hard", width=8, height=8, device="cpu", shadow_map_size=16384)
+
+
+@pytest.mark.slow
+def test_8192_map_on_contact(device):
+    scene = wsoft.load_scene(scene_path("contact.usda"))
+    f = wsoft.render(scene, "hard", width=64, height=48, device=device, shadow_map_size=8192)
+    assert np.all(np.isfinite(f.V))
+    assert f.stats["memory_bytes"]["light_depth[Light]@8192.depth"] == 8192 * 8192 * 4

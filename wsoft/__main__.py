@@ -1,0 +1,5 @@
+import sys
+
+from wsoft.cli import main
+
+sys.exit(main())
