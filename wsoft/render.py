@@ -214,8 +214,8 @@ def build_graph(scene: Scene, technique, *, width: int, height: int, camera=None
         prim = ch.pop("_prim")
         P = np.stack([ch[f"P.{a}"] for a in "XYZ"], -1).astype(np.float64)
         N = np.stack([ch[f"N.{a}"] for a in "XYZ"], -1).astype(np.float64)
-        albedo = np.array([m.albedo for m in scene.materials], np.float64)[scene.tri_material]
-        alb = np.where((prim >= 0)[..., None], albedo[np.maximum(prim, 0)], 0.0)
+        albedo = np.array([m.albedo for m in scene.materials], np.float64)
+        alb = np.where((prim >= 0)[..., None], albedo[scene.tri_material[np.maximum(prim, 0)]], 0.0)
         light_sum = np.zeros(P.shape[:2])
         for label, l in zip(labels, lights):
             Ldir = l.frame[:, 2][None, None, :] if not l.is_local else (np.asarray(l.position) - P)

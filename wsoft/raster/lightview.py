@@ -24,6 +24,7 @@ from wsoft.scene.device import Cutouts, DeviceScene, surface_present
 from wsoft.scene.types import LIGHT_DISTANT, LIGHT_SPHERE, LIGHT_POINT, Light
 
 DEPTH_CLEAR = 1.0e30  # value of texels no triangle covers (finite on purpose)
+BANDS_PER_THREAD = 4  # CPU: bands of rows per thread (more bands balance better, each re-scans the triangle list)
 MAX_TAN = math.tan(math.radians(80.0))  # widest half-angle a perspective light view may open
 
 
@@ -449,7 +450,7 @@ def rasterize(ds: DeviceScene, view: LightView, alpha_tested: bool, conservative
     cons = int(conservative)
     ensure_loaded(rasterize_depth, dev)
     if dev.startswith("cpu"):
-        nb = max(1, min(view.height, cpu_threads() * 4))
+        nb = max(1, min(view.height, cpu_threads() * BANDS_PER_THREAD))
         rows = (view.height + nb - 1) // nb
         nb = (view.height + rows - 1) // rows
 

@@ -113,3 +113,84 @@ def trace_reference(ds: DeviceScene, light: LightGPU, gb, samples: int, seed: in
 def ray_epsilon(ds: DeviceScene) -> float:
     """Offset of shadow-ray origins along the normal, relative to the scene's size."""
     return 2.0e-5 * ds.diagonal
+
+
+# -- explicit rays: the same shadow rays as arrays (for throughput comparisons with other tracers) --
+
+
+@wp.kernel
+def generate_shadow_rays(
+    offset: int,
+    light: LightGPU,
+    pos: wp.array[wp.vec3],
+    nrm: wp.array[wp.vec3],
+    pix: wp.array[wp.int32],
+    samples: int,
+    grid: int,
+    seed: int,
+    eps: float,
+    # outputs
+    origin: wp.array[wp.vec3],
+    dir: wp.array[wp.vec3],
+    tmax: wp.array[float],
+):
+    r = wp.tid() + offset
+    k = r // samples
+    s = r - k * samples
+    i = pix[k]
+    p = pos[i]
+    n = nrm[i]
+    state = wp.rand_init(seed, r)
+    shift = wp.vec2(wp.randf(state), wp.randf(state))
+    j = wp.vec2(wp.randf(state), wp.randf(state))
+    u = stratified_sample(s, samples, grid, j, shift)
+    ls = light_sample(light, p, u[0], u[1])
+    d = wp.vec3(ls[0], ls[1], ls[2])
+    side = n
+    if wp.dot(n, d) < 0.0:
+        side = -n
+    origin[r] = p + side * eps
+    dir[r] = d
+    tmax[r] = ls[3] - eps
+
+
+@wp.kernel
+def trace_shadow_rays(
+    offset: int,
+    mesh: wp.uint64,
+    cut: Cutouts,
+    has_cutouts: int,
+    origin: wp.array[wp.vec3],
+    dir: wp.array[wp.vec3],
+    tmax: wp.array[float],
+    # outputs
+    hit: wp.array[wp.int32],
+):
+    r = wp.tid() + offset
+    if occluded(mesh, cut, has_cutouts, origin[r], dir[r], tmax[r]):
+        hit[r] = 1
+    else:
+        hit[r] = 0
+
+
+def shadow_rays(ds: DeviceScene, light: LightGPU, gb, samples: int, seed: int = 0):
+    """Origins, unit directions and lengths of ``samples`` shadow rays per covered G-buffer sample."""
+    import math
+
+    import numpy as np
+
+    covered = np.nonzero(gb.prim.numpy() >= 0)[0].astype(np.int32)
+    pix = wp.array(covered, dtype=wp.int32, device=ds.device)
+    n = len(covered) * samples
+    o = wp.empty(n, dtype=wp.vec3, device=ds.device)
+    d = wp.empty(n, dtype=wp.vec3, device=ds.device)
+    t = wp.empty(n, dtype=float, device=ds.device)
+    launch_chunked(generate_shadow_rays, n, inputs=[light, gb.pos, gb.nrm, pix, samples, int(math.isqrt(samples)), seed, ray_epsilon(ds)], outputs=[o, d, t], device=ds.device)
+    return o, d, t
+
+
+def trace_rays(ds: DeviceScene, origin: wp.array, dir: wp.array, tmax: wp.array) -> wp.array:
+    """Occlusion (1 = blocked) of explicit rays, chunked across CPU threads."""
+    hit = wp.empty(origin.shape[0], dtype=wp.int32, device=ds.device)
+    launch_chunked(trace_shadow_rays, origin.shape[0], inputs=[ds.mesh.id, ds.cutouts, ds.has_cutouts, origin, dir, tmax], outputs=[hit], device=ds.device, min_chunk=4096)
+    return hit

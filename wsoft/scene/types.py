@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -163,8 +164,9 @@ class Scene:
     def triangle_count(self) -> int:
         return int(self.triangles.shape[0])
 
-    @property
+    @cached_property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """World bounds of the points that triangles use (computed once: scenes are not edited in place)."""
         if len(self.points) == 0:
             return np.zeros(3), np.zeros(3)
         used = self.points[np.unique(self.triangles)] if self.triangle_count else self.points

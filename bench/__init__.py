@@ -1,0 +1,1 @@
+"""Benchmark sweeps (``wsoft bench SWEEP``): rows in ``reports/<sweep>.jsonl``, report in ``reports/<sweep>.md``."""
