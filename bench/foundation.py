@@ -1,0 +1,343 @@
+"""Sweep ``foundation``: ``hard`` and low-sample ``reference`` against the cached reference on the
+bundled scenes at two resolutions, the rasterizer against one BVH ray per texel, and reference
+shadow-ray throughput beside Embree's (embreex) on the same rays and thread count.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from bench.harness import load, measure_render, reference
+
+FULL_VIEWS = [
+    ("box_plane", None), ("contact", None), ("cutout", None),
+    ("multi_light", "Rect"), ("multi_light", "Disk"), ("multi_light", "Sphere"), ("multi_light", "Sun"),
+    ("city", "Sun"), ("city", "Rect"),
+]
+QUICK_VIEWS = [("box_plane", None), ("cutout", None), ("multi_light", "Disk")]
+
+
+def cases(quick: bool, devices: list[str]) -> list[dict]:
+    out = []
+    views = QUICK_VIEWS if quick else FULL_VIEWS
+    resolutions = [(160, 120)] if quick else [(320, 240), (640, 480)]
+    ref_samples = 64 if quick else 256
+    sizes = [1024] if quick else [1024, 2048]
+    low_samples = [4] if quick else [4, 16, 64]
+    for dev in devices:
+        for scene, light in views:
+            for w, h in resolutions:
+                base = {"kind": "render", "scene": scene, "light": light, "device": dev, "width": w, "height": h, "ref_samples": ref_samples}
+                for size in sizes:
+                    image = (w, h) == resolutions[-1] and size == sizes[-1]
+                    out.append(base | {"technique": "hard", "params": {"shadow_map_size": size}, "image": image})
+                for n in low_samples:
+                    out.append(base | {"technique": "reference", "params": {"samples": n, "seed": 1}, "image": False})
+        if quick:
+            out.append({"kind": "raster_vs_raycast", "scene": "contact", "light": None, "size": 1024, "device": dev})
+            out.append({"kind": "ray_throughput", "scene": "contact", "light": None, "width": 80, "height": 60, "samples": 4, "device": dev})
+        else:
+            for light in ("Sun", "Rect"):
+                out.append({"kind": "raster_vs_raycast", "scene": "city", "light": light, "size": 2048, "device": dev})
+            out.append({"kind": "ray_throughput", "scene": "city", "light": "Sun", "width": 320, "height": 240, "samples": 16, "device": dev})
+            out.append({"kind": "ray_throughput", "scene": "contact", "light": None, "width": 320, "height": 240, "samples": 16, "device": dev})
+    return out
+
+
+def run_case(case: dict, ctx: dict) -> dict:
+    return {"render": _render, "raster_vs_raycast": _raster_vs_raycast, "ray_throughput": _throughput}[case["kind"]](case, ctx)
+
+
+# -- rows --------------------------------------------------------------------------------------
+
+
+def _render(case: dict, ctx: dict) -> dict:
+    from wsoft.metrics import visibility_error
+
+    ref = reference(case["scene"], width=case["width"], height=case["height"], light=case["light"], samples=case["ref_samples"], device=case["device"])
+    fr = measure_render(case["scene"], case["technique"], case["params"], device=case["device"], width=case["width"], height=case["height"], light=case["light"])
+    err = visibility_error(fr.V, ref["V"], ref["V_stderr"], ref["A"])
+    st = fr.stats
+    row = {
+        "scene": case["scene"], "technique": st["technique"], "params": st["params"], "device": st["device"],
+        "width": case["width"], "height": case["height"], "light": st["light"], "ref_samples": case["ref_samples"],
+        "timings_ms": st["timings_ms"], "timings_ms_runs": st["timings_ms_runs"], "cpu_ms": st["cpu_ms"],
+        "memory_bytes": st["memory_bytes"], "counters": st["counters"], "passes": st["passes"], "error": err,
+        "reference_ms": float(ref["ms"]),
+    }
+    if case.get("image"):
+        row["image"] = _side_by_side(case, fr.V, ref["V"], ref["A"], ctx)
+    return row
+
+
+def _side_by_side(case, v, ref, cov, ctx) -> str:
+    from PIL import Image, ImageDraw
+
+    from wsoft.io import to_srgb8
+
+    diff = np.clip(np.abs(v - ref) * 4.0, 0, 1)
+    panels = [to_srgb8(v * (cov > 0) + (cov == 0) * 0.15), to_srgb8(ref * (cov > 0) + (cov == 0) * 0.15), (diff * 255).astype(np.uint8)]
+    h, w = v.shape
+    img = Image.new("L", (3 * w, h + 18), 255)
+    for i, p in enumerate(panels):
+        img.paste(Image.fromarray(p, "L"), (i * w, 18))
+    d = ImageDraw.Draw(img)
+    for i, label in enumerate([f"hard {case['params']['shadow_map_size']}", f"reference {case['ref_samples']} spp", "|difference| x4"]):
+        d.text((i * w + 4, 3), label, fill=0)
+    rel = Path("images") / ctx["stem"] / f"{case['scene']}-{case['light'] or 'light'}-{case['device'].replace(':', '')}.png"
+    path = ctx["out_dir"] / rel
+    path.parent.mkdir(parents=True, exist_ok=True)
+    img.save(path)
+    return str(rel)
+
+
+def _timed(fn, repeats=3):
+    """Best-of wall and CPU time of ``fn`` after one warm-up call."""
+    import warp as wp
+
+    fn()
+    best = None
+    for _ in range(repeats):
+        wp.synchronize()
+        t0, c0 = time.perf_counter(), time.process_time()
+        fn()
+        wp.synchronize()
+        t = (time.perf_counter() - t0, time.process_time() - c0)
+        best = t if best is None or t[0] < best[0] else best
+    return best
+
+
+def _gbuffer_points(scene_name, device, width=320, height=240):
+    import wsoft
+
+    fr = wsoft.render(load(scene_name), "hard", width=width, height=height, device=device)
+    return np.stack([fr["P.X"], fr["P.Y"], fr["P.Z"]], -1)[fr["A"] > 0]
+
+
+def _raster_vs_raycast(case: dict, ctx: dict) -> dict:
+    from wsoft.parallel import cpu_threads
+    from wsoft.raster.lightview import DEPTH_CLEAR, fit_light_view, rasterize
+    from wsoft.raster.raycast import raycast_depth
+    from wsoft.scene.device import upload_scene
+
+    scene = load(case["scene"])
+    light = scene.find_light(case["light"]) if case["light"] else scene.lights[0]
+    dev = case["device"]
+    ds = upload_scene(scene, dev)
+    lo, hi = scene.bounds
+    view = fit_light_view(light, _gbuffer_points(case["scene"], dev), lo, hi, case["size"])
+    r_wall, r_cpu = _timed(lambda: rasterize(ds, view, alpha_tested=scene.has_cutouts))
+    c_wall, c_cpu = _timed(lambda: raycast_depth(ds, view, alpha_tested=scene.has_cutouts))
+    a = rasterize(ds, view, scene.has_cutouts).depth.numpy()
+    b = raycast_depth(ds, view, scene.has_cutouts).depth.numpy()
+    both = (a < DEPTH_CLEAR) & (b < DEPTH_CLEAR)
+    return {
+        "scene": case["scene"], "light": light.path, "device": dev, "size": case["size"], "triangles": scene.triangle_count,
+        "threads": cpu_threads() if dev == "cpu" else None,
+        "raster_ms": 1e3 * r_wall, "raster_cpu_over_wall": r_cpu / r_wall,
+        "raycast_ms": 1e3 * c_wall, "raycast_cpu_over_wall": c_cpu / c_wall,
+        "speedup": c_wall / r_wall,
+        "coverage_mismatch": float(np.mean((a < DEPTH_CLEAR) != (b < DEPTH_CLEAR))),
+        "depth_rel_err_p99": float(np.percentile(np.abs(a - b)[both] / b[both], 99)) if both.any() else 0.0,
+    }
+
+
+def _throughput(case: dict, ctx: dict) -> dict:
+    import wsoft
+    from wsoft.parallel import cpu_threads
+    from wsoft.reference import shadow_rays, trace_reference, trace_rays
+    from wsoft.render import RenderContext
+    from wsoft.raster.camera import camera_gpu
+    from wsoft.raster.gbuffer import render_gbuffer
+    from wsoft.render import _pick_camera
+    from wsoft.scene.device import upload_scene
+
+    scene = load(case["scene"])
+    light = scene.find_light(case["light"]) if case["light"] else scene.lights[0]
+    dev, w, h, n = case["device"], case["width"], case["height"], case["samples"]
+    ds = upload_scene(scene, dev)
+    ctx_r = RenderContext(scene, _pick_camera(scene, None, w, h), w, h, dev)
+    gb = render_gbuffer(ds, camera_gpu(ctx_r.camera), w, h, 1, scene.has_cutouts)
+    L = ctx_r.light_gpu(light)
+    covered = int((gb.prim.numpy() >= 0).sum())
+    nrays = covered * n
+    p_wall, p_cpu = _timed(lambda: trace_reference(ds, L, gb, n, 0, True))
+    o, d, t = shadow_rays(ds, L, gb, n)
+    threads = cpu_threads() if dev == "cpu" else None
+    e_wall, e_cpu = _timed(lambda: trace_rays(ds, o, d, t))
+    row = {
+        "scene": case["scene"], "light": light.path, "device": dev, "rays": nrays, "threads": threads,
+        "warp_pass_ms": 1e3 * p_wall, "warp_pass_mrays_s": nrays / p_wall / 1e6, "warp_pass_cpu_over_wall": p_cpu / p_wall,
+        "warp_rays_ms": 1e3 * e_wall, "warp_rays_mrays_s": nrays / e_wall / 1e6, "warp_rays_cpu_over_wall": e_cpu / e_wall,
+    }
+    if dev == "cpu":
+        with _threads(1):
+            w1, _ = _timed(lambda: trace_rays(ds, o, d, t))
+        row["warp_rays_1t_mrays_s"] = nrays / w1 / 1e6
+    warp_hits = trace_rays(ds, o, d, t).numpy()
+    row["occluded_fraction"] = float(warp_hits.mean())
+    try:
+        from embreex import mesh_construction, rtcore, rtcore_scene
+    except ImportError:
+        row["embree"] = "embreex not installed (pip install -e '.[peers]')"
+        return row
+    if scene.has_cutouts:
+        row["embree"] = "skipped: scene has cutouts (embreex has no alpha-test filter)"
+        return row
+    es = rtcore_scene.EmbreeScene(rtcore.EmbreeDevice())
+    mesh_construction.TriangleMesh(es, scene.points.astype(np.float32), scene.triangles.astype(np.int32))
+    on, dn, tn = o.numpy().astype(np.float32), d.numpy().astype(np.float32), t.numpy().astype(np.float32)
+    es.run(on[:1000], dn[:1000], dists=tn[:1000], query="OCCLUDED")  # builds the BVH
+    # embreex traces a batch on the calling thread; run one batch per thread for the n-thread figure
+    nt = threads or 1
+    parts = [slice(i * len(on) // nt, (i + 1) * len(on) // nt) for i in range(nt)]
+    from concurrent.futures import ThreadPoolExecutor
+
+    pool = ThreadPoolExecutor(nt)
+    res = {}
+
+    def one():
+        res["hits"] = es.run(on, dn, dists=tn, query="OCCLUDED")
+
+    def many():
+        list(pool.map(lambda sl: es.run(on[sl], dn[sl], dists=tn[sl], query="OCCLUDED"), parts))
+
+    e1_wall, e1_cpu = _timed(one)
+    en_wall, en_cpu = _timed(many)
+    pool.shutdown()
+    emb_hits = (res["hits"] >= 0).astype(np.int32)
+    row.update({
+        "embree_1t_mrays_s": nrays / e1_wall / 1e6,
+        "embree_mrays_s": nrays / en_wall / 1e6, "embree_cpu_over_wall": en_cpu / en_wall,
+        "warp_over_embree": (nrays / e_wall) / (nrays / en_wall),
+        "agreement_with_embree": float(np.mean(emb_hits == warp_hits)),
+    })
+    if "warp_rays_1t_mrays_s" in row:
+        row["warp_over_embree_1t"] = row["warp_rays_1t_mrays_s"] / row["embree_1t_mrays_s"]
+    return row
+
+
+class _threads:
+    """Temporarily set the number of CPU threads Warp launches use."""
+
+    def __init__(self, n: int):
+        self.n = n
+
+    def __enter__(self):
+        import os
+
+        self.old = os.environ.get("WSOFT_THREADS")
+        os.environ["WSOFT_THREADS"] = str(self.n)
+
+    def __exit__(self, *exc):
+        import os
+
+        if self.old is None:
+            os.environ.pop("WSOFT_THREADS", None)
+        else:
+            os.environ["WSOFT_THREADS"] = self.old
+
+
+# -- report ------------------------------------------------------------------------------------
+
+
+def _fmt(x, nd=4):
+    return f"{x:.{nd}f}" if isinstance(x, float) else str(x)
+
+
+def report(rows: list[dict], md: Path, ctx: dict) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    renders = [r for r in rows if r["case"]["kind"] == "render"]
+    raster = [r for r in rows if r["case"]["kind"] == "raster_vs_raycast"]
+    thr = [r for r in rows if r["case"]["kind"] == "ray_throughput"]
+    m = rows[0]["machine"] if rows else {}
+    L = [f"# Sweep `foundation`{' (quick)' if ctx['quick'] else ''}", ""]
+    L.append(f"Produced by `{ctx['command']}` (rows: `{md.with_suffix('.jsonl').name}`; rerun resumes, `--fresh` starts over).")
+    L.append(f"Machine: {m.get('cpu', '?')}, {m.get('threads', '?')} CPU threads for Warp launches, Python {m.get('python', '?')}.")
+    L.append("Error is against the cached ray-traced reference on the same covered pixels; penumbra = reference in (0.01, 0.99);")
+    L.append("`>3se` = fraction of pixels further than 3 reference standard errors from it. Times: median of 3 runs after a warm-up.")
+    L.append("")
+    L.append("## Accuracy and time")
+    L.append("")
+    L.append("| scene | light | device | res | technique | params | total ms | technique ms | MAE | RMSE | max | MAE penumbra | >3se |")
+    L.append("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for r in sorted(renders, key=lambda r: (r["scene"], r["light"], r["device"], r["width"], r["technique"], str(r["params"]))):
+        tech_ms = sum(v for k, v in r["timings_ms"].items() if k.startswith(r["technique"]))
+        p = r["case"]["params"]
+        e = r["error"]
+        L.append(f"| {r['scene']} | {r['light'].split('/')[-1]} | {r['device']} | {r['width']}x{r['height']} | {r['technique']} | "
+                 f"{', '.join(f'{k}={v}' for k, v in p.items())} | {r['timings_ms']['total']:.1f} | {tech_ms:.1f} | {e['mae']:.4f} | "
+                 f"{e['rmse']:.4f} | {e['max']:.3f} | {e['mae_penumbra']:.4f} | {e.get('frac_outside_3se', 0):.3f} |")
+    if raster:
+        L += ["", "## Light depth map: rasterizer vs one BVH ray per texel (target: >= 10x; CPU time / wall >= 1.7 on 2 cores)", ""]
+        L.append("| scene | light | device | size | triangles | raster ms | ray/texel ms | speedup | raster CPU/wall | ray CPU/wall | coverage mismatch | depth rel. err p99 |")
+        L.append("|---|---|---|---|---|---|---|---|---|---|---|---|")
+        for r in raster:
+            L.append(f"| {r['scene']} | {r['light'].split('/')[-1]} | {r['device']} | {r['size']} | {r['triangles']} | {r['raster_ms']:.1f} | {r['raycast_ms']:.1f} | "
+                     f"{r['speedup']:.1f}x | {r['raster_cpu_over_wall']:.2f} | {r['raycast_cpu_over_wall']:.2f} | {r['coverage_mismatch']:.2e} | {r['depth_rel_err_p99']:.1e} |")
+    if thr:
+        L += ["", "## Reference shadow-ray throughput beside Embree (same rays, same thread count)", ""]
+        L.append("Embree runs through embreex, which traces a batch on the calling thread: the 1-thread columns are the like-for-like")
+        L.append("figure; for N threads Embree gets one batch per Python thread (embreex holds the GIL part of the time: see its CPU/wall).")
+        L.append("")
+        L.append("| scene | light | device | threads | rays | reference pass Mrays/s (CPU/wall) | Warp rays Mrays/s (CPU/wall) | Embree Mrays/s (CPU/wall) | Warp/Embree | Warp 1 thread | Embree 1 thread | Warp/Embree 1 thread | agreement |")
+        L.append("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+        for r in thr:
+            if "embree_mrays_s" in r:
+                emb = (f"{r['embree_mrays_s']:.2f} ({r['embree_cpu_over_wall']:.2f}) | {r['warp_over_embree']:.2f} | {r.get('warp_rays_1t_mrays_s', float('nan')):.2f} | "
+                       f"{r['embree_1t_mrays_s']:.2f} | {r.get('warp_over_embree_1t', float('nan')):.2f} | {r['agreement_with_embree']:.5f}")
+            else:
+                emb = f"{r.get('embree')} | | | | | "
+            L.append(f"| {r['scene']} | {r['light'].split('/')[-1]} | {r['device']} | {r['threads']} | {r['rays']} | {r['warp_pass_mrays_s']:.2f} ({r['warp_pass_cpu_over_wall']:.2f}) | "
+                     f"{r['warp_rays_mrays_s']:.2f} ({r['warp_rays_cpu_over_wall']:.2f}) | {emb} |")
+    # CPU utilisation of the heavy passes inside renders
+    util = []
+    for r in renders:
+        for k, ms in r["timings_ms"].items():
+            if ms > 20 and (k.startswith("light_depth") or k.startswith("reference")) and r["device"] == "cpu":
+                util.append((r["scene"], r["width"], k, ms, r["cpu_ms"][k] / ms))
+    if util:
+        L += ["", "## CPU time / wall time of heavy passes in the renders above (passes over 20 ms)", ""]
+        L.append("| scene | width | pass | ms | CPU/wall |")
+        L.append("|---|---|---|---|---|")
+        for s, w, k, ms, u in sorted(util):
+            L.append(f"| {s} | {w} | {k} | {ms:.1f} | {u:.2f} |")
+    # error vs time plot
+    plot_rel = Path("images") / ctx["stem"] / "error_vs_time.png"
+    if renders:
+        groups = sorted({(r["scene"], r["light"].split("/")[-1], r["device"]) for r in renders})
+        fig, ax = plt.subplots(figsize=(8, 5))
+        for g in groups:
+            pts = sorted((r["timings_ms"]["total"], r["error"]["mae"], r["technique"]) for r in renders if (r["scene"], r["light"].split("/")[-1], r["device"]) == g and r["width"] == max(x["width"] for x in renders))
+            for tech, mk in (("hard", "s"), ("reference", "o")):
+                xs = [p[0] for p in pts if p[2] == tech]
+                ys = [max(p[1], 1e-5) for p in pts if p[2] == tech]
+                if xs:
+                    ax.plot(xs, ys, marker=mk, linestyle="-" if tech == "reference" else "--", label=f"{g[0]}/{g[1]} {tech}" + (f" ({g[2]})" if len(devs := {x['device'] for x in renders}) > 1 else ""))
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("total frame time (ms)")
+        ax.set_ylabel("MAE of V against the reference")
+        ax.set_title("foundation: error vs time (largest resolution; reference over sample counts)")
+        ax.legend(fontsize=6, ncol=2)
+        fig.tight_layout()
+        (md.parent / plot_rel).parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(md.parent / plot_rel, dpi=110)
+        plt.close(fig)
+        L += ["", "## Error against time", "", f"![error vs time]({plot_rel.as_posix()})"]
+    imgs = [r for r in renders if r.get("image")]
+    if imgs:
+        L += ["", "## Images (hard, reference, |difference| x4)", ""]
+        for r in imgs:
+            L.append(f"**{r['scene']} / {r['light'].split('/')[-1]}** ({r['device']})")
+            L.append("")
+            L.append(f"![{r['scene']}]({r['image']})")
+            L.append("")
+    md.write_text("\n".join(L) + "\n")
