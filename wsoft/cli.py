@@ -89,6 +89,50 @@ def cmd_techniques(args) -> int:
     return 0
 
 
+def cmd_compare(args) -> int:
+    """Render a technique and the reference on the same view; write EXR/PNG of both and a stats table."""
+    import wsoft
+    from wsoft.io import write_gray_png
+    from wsoft.metrics import visibility_error
+
+    scene = wsoft.load_scene(args.scene, time=args.time)
+    params = _parse_sets(args.set)
+    common = dict(width=args.width, height=args.height, camera=args.camera, light=args.light, device=args.device)
+    frame = wsoft.render(scene, args.technique, **common, **params)
+    ref = wsoft.render(scene, "reference", **common, samples=args.samples)
+    os.makedirs(args.out_dir, exist_ok=True)
+    stem = os.path.splitext(os.path.basename(scene.path))[0]
+    out = {}
+    for name, fr in ((args.technique, frame), ("reference", ref)):
+        base = os.path.join(args.out_dir, f"{stem}-{name}")
+        fr.write_exr(base + ".exr")
+        fr.write_png(base + ".png")
+        write_gray_png(base + "-V.png", fr.V)
+        with open(base + ".json", "w") as f:
+            json.dump(fr.stats, f, indent=2, default=str)
+        out[name] = base
+    err = visibility_error(frame.V, ref.V, ref["V_stderr"], ref["A"])
+    rows = [("pass", args.technique, "reference")]
+    names = list(dict.fromkeys(frame.stats["passes"] + ref.stats["passes"])) + ["total"]
+    for n in names:
+        a = frame.stats["timings_ms"].get(n)
+        b = ref.stats["timings_ms"].get(n)
+        rows.append((n, f"{a:.1f}" if a is not None else "-", f"{b:.1f}" if b is not None else "-"))
+    table = ["| " + " | ".join(r) + " |" for r in rows]
+    table.insert(1, "|---|---:|---:|")
+    lines = [f"# {args.technique} vs reference on {stem} ({args.width}x{args.height}, {frame.stats['device']}, light {frame.stats['light']})", "",
+             f"Command: `wsoft compare {' '.join(sys.argv[2:]) if sys.argv[1:2] == ['compare'] else args.scene}`", "",
+             "## Time (ms)", "", *table, "", "## Error of V against the reference", "",
+             "| MAE | RMSE | max | MAE penumbra | penumbra pixels | >3 stderr |", "|---:|---:|---:|---:|---:|---:|",
+             f"| {err['mae']:.4f} | {err['rmse']:.4f} | {err['max']:.3f} | {err['mae_penumbra']:.4f} | {err['penumbra_pixels']} | {err.get('frac_outside_3se', 0):.3f} |"]
+    md = os.path.join(args.out_dir, f"{stem}-{args.technique}-vs-reference.md")
+    with open(md, "w") as f:
+        f.write("\n".join(lines) + "\n")
+    print("\n".join(lines))
+    print(f"\nwrote {out[args.technique]}.exr/.png/.json, {out['reference']}.exr/.png/.json, {md}")
+    return 0
+
+
 def cmd_bench(args) -> int:
     from bench.harness import run_sweep
 
@@ -114,6 +158,20 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--stats", help="stats JSON")
     r.add_argument("--png", help="shaded PNG")
     r.set_defaults(fn=cmd_render)
+
+    c = sub.add_parser("compare", help="render a technique and the reference; EXR/PNG of both and a stats table")
+    c.add_argument("scene")
+    c.add_argument("--technique", "-t", default="hard")
+    c.add_argument("--set", action="append", metavar="KEY=VALUE")
+    c.add_argument("--samples", type=int, default=256, help="reference light samples per pixel")
+    c.add_argument("--width", type=int, default=640)
+    c.add_argument("--height", type=int, default=480)
+    c.add_argument("--camera")
+    c.add_argument("--light")
+    c.add_argument("--time", type=float)
+    c.add_argument("--device")
+    c.add_argument("--out-dir", default="out")
+    c.set_defaults(fn=cmd_compare)
 
     p = sub.add_parser("plan", help="lights, cutouts and the passes each technique would run")
     p.add_argument("scene")

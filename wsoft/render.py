@@ -184,13 +184,18 @@ def build_graph(scene: Scene, technique, *, width: int, height: int, camera=None
         hit = prim >= 0
         nhit = hit.sum(axis=0)
         cov = nhit / gb.spp
-        first = np.argmax(hit, axis=0)  # first covered sample per pixel
-        take = lambda a: np.take_along_axis(a, first[None, ..., None] if a.ndim == 4 else first[None], axis=0)[0]  # noqa: E731
-        pos, nrm, dist = take(gb.host("pos")), take(gb.host("nrm")), take(gb.host("dist"))
+        if gb.spp == 1:
+            pos, nrm, dist, prim0 = gb.host("pos")[0], gb.host("nrm")[0], gb.host("dist")[0], prim[0]
+        else:
+            first = np.argmax(hit, axis=0)[None]  # first covered sample per pixel
+            pos = np.take_along_axis(gb.host("pos"), first[..., None], axis=0)[0]
+            nrm = np.take_along_axis(gb.host("nrm"), first[..., None], axis=0)[0]
+            dist = np.take_along_axis(gb.host("dist"), first, axis=0)[0]
+            prim0 = np.take_along_axis(prim, first, axis=0)[0]
         ch: dict[str, np.ndarray] = {}
         for label, vk in zip(labels, vis_keys):
             v = res[vk].vis.numpy().reshape(gb.spp, gb.height, gb.width)
-            vv = np.where(nhit > 0, (v * hit).sum(axis=0) / np.maximum(nhit, 1), 1.0)
+            vv = v[0] if gb.spp == 1 else np.where(nhit > 0, (v * hit).sum(axis=0) / np.maximum(nhit, 1), 1.0)
             ch[f"V.{label}"] = vv.astype(np.float32)
             if res[vk].stderr is not None:
                 e = res[vk].stderr.numpy().reshape(gb.spp, gb.height, gb.width)
@@ -199,12 +204,12 @@ def build_graph(scene: Scene, technique, *, width: int, height: int, camera=None
         ch["V"] = ch[f"V.{labels[0]}"]
         if f"V_stderr.{labels[0]}" in ch:
             ch["V_stderr"] = ch[f"V_stderr.{labels[0]}"]
-        for i, axis in enumerate("XYZ"):
-            ch[f"P.{axis}"] = np.where(nhit > 0, pos[..., i], 0).astype(np.float32)
-            ch[f"N.{axis}"] = np.where(nhit > 0, nrm[..., i], 0).astype(np.float32)
-        ch["Z"] = np.where(nhit > 0, dist, 0).astype(np.float32)
+        for i, axis in enumerate("XYZ"):  # the G-buffer writes zeros on background samples
+            ch[f"P.{axis}"] = np.ascontiguousarray(pos[..., i], dtype=np.float32)
+            ch[f"N.{axis}"] = np.ascontiguousarray(nrm[..., i], dtype=np.float32)
+        ch["Z"] = dist.astype(np.float32)
         ch["A"] = cov.astype(np.float32)
-        ch["_prim"] = np.where(nhit > 0, np.take_along_axis(prim, first[None], axis=0)[0], -1)
+        ch["_prim"] = prim0
         return {"channels": ch}
 
     ctx.graph.add(Pass("resolve", (gk, *vis_keys), ("channels",), resolve, kind="resolve"))
