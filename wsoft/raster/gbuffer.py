@@ -1,7 +1,8 @@
 """Eye-view G-buffer: world position, normal, camera distance, primitive id, uv per sample.
 
 Primary visibility is resolved by casting one camera ray per sample against the scene's
-BVH (alpha-tested through cutouts), which gives exact positions for the shadow passes.
+BVH (alpha-tested through cutouts; back faces of single-sided meshes culled, as
+``doubleSided = false`` allows), which gives exact positions for the shadow passes.
 ``k`` samples per pixel use a fixed MSAA-like pattern.
 """
 
@@ -14,7 +15,7 @@ import warp as wp
 
 from wsoft.parallel import launch_chunked
 from wsoft.raster.camera import CameraGPU
-from wsoft.scene.device import Cutouts, DeviceScene, surface_present
+from wsoft.scene.device import Surfaces, DeviceScene, surface_present
 
 
 @wp.func
@@ -34,7 +35,7 @@ def radical_inverse2(i: int) -> float:
 def trace_gbuffer(
     offset: int,
     mesh: wp.uint64,
-    cut: Cutouts,
+    cut: Surfaces,
     has_cutouts: int,
     cam: CameraGPU,
     width: int,
@@ -85,8 +86,8 @@ def trace_gbuffer(
             if not q.result:
                 remaining = -1.0
             else:
-                ok = True
-                if has_cutouts != 0:
+                ok = q.sign > 0.0 or cut.double_sided[q.face] != 0
+                if ok and has_cutouts != 0:
                     ok = surface_present(cut, q.face, q.u, q.v, 1.0 - q.u - q.v)
                 if ok:
                     found = 1

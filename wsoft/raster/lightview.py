@@ -20,7 +20,7 @@ import numpy as np
 import warp as wp
 
 from wsoft.parallel import cpu_threads, ensure_loaded, launch_chunked, run_tasks
-from wsoft.scene.device import Cutouts, DeviceScene, surface_present
+from wsoft.scene.device import Surfaces, DeviceScene, surface_present
 from wsoft.scene.types import LIGHT_DISTANT, LIGHT_SPHERE, LIGHT_POINT, Light
 
 DEPTH_CLEAR = 1.0e30  # value of texels no triangle covers (finite on purpose)
@@ -246,7 +246,7 @@ def raster_triangle(
     wc: wp.vec3,
     row0: int,
     row1: int,
-    cut: Cutouts,
+    cut: Surfaces,
     alpha: int,
     conservative: int,
     depth: wp.array2d[float],
@@ -356,7 +356,7 @@ def rasterize_depth(
     view_pts: wp.array[wp.vec3],
     row_range: wp.array[wp.vec2i],
     lv: LightViewGPU,
-    cut: Cutouts,
+    cut: Surfaces,
     alpha: int,
     conservative: int,
     # outputs

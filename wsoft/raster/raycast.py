@@ -11,14 +11,14 @@ import warp as wp
 
 from wsoft.parallel import launch_chunked
 from wsoft.raster.lightview import DEPTH_CLEAR, DepthMap, LightView, LightViewGPU
-from wsoft.scene.device import Cutouts, DeviceScene, surface_present
+from wsoft.scene.device import Surfaces, DeviceScene, surface_present
 
 
 @wp.kernel
 def raycast_texels(
     offset: int,
     mesh: wp.uint64,
-    cut: Cutouts,
+    cut: Surfaces,
     alpha: int,
     lv: LightViewGPU,
     # outputs

@@ -18,7 +18,7 @@ from __future__ import annotations
 import warp as wp
 
 from wsoft.parallel import launch_chunked
-from wsoft.scene.device import Cutouts, DeviceScene, occluded
+from wsoft.scene.device import Surfaces, DeviceScene, occluded
 from wsoft.scene.light_gpu import LightGPU, light_sample
 
 
@@ -45,7 +45,7 @@ def stratified_sample(s: int, n: int, m: int, jitter: wp.vec2, shift: wp.vec2) -
 def trace_visibility(
     offset: int,
     mesh: wp.uint64,
-    cut: Cutouts,
+    cut: Surfaces,
     has_cutouts: int,
     light: LightGPU,
     pos: wp.array[wp.vec3],
@@ -158,7 +158,7 @@ def generate_shadow_rays(
 def trace_shadow_rays(
     offset: int,
     mesh: wp.uint64,
-    cut: Cutouts,
+    cut: Surfaces,
     has_cutouts: int,
     origin: wp.array[wp.vec3],
     dir: wp.array[wp.vec3],

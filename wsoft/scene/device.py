@@ -1,6 +1,6 @@
 """The scene on a Warp device: BVH, triangles, cutout materials and their alpha textures.
 
-Kernels take a :class:`Cutouts` struct and call :func:`surface_present` to alpha-test a
+Kernels take a :class:`Surfaces` struct and call :func:`surface_present` to alpha-test a
 point on a triangle; scenes without cutouts pass ``has_cutouts = 0`` and never sample.
 """
 
@@ -15,10 +15,13 @@ from wsoft.scene.types import Scene
 
 
 @wp.struct
-class Cutouts:
-    """Per-triangle cutout data. ``tri_cut[t]`` is a cutout index or -1 (opaque)."""
+class Surfaces:
+    """Per-triangle surface data: cutouts (``tri_cut[t]`` is a cutout index or -1 = opaque),
+    their alpha textures, and sidedness (``double_sided[t]``: 0 = back face culled in the eye view).
+    Shadows are cast by both sides of every triangle."""
 
     tri_cut: wp.array[wp.int32]  # [T]
+    double_sided: wp.array[wp.int32]  # [T]
     tri_uv: wp.array[wp.vec2]  # [3T] texture coordinates per triangle corner
     threshold: wp.array[wp.float32]  # [C] opacityThreshold
     opacity: wp.array[wp.float32]  # [C] constant opacity (used when tex < 0)
@@ -55,7 +58,7 @@ def wrap_coord(i: int, n: int, mode: int) -> int:
 
 
 @wp.func
-def texel_value(cut: Cutouts, t: int, x: int, y: int) -> float:
+def texel_value(cut: Surfaces, t: int, x: int, y: int) -> float:
     w = cut.tex_w[t]
     h = cut.tex_h[t]
     xi = wrap_coord(x, w, cut.tex_wrap_s[t])
@@ -66,7 +69,7 @@ def texel_value(cut: Cutouts, t: int, x: int, y: int) -> float:
 
 
 @wp.func
-def sample_alpha(cut: Cutouts, t: int, st: wp.vec2) -> float:
+def sample_alpha(cut: Surfaces, t: int, st: wp.vec2) -> float:
     """Bilinear sample of texture ``t`` at ``st`` (st=(0,0) is the image's lower-left corner)."""
     fx = st[0] * float(cut.tex_w[t]) - 0.5
     fy = st[1] * float(cut.tex_h[t]) - 0.5
@@ -80,7 +83,7 @@ def sample_alpha(cut: Cutouts, t: int, st: wp.vec2) -> float:
 
 
 @wp.func
-def surface_present(cut: Cutouts, tri: int, w0: float, w1: float, w2: float) -> bool:
+def surface_present(cut: Surfaces, tri: int, w0: float, w1: float, w2: float) -> bool:
     """Alpha test at barycentric weights (w0, w1, w2) of triangle ``tri``'s corners."""
     c = cut.tri_cut[tri]
     if c < 0:
@@ -94,7 +97,7 @@ def surface_present(cut: Cutouts, tri: int, w0: float, w1: float, w2: float) -> 
 
 
 @wp.func
-def occluded(mesh: wp.uint64, cut: Cutouts, has_cutouts: int, origin: wp.vec3, dir: wp.vec3, max_t: float) -> bool:
+def occluded(mesh: wp.uint64, cut: Surfaces, has_cutouts: int, origin: wp.vec3, dir: wp.vec3, max_t: float) -> bool:
     """Is the segment origin + t*dir, t in (0, max_t), blocked? Any-hit, alpha-tested through cutouts."""
     if has_cutouts == 0:
         return wp.mesh_query_ray_anyhit(mesh, origin, dir, max_t)
@@ -123,7 +126,7 @@ class DeviceScene:
     mesh: wp.Mesh
     points: wp.array
     indices: wp.array  # flat [3T] int32
-    cutouts: Cutouts
+    cutouts: Surfaces
     has_cutouts: int
     tri_albedo: wp.array  # [T] vec3
     diagonal: float
@@ -173,8 +176,9 @@ def upload_scene(scene: Scene, device: str) -> DeviceScene:
             a = np.zeros(1, dtype=np.int32 if dtype == wp.int32 else np.float32)
         return wp.array(a, dtype=dtype, device=device)
 
-    cut = Cutouts()
+    cut = Surfaces()
     cut.tri_cut = arr(tri_cut.astype(np.int32), wp.int32)
+    cut.double_sided = arr(scene.tri_double_sided.astype(np.int32), wp.int32)
     cut.tri_uv = wp.array(scene.tri_uv.reshape(-1, 2).astype(np.float32), dtype=wp.vec2, device=device)
     cut.threshold = arr([m.opacity_threshold for m in cut_mats], wp.float32)
     cut.opacity = arr([m.opacity for m in cut_mats], wp.float32)

@@ -439,22 +439,26 @@ class _StageReader:
 
 
 def auto_camera(scene: Scene, aspect: float = 4.0 / 3.0) -> Camera:
-    """A perspective camera framing the scene's bounds from above and to the side (up axis aware)."""
+    """A perspective camera looking down at the scene from above and to the side (up-axis aware),
+    placed at the smallest distance at which all 8 corners of the scene's bounds are in view."""
     lo, hi = scene.bounds
     center = 0.5 * (lo + hi)
-    radius = 0.5 * scene.diagonal
     up = np.array([0.0, 0.0, 1.0]) if scene.up_axis == "Z" else np.array([0.0, 1.0, 0.0])
     side = np.array([1.0, 0.0, 0.0])
-    fwd_h = np.cross(up, side)  # horizontal direction
+    fwd_h = np.cross(up, side)  # a horizontal direction
     view_dir = -(0.55 * up + 0.6 * fwd_h + 0.35 * side)
     view_dir /= np.linalg.norm(view_dir)
-    tan_h = math.tan(math.radians(25.0))
-    dist = radius / math.sin(math.atan(tan_h / max(aspect, 1.0) if aspect >= 1 else tan_h)) * 1.05
-    eye = center - view_dir * dist
     z = -view_dir
     x = np.cross(up, z)
     x /= np.linalg.norm(x)
     y = np.cross(z, x)
+    tan_x = math.tan(math.radians(27.0))
+    tan_y = tan_x / aspect
+    corners = np.array([[a, b, c] for a in (lo[0], hi[0]) for b in (lo[1], hi[1]) for c in (lo[2], hi[2])]) - center
+    cx, cy, cz = corners @ x, corners @ y, corners @ z
+    dist = float(np.max(np.maximum(cz + np.abs(cx) / tan_x, cz + np.abs(cy) / tan_y))) * 1.02
+    dist = max(dist, 1e-3 * scene.diagonal)
+    eye = center + z * dist
     M = np.eye(4)
     M[:3, 0], M[:3, 1], M[:3, 2], M[:3, 3] = x, y, z, eye
-    return Camera(path="(automatic)", to_world=M, tan_half=(tan_h, tan_h / aspect), clip=(dist * 1e-3, dist + 4 * radius))
+    return Camera(path="(automatic)", to_world=M, tan_half=(tan_x, tan_y), clip=(dist * 1e-4, dist + 2 * scene.diagonal))
