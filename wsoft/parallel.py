@@ -31,11 +31,29 @@ wp.config.enable_backward = False
 
 
 def init_warp() -> None:
-    """Initialise Warp once, quietly (honours ``WARP_CACHE_PATH``)."""
+    """Initialise Warp once (honours ``WARP_CACHE_PATH``).
+
+    On a machine without a CUDA driver, Warp's native library prints a warning on every start;
+    unless ``WSOFT_WARP_VERBOSE=1``, stderr is muted for the duration of ``wp.init()`` only.
+    """
     global _INIT
-    if not _INIT:
+    if _INIT:
+        return
+    if os.environ.get("WSOFT_WARP_VERBOSE", "") == "1":
         wp.init()
-        _INIT = True
+    else:
+        import sys
+
+        sys.stderr.flush()
+        saved = os.dup(2)
+        try:
+            with open(os.devnull, "w") as null:
+                os.dup2(null.fileno(), 2)
+                wp.init()
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+    _INIT = True
 
 
 def cpu_threads() -> int:
@@ -114,3 +132,6 @@ def launch_chunked(kernel, n: int, inputs: list, outputs: list, device: str, min
         return lambda: wp.launch(kernel, dim=count, inputs=[start, *inputs], outputs=outputs, device=device)
 
     run_tasks([task(s, c) for s, c in chunk_ranges(n, device, min_chunk)], device)
+
+
+init_warp()

@@ -7,8 +7,10 @@ camera sees. :func:`rasterize_depth` fills a ``[H, W]`` map of light-space *line
 clipping, perspective-correct depth and uv, alpha test for cutouts, and an optional
 conservative mode that writes every texel a triangle touches.
 
-On CPU the map is split into bands of rows that run on the thread pool (each band only
-writes its own rows); on CUDA all bands run in one launch with ``atomic_min``.
+Each triangle is visited once. On CPU every worker thread rasterizes its share of the
+triangles into a private map (interleaved chunks, so clustered geometry is shared out) and
+the maps are merged by a parallel ``min``; on CUDA one launch splits the map into bands of
+rows (so a large triangle is shared by many threads) and writes with ``atomic_min``.
 """
 
 from __future__ import annotations
@@ -24,7 +26,10 @@ from wsoft.scene.device import Surfaces, DeviceScene, surface_present
 from wsoft.scene.types import LIGHT_DISTANT, LIGHT_SPHERE, LIGHT_POINT, Light
 
 DEPTH_CLEAR = 1.0e30  # value of texels no triangle covers (finite on purpose)
-BANDS_PER_THREAD = 4  # CPU: bands of rows per thread (more bands balance better, each re-scans the triangle list)
+GPU_BAND_ROWS = 64  # CUDA: rows per band (one thread per triangle and band)
+CPU_CHUNK = 32768  # CPU: triangles per launch; a worker's chunks are interleaved with the others'
+BIG_TRIANGLE_TEXELS = 4096  # CPU: triangles with a larger texel bounding box go to the banded pass
+PRIVATE_MAP_BUDGET = 1 << 30  # CPU: bytes allowed for per-worker private depth maps
 MAX_TAN = math.tan(math.radians(80.0))  # widest half-angle a perspective light view may open
 
 
@@ -36,6 +41,7 @@ class LightViewGPU:
     az: wp.vec3  # view axis (depth grows along it)
     persp: int
     window: wp.vec4  # l, r, b, t (tangents for perspective, world units for orthographic)
+    scale: wp.vec2  # texels per window unit: width / (r - l), height / (t - b)
     near: float
     far: float
     width: int
@@ -65,6 +71,8 @@ class LightView:
         g.az = wp.vec3(*self.axes[:, 2])
         g.persp = int(self.persp)
         g.window = wp.vec4(*self.window)
+        l, r, b, t = self.window
+        g.scale = wp.vec2(self.width / (r - l), self.height / (t - b))
         g.near = float(self.near)
         g.far = float(self.far)
         g.width = int(self.width)
@@ -181,52 +189,10 @@ def texel_of(lv: LightViewGPU, v: wp.vec3) -> wp.vec2:
     x = v[0]
     y = v[1]
     if lv.persp != 0:
-        x = x / v[2]
-        y = y / v[2]
-    return wp.vec2(
-        (x - lv.window[0]) / (lv.window[1] - lv.window[0]) * float(lv.width),
-        (y - lv.window[2]) / (lv.window[3] - lv.window[2]) * float(lv.height),
-    )
-
-
-@wp.kernel
-def setup_triangles(
-    offset: int,
-    points: wp.array[wp.vec3],
-    indices: wp.array[wp.int32],
-    lv: LightViewGPU,
-    # outputs
-    view_pts: wp.array[wp.vec3],
-    row_range: wp.array[wp.vec2i],
-):
-    """Per triangle: view-space corners and the rows it may touch (empty range = culled)."""
-    tri = wp.tid() + offset
-    a = view_of(lv, points[indices[3 * tri]])
-    b = view_of(lv, points[indices[3 * tri + 1]])
-    c = view_of(lv, points[indices[3 * tri + 2]])
-    view_pts[3 * tri] = a
-    view_pts[3 * tri + 1] = b
-    view_pts[3 * tri + 2] = c
-    zmax = wp.max(a[2], wp.max(b[2], c[2]))
-    zmin = wp.min(a[2], wp.min(b[2], c[2]))
-    lo = int(0)
-    hi = int(-1)
-    if zmax >= lv.near and (zmin <= lv.far or lv.persp == 0):
-        if zmin < lv.near:
-            lo = 0  # crosses the near plane: clipped later, rows unknown here
-            hi = lv.height - 1
-        else:
-            ta = texel_of(lv, a)
-            tb = texel_of(lv, b)
-            tc = texel_of(lv, c)
-            ymin = wp.min(ta[1], wp.min(tb[1], tc[1]))
-            ymax = wp.max(ta[1], wp.max(tb[1], tc[1]))
-            xmin = wp.min(ta[0], wp.min(tb[0], tc[0]))
-            xmax = wp.max(ta[0], wp.max(tb[0], tc[0]))
-            if xmax >= 0.0 and xmin <= float(lv.width) and ymax >= 0.0 and ymin <= float(lv.height):
-                lo = wp.max(int(wp.floor(ymin)) - 1, 0)
-                hi = wp.min(int(wp.floor(ymax)) + 1, lv.height - 1)
-    row_range[tri] = wp.vec2i(lo, hi)
+        inv = 1.0 / v[2]
+        x = x * inv
+        y = y * inv
+    return wp.vec2((x - lv.window[0]) * lv.scale[0], (y - lv.window[2]) * lv.scale[1])
 
 
 @wp.func
@@ -235,12 +201,27 @@ def edge(ax: float, ay: float, bx: float, by: float, px: float, py: float) -> fl
 
 
 @wp.func
+def span_limit(lim: wp.vec2, e: float, g: float, inv_g: float, pxr: float) -> wp.vec2:
+    """Narrow the row span [lim.x, lim.y] (in texel x) to where e + g * (px - pxr) >= 0."""
+    if g > 0.0:
+        return wp.vec2(wp.max(lim[0], pxr - e * inv_g), lim[1])
+    if g < 0.0:
+        return wp.vec2(lim[0], wp.min(lim[1], pxr - e * inv_g))
+    if e < 0.0:
+        return wp.vec2(lim[1], lim[0] - 1.0)  # empty
+    return lim
+
+
+@wp.func
 def raster_triangle(
     lv: LightViewGPU,
     tri: int,
-    va: wp.vec3,
-    vb: wp.vec3,
-    vc: wp.vec3,
+    ta: wp.vec2,
+    tb: wp.vec2,
+    tc: wp.vec2,
+    za: float,
+    zb: float,
+    zc: float,
     wa: wp.vec3,
     wb: wp.vec3,
     wc: wp.vec3,
@@ -251,33 +232,14 @@ def raster_triangle(
     conservative: int,
     depth: wp.array2d[float],
 ):
-    """Scan-convert one (clipped) triangle into rows [row0, row1). wa/wb/wc: corners' weights of the original triangle."""
-    ta = texel_of(lv, va)
-    tb = texel_of(lv, vb)
-    tc = texel_of(lv, vc)
+    """Scan-convert one (clipped) triangle into rows [row0, row1).
+
+    ``ta, tb, tc``: corners in texel coordinates; ``za, zb, zc``: their view depths;
+    ``wa, wb, wc``: the corners' weights of the original triangle (for the uv of the alpha test).
+    """
     area = edge(ta[0], ta[1], tb[0], tb[1], tc[0], tc[1])
     if wp.abs(area) < 1.0e-12:
         return
-    inv_area = 1.0 / area
-    # interpolated quantity: q = 1/z (perspective) or z (orthographic); both affine in texel space
-    qa = va[2]
-    qb = vb[2]
-    qc = vc[2]
-    if lv.persp != 0:
-        qa = 1.0 / va[2]
-        qb = 1.0 / vb[2]
-        qc = 1.0 / vc[2]
-    # gradients of the barycentrics (l0 from edge b->c, l1 from c->a, l2 from a->b)
-    g0x = -(tc[1] - tb[1]) * inv_area
-    g0y = (tc[0] - tb[0]) * inv_area
-    g1x = -(ta[1] - tc[1]) * inv_area
-    g1y = (ta[0] - tc[0]) * inv_area
-    g2x = -(tb[1] - ta[1]) * inv_area
-    g2y = (tb[0] - ta[0]) * inv_area
-    qx = g0x * qa + g1x * qb + g2x * qc
-    qy = g0y * qa + g1y * qb + g2y * qc
-    qmin = wp.min(qa, wp.min(qb, qc))
-    qmax = wp.max(qa, wp.max(qb, qc))
     xmin = wp.min(ta[0], wp.min(tb[0], tc[0]))
     xmax = wp.max(ta[0], wp.max(tb[0], tc[0]))
     ymin = wp.min(ta[1], wp.min(tb[1], tc[1]))
@@ -300,40 +262,98 @@ def raster_triangle(
     x1 = wp.min(x1, lv.width - 1)
     y0 = wp.max(y0, row0)
     y1 = wp.min(y1, row1 - 1)
-    hx0 = 0.5 * (wp.abs(g0x) + wp.abs(g0y))
-    hx1 = 0.5 * (wp.abs(g1x) + wp.abs(g1y))
-    hx2 = 0.5 * (wp.abs(g2x) + wp.abs(g2y))
+    if x0 > x1 or y0 > y1:  # covers no texel centre (most small triangles of a dense mesh)
+        return
+    inv_area = 1.0 / area
+    # interpolated quantity: q = 1/z (perspective) or z (orthographic); both affine in texel space
+    qa = za
+    qb = zb
+    qc = zc
+    if lv.persp != 0:
+        qa = 1.0 / za
+        qb = 1.0 / zb
+        qc = 1.0 / zc
+    # gradients of the barycentrics (l0 from edge b->c, l1 from c->a, l2 from a->b)
+    g0x = -(tc[1] - tb[1]) * inv_area
+    g0y = (tc[0] - tb[0]) * inv_area
+    g1x = -(ta[1] - tc[1]) * inv_area
+    g1y = (ta[0] - tc[0]) * inv_area
+    g2x = -(tb[1] - ta[1]) * inv_area
+    g2y = (tb[0] - ta[0]) * inv_area
+    qx = g0x * qa + g1x * qb + g2x * qc
+    qy = g0y * qa + g1y * qb + g2y * qc
+    qmin = float(0.0)
+    qmax = float(0.0)
+    hx0 = float(0.0)
+    hx1 = float(0.0)
+    hx2 = float(0.0)
+    if conservative != 0:
+        qmin = wp.min(qa, wp.min(qb, qc))
+        qmax = wp.max(qa, wp.max(qb, qc))
+        hx0 = 0.5 * (wp.abs(g0x) + wp.abs(g0y))
+        hx1 = 0.5 * (wp.abs(g1x) + wp.abs(g1y))
+        hx2 = 0.5 * (wp.abs(g2x) + wp.abs(g2y))
+    # plain case (no alpha test, not conservative): walk the exact span of covered texel
+    # centres on each row and evaluate the depth plane directly at each texel
+    spans = conservative == 0 and alpha == 0
+    # x at which each barycentric crosses zero is pxr - e / g: keep 1/g (0 when g = 0)
+    i0 = float(0.0)
+    i1 = float(0.0)
+    i2 = float(0.0)
+    if g0x != 0.0:
+        i0 = 1.0 / g0x
+    if g1x != 0.0:
+        i1 = 1.0 / g1x
+    if g2x != 0.0:
+        i2 = 1.0 / g2x
     for y in range(y0, y1 + 1):
         py = float(y) + 0.5
-        for x in range(x0, x1 + 1):
+        xs = x0
+        xe = x1
+        pxr = float(x0) + 0.5
+        e0 = edge(tb[0], tb[1], tc[0], tc[1], pxr, py) * inv_area
+        e1 = edge(tc[0], tc[1], ta[0], ta[1], pxr, py) * inv_area
+        # q at the row's first texel centre from the barycentrics (stable even when corners are
+        # far outside the map), then the plane's x slope from there
+        q_row = e0 * qa + e1 * qb + (1.0 - e0 - e1) * qc
+        if spans:
+            lim = wp.vec2(float(x0) - 1.0, float(x1) + 2.0)
+            lim = span_limit(lim, e0, g0x, i0, pxr)
+            lim = span_limit(lim, e1, g1x, i1, pxr)
+            lim = span_limit(lim, 1.0 - e0 - e1, g2x, i2, pxr)
+            xs = wp.max(x0, int(wp.ceil(lim[0] - 0.5)))
+            xe = wp.min(x1, int(wp.floor(lim[1] - 0.5)))
+        for x in range(xs, xe + 1):
             px = float(x) + 0.5
-            l0 = edge(tb[0], tb[1], tc[0], tc[1], px, py) * inv_area
-            l1 = edge(tc[0], tc[1], ta[0], ta[1], px, py) * inv_area
-            l2 = 1.0 - l0 - l1
-            covered = False
-            q = l0 * qa + l1 * qb + l2 * qc
-            if conservative != 0:
-                covered = l0 + hx0 >= 0.0 and l1 + hx1 >= 0.0 and l2 + hx2 >= 0.0
-                # nearest depth over the texel square, kept within the triangle's range
-                if lv.persp != 0:
-                    q = wp.min(q + 0.5 * (wp.abs(qx) + wp.abs(qy)), qmax)
+            covered = True
+            q = q_row + qx * (px - pxr)
+            if not spans:
+                # evaluated per texel, not stepped: stepping drifts on wide triangles
+                l0 = edge(tb[0], tb[1], tc[0], tc[1], px, py) * inv_area
+                l1 = edge(tc[0], tc[1], ta[0], ta[1], px, py) * inv_area
+                l2 = 1.0 - l0 - l1
+                if conservative != 0:
+                    covered = l0 + hx0 >= 0.0 and l1 + hx1 >= 0.0 and l2 + hx2 >= 0.0
+                    # nearest depth over the texel square, kept within the triangle's range
+                    if lv.persp != 0:
+                        q = q + 0.5 * (wp.abs(qx) + wp.abs(qy))
+                    else:
+                        q = q - 0.5 * (wp.abs(qx) + wp.abs(qy))
+                    q = wp.clamp(q, qmin, qmax)
                 else:
-                    q = wp.max(q - 0.5 * (wp.abs(qx) + wp.abs(qy)), qmin)
-                q = wp.clamp(q, qmin, qmax)
-            else:
-                covered = l0 >= 0.0 and l1 >= 0.0 and l2 >= 0.0
-            if covered and alpha != 0:
-                c0 = wp.max(l0, 0.0)
-                c1 = wp.max(l1, 0.0)
-                c2 = wp.max(l2, 0.0)
-                if lv.persp != 0:  # perspective-correct weights
-                    c0 = c0 * qa
-                    c1 = c1 * qb
-                    c2 = c2 * qc
-                s = c0 + c1 + c2
-                if s > 0.0:
-                    w = (wa * c0 + wb * c1 + wc * c2) / s
-                    covered = surface_present(cut, tri, w[0], w[1], w[2])
+                    covered = l0 >= 0.0 and l1 >= 0.0 and l2 >= 0.0
+                if covered and alpha != 0:
+                    c0 = wp.max(l0, 0.0)
+                    c1 = wp.max(l1, 0.0)
+                    c2 = wp.max(l2, 0.0)
+                    if lv.persp != 0:  # perspective-correct weights
+                        c0 = c0 * qa
+                        c1 = c1 * qb
+                        c2 = c2 * qc
+                    s = c0 + c1 + c2
+                    if s > 0.0:
+                        w = (wa * c0 + wb * c1 + wc * c2) / s
+                        covered = surface_present(cut, tri, w[0], w[1], w[2])
             if covered:
                 z = q
                 if lv.persp != 0:
@@ -351,35 +371,70 @@ def clip_point(p: wp.vec3, q: wp.vec3, wp_: wp.vec3, wq: wp.vec3, near: float) -
 
 @wp.kernel
 def rasterize_depth(
+    offset: int,
     band_start: int,
     band_rows: int,
-    view_pts: wp.array[wp.vec3],
-    row_range: wp.array[wp.vec2i],
+    tri_list: wp.array[wp.int32],
+    use_list: int,
+    big_texels: float,
+    points: wp.array[wp.vec3],
+    indices: wp.array[wp.int32],
     lv: LightViewGPU,
     cut: Surfaces,
     alpha: int,
     conservative: int,
     # outputs
     depth: wp.array2d[float],
+    big: wp.array[wp.int32],
 ):
-    band, tri = wp.tid()
-    row0 = (band_start + band) * band_rows
+    """One thread per (band of rows, triangle): project, cull, clip at the near plane, scan-convert.
+
+    ``use_list``: triangles are ``tri_list[t + offset]`` instead of ``t + offset``.
+    ``big_texels > 0``: triangles whose texel bounding box is larger (or that cross the near
+    plane) are only flagged in ``big`` and left for a banded pass.
+    """
+    bi, t = wp.tid()
+    band = bi + band_start
+    tri = t + offset
+    if use_list != 0:
+        tri = tri_list[tri]
+    row0 = band * band_rows
     row1 = wp.min(row0 + band_rows, lv.height)
-    rr = row_range[tri]
-    if rr[1] < row0 or rr[0] >= row1:
+    a = view_of(lv, points[indices[3 * tri]])
+    b = view_of(lv, points[indices[3 * tri + 1]])
+    c = view_of(lv, points[indices[3 * tri + 2]])
+    zmax = wp.max(a[2], wp.max(b[2], c[2]))
+    zmin = wp.min(a[2], wp.min(b[2], c[2]))
+    if lv.persp != 0 and (zmax < lv.near or zmin > lv.far):
         return
-    if alpha != 0 and cut.tri_cut[tri] >= 0:
-        alpha_on = 1
-    else:
-        alpha_on = 0
-    a = view_pts[3 * tri]
-    b = view_pts[3 * tri + 1]
-    c = view_pts[3 * tri + 2]
+    clipped = lv.persp != 0 and zmin < lv.near
+    ta = wp.vec2(0.0)
+    tb = wp.vec2(0.0)
+    tc = wp.vec2(0.0)
+    if not clipped:
+        ta = texel_of(lv, a)
+        tb = texel_of(lv, b)
+        tc = texel_of(lv, c)
+    if big_texels > 0.0:
+        if clipped:
+            big[tri] = 1
+            return
+        bw = wp.min(wp.max(ta[0], wp.max(tb[0], tc[0])), float(lv.width)) - wp.max(wp.min(ta[0], wp.min(tb[0], tc[0])), 0.0)
+        bh = wp.min(wp.max(ta[1], wp.max(tb[1], tc[1])), float(lv.height)) - wp.max(wp.min(ta[1], wp.min(tb[1], tc[1])), 0.0)
+        if bw < 0.0 or bh < 0.0:
+            return
+        if bw * bh > big_texels:
+            big[tri] = 1
+            return
+    alpha_on = int(0)
+    if alpha != 0:
+        if cut.tri_cut[tri] >= 0:
+            alpha_on = 1
     ea = wp.vec3(1.0, 0.0, 0.0)
     eb = wp.vec3(0.0, 1.0, 0.0)
     ec = wp.vec3(0.0, 0.0, 1.0)
-    if lv.persp == 0 or (a[2] >= lv.near and b[2] >= lv.near and c[2] >= lv.near):
-        raster_triangle(lv, tri, a, b, c, ea, eb, ec, row0, row1, cut, alpha_on, conservative, depth)
+    if not clipped:
+        raster_triangle(lv, tri, ta, tb, tc, a[2], b[2], c[2], ea, eb, ec, row0, row1, cut, alpha_on, conservative, depth)
         return
     # Sutherland-Hodgman against z >= near: 1 or 2 triangles
     n_in = int(0)
@@ -418,10 +473,19 @@ def rasterize_depth(
     u01 = w0 + (w1 - w0) * k01[3]
     u02 = w0 + (w2 - w0) * k02[3]
     if odd_in:  # only p0 in front: one triangle p0, q01, q02
-        raster_triangle(lv, tri, p0, q01, q02, w0, u01, u02, row0, row1, cut, alpha_on, conservative, depth)
+        raster_triangle(lv, tri, texel_of(lv, p0), texel_of(lv, q01), texel_of(lv, q02), p0[2], q01[2], q02[2], w0, u01, u02, row0, row1, cut, alpha_on, conservative, depth)
     else:  # p0 behind: quad q01, p1, p2, q02
-        raster_triangle(lv, tri, q01, p1, p2, u01, w1, w2, row0, row1, cut, alpha_on, conservative, depth)
-        raster_triangle(lv, tri, q01, p2, q02, u01, w2, u02, row0, row1, cut, alpha_on, conservative, depth)
+        t01 = texel_of(lv, q01)
+        t2 = texel_of(lv, p2)
+        raster_triangle(lv, tri, t01, texel_of(lv, p1), t2, q01[2], p1[2], p2[2], u01, w1, w2, row0, row1, cut, alpha_on, conservative, depth)
+        raster_triangle(lv, tri, t01, t2, texel_of(lv, q02), q01[2], p2[2], q02[2], u01, w2, u02, row0, row1, cut, alpha_on, conservative, depth)
+
+
+@wp.kernel
+def merge_min(offset: int, src: wp.array[float], dst: wp.array[float]):
+    """dst = min(dst, src), element-wise over flat maps."""
+    i = wp.tid() + offset
+    dst[i] = wp.min(dst[i], src[i])
 
 
 @dataclass
@@ -432,6 +496,8 @@ class DepthMap:
     depth: wp.array
     alpha_tested: bool
     conservative: bool
+    private_maps: int = 0  # CPU worker maps merged into ``depth`` (temporaries, freed)
+    big_triangles: int = 0  # CPU: triangles rasterized in the banded second pass
 
     def arrays(self) -> dict[str, wp.array]:
         return {"depth": self.depth}
@@ -442,24 +508,54 @@ def rasterize(ds: DeviceScene, view: LightView, alpha_tested: bool, conservative
     dev = ds.device
     lv = view.gpu()
     ntri = ds.indices.shape[0] // 3
-    view_pts = wp.empty(3 * ntri, dtype=wp.vec3, device=dev)
-    row_range = wp.empty(ntri, dtype=wp.vec2i, device=dev)
-    launch_chunked(setup_triangles, ntri, inputs=[ds.points, ds.indices, lv], outputs=[view_pts, row_range], device=dev, min_chunk=4096)
-    depth = wp.full((view.height, view.width), DEPTH_CLEAR, dtype=float, device=dev)
+    shape = (view.height, view.width)
     alpha = int(alpha_tested and ds.has_cutouts)
     cons = int(conservative)
     ensure_loaded(rasterize_depth, dev)
-    if dev.startswith("cpu"):
-        nb = max(1, min(view.height, cpu_threads() * BANDS_PER_THREAD))
+    no_list = wp.zeros(1, dtype=wp.int32, device=dev)
+
+    def launch(target, start, count, nbands, band_rows, band_start=0, tri_list=None, big_texels=0.0, big=None):
+        wp.launch(
+            rasterize_depth, dim=(nbands, count),
+            inputs=[start, band_start, band_rows, tri_list if tri_list is not None else no_list, int(tri_list is not None), float(big_texels),
+                    ds.points, ds.indices, lv, ds.cutouts, alpha, cons],
+            outputs=[target, big if big is not None else no_list], device=dev,
+        )
+
+    if not dev.startswith("cpu"):
+        depth = wp.full(shape, DEPTH_CLEAR, dtype=float, device=dev)
+        nb = (view.height + GPU_BAND_ROWS - 1) // GPU_BAND_ROWS
+        launch(depth, 0, ntri, nb, GPU_BAND_ROWS)
+        return DepthMap(view=view, depth=depth, alpha_tested=bool(alpha), conservative=conservative, private_maps=0)
+    # CPU phase 1: each worker rasterizes interleaved chunks of small triangles into its own map
+    map_bytes = 4 * view.width * view.height
+    nmaps = max(1, min(cpu_threads(), PRIVATE_MAP_BUDGET // map_bytes, (ntri + CPU_CHUNK - 1) // CPU_CHUNK))
+    maps = [wp.full(shape, DEPTH_CLEAR, dtype=float, device=dev) for _ in range(nmaps)]
+    chunks = [(s, min(CPU_CHUNK, ntri - s)) for s in range(0, ntri, CPU_CHUNK)]
+    big = wp.zeros(ntri, dtype=wp.int32, device=dev)
+    big_texels = float(max(BIG_TRIANGLE_TEXELS, 1))
+
+    def worker(m):
+        def run():
+            for start, count in chunks[m::nmaps]:
+                launch(maps[m], start, count, 1, view.height, big_texels=big_texels, big=big)
+
+        return run
+
+    run_tasks([worker(m) for m in range(nmaps)], dev)
+    depth = maps[0]
+    flat = depth.reshape(-1)
+    for other in maps[1:]:
+        launch_chunked(merge_min, flat.shape[0], inputs=[other.reshape(-1)], outputs=[flat], device=dev, min_chunk=1 << 16)
+    # CPU phase 2: large (and near-clipped) triangles, shared out by bands of rows of the one map
+    big_list = np.flatnonzero(big.numpy()).astype(np.int32)
+    if len(big_list):
+        blist = wp.array(big_list, dtype=wp.int32, device=dev)
+        nb = max(1, min(view.height, cpu_threads() * 4))
         rows = (view.height + nb - 1) // nb
         nb = (view.height + rows - 1) // rows
+        def band_task(b):
+            return lambda: launch(depth, 0, len(big_list), 1, rows, band_start=b, tri_list=blist)
 
-        def band(i):
-            return lambda: wp.launch(rasterize_depth, dim=(1, ntri), inputs=[i, rows, view_pts, row_range, lv, ds.cutouts, alpha, cons], outputs=[depth], device=dev)
-
-        run_tasks([band(i) for i in range(nb)], dev)
-    else:
-        rows = 32
-        nb = (view.height + rows - 1) // rows
-        wp.launch(rasterize_depth, dim=(nb, ntri), inputs=[0, rows, view_pts, row_range, lv, ds.cutouts, alpha, cons], outputs=[depth], device=dev)
-    return DepthMap(view=view, depth=depth, alpha_tested=bool(alpha), conservative=conservative)
+        run_tasks([band_task(b) for b in range(nb)], dev)
+    return DepthMap(view=view, depth=depth, alpha_tested=bool(alpha), conservative=conservative, private_maps=nmaps, big_triangles=int(len(big_list)))

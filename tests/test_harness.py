@@ -1,0 +1,89 @@
+"""Harness core: rows are appended as they finish, a rerun resumes, the report is written."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from bench import harness
+
+
+@pytest.fixture
+def tiny(monkeypatch, tmp_path):
+    """A two-row sweep on box_plane so the test is quick; references cached in tmp."""
+    import bench.foundation as fnd
+
+    monkeypatch.setenv("WSOFT_CACHE_DIR", str(tmp_path / "cache"))
+    calls = []
+
+    def cases(quick, devices):
+        return [
+            {"kind": "render", "scene": "box_plane", "light": None, "device": devices[0], "width": 48, "height": 36, "ref_samples": 16,
+             "technique": "hard", "params": {"shadow_map_size": s}, "image": s == 512}
+            for s in (256, 512)
+        ]
+
+    real = fnd.run_case
+
+    def run_case(case, ctx):
+        calls.append(case["params"]["shadow_map_size"])
+        return real(case, ctx)
+
+    monkeypatch.setattr(fnd, "cases", cases)
+    monkeypatch.setattr(fnd, "run_case", run_case)
+    return tmp_path / "reports", calls
+
+
+def test_rows_resume_and_report(tiny):
+    out, calls = tiny
+    assert harness.run_sweep("foundation", quick=True, device=["cpu"], out_dir=str(out)) == 0
+    rows = harness.read_rows(out / "foundation-quick.jsonl")
+    assert [r["params"]["shadow_map_size"] for r in rows] == [256, 512] and calls == [256, 512]
+    r = rows[0]
+    for k in ("scene", "technique", "params", "device", "width", "height", "timings_ms", "memory_bytes", "error"):
+        assert k in r
+    assert set(r["error"]) >= {"mae", "rmse", "max", "mae_penumbra", "frac_outside_3se"}
+    assert 0 <= r["error"]["mae"] <= 1
+    md = (out / "foundation-quick.md").read_text()
+    assert "wsoft bench foundation --quick" in md and "| box_plane |" in md
+    assert (out / "images" / "foundation-quick" / "error_vs_time.png").exists()
+    # a rerun computes nothing; losing the last row (an interrupted sweep) recomputes only it
+    harness.run_sweep("foundation", quick=True, device=["cpu"], out_dir=str(out))
+    assert calls == [256, 512]
+    lines = (out / "foundation-quick.jsonl").read_text().splitlines()
+    (out / "foundation-quick.jsonl").write_text(lines[0] + "\n" + lines[1][:40])  # cut short mid-row
+    harness.run_sweep("foundation", quick=True, device=["cpu"], out_dir=str(out))
+    assert calls == [256, 512, 512]
+    assert len(harness.read_rows(out / "foundation-quick.jsonl")) == 2
+
+
+def test_reference_is_cached(tiny):
+    a = harness.reference("box_plane", width=32, height=24, light=None, samples=4)
+    b = harness.reference("box_plane", width=32, height=24, light=None, samples=4)
+    assert not a["cached"] and b["cached"]
+    assert np.array_equal(a["V"], b["V"])
+    c = harness.reference("box_plane", width=32, height=24, light=None, samples=9)
+    assert not c["cached"]
+
+
+def test_unknown_sweep(tiny):
+    import wsoft
+
+    with pytest.raises(wsoft.ParameterError, match="sweeps: foundation"):
+        harness.run_sweep("nope", out_dir=str(tiny[0]))
+
+
+def test_metrics_on_known_images():
+    from wsoft.metrics import visibility_error
+
+    ref = np.array([[0.0, 0.5], [1.0, 1.0]])
+    v = np.array([[0.0, 0.7], [1.0, 0.0]])
+    se = np.full_like(ref, 0.05)
+    cov = np.array([[1, 1], [1, 0]])
+    e = visibility_error(v, ref, se, cov)
+    assert e["pixels"] == 3 and e["mae"] == pytest.approx(0.2 / 3) and e["max"] == pytest.approx(0.2)
+    assert e["mae_penumbra"] == pytest.approx(0.2) and e["penumbra_pixels"] == 1
+    assert e["frac_outside_3se"] == pytest.approx(1 / 3)
+    assert json.dumps(e)
