@@ -105,6 +105,15 @@ def read_rows(path: Path) -> list[dict]:
     return rows
 
 
+def drop_partial_row(path: Path) -> None:
+    """Cut a last line left unfinished by an interruption, so new rows start on a fresh line."""
+    if not path.exists():
+        return
+    data = path.read_bytes()
+    if data and not data.endswith(b"\n"):
+        path.write_bytes(data[: data.rfind(b"\n") + 1])
+
+
 def append_row(path: Path, row: dict) -> None:
     with open(path, "a") as f:
         f.write(json.dumps(row, default=_jsonable) + "\n")
@@ -146,6 +155,7 @@ def run_sweep(name: str, *, quick: bool = False, device: list[str] | None = None
     jsonl = out / f"{stem}.jsonl"
     if fresh and jsonl.exists():
         jsonl.unlink()
+    drop_partial_row(jsonl)
     done = {r["key"] for r in read_rows(jsonl)}
     cases = mod.cases(quick=quick, devices=devices)
     todo = [c for c in cases if case_key(c) not in done]
