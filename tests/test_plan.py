@@ -47,3 +47,17 @@ def test_render_stats_list_passes_that_ran(device):
     f = wsoft.render(scene, "reference", width=16, height=12, device=device, samples=4)
     assert f.stats["passes"] == ["upload_scene", "gbuffer", "reference[Light]", "resolve", "shade"]
     assert set(f.stats["timings_ms"]) == set(f.stats["passes"]) | {"total"}
+
+
+def test_device_copy_is_reused_until_changed(device):
+    scene = wsoft.load_scene(scene_path("box_plane.usda"))
+    a = wsoft.render(scene, "hard", width=16, height=12, device=device)
+    b = wsoft.render(scene, "hard", width=16, height=12, device=device)
+    assert a.stats["counters"]["scene_upload_cached"] is False
+    assert b.stats["counters"]["scene_upload_cached"] is True
+    assert (a.V == b.V).all()
+    scene.points[:, 2] += 1.0  # lift everything: the camera now sees the scene from closer
+    scene.changed()
+    c = wsoft.render(scene, "hard", width=16, height=12, device=device)
+    assert c.stats["counters"]["scene_upload_cached"] is False
+    assert not (c["P.Z"] == a["P.Z"]).all()

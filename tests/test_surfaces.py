@@ -28,6 +28,7 @@ def test_single_sided_back_face_is_culled_but_casts_shadow(device):
     assert np.all(np.abs(f["P.Z"][under]) < 1e-3)  # the camera sees the ground through the culled roof
     assert np.all(f.V[under] == 0)  # and the roof shadows it
     s.tri_double_sided[:] = True
+    s.changed()
     f2 = wsoft.render(s, "hard", width=48, height=48, device=device)
     assert np.all(np.abs(f2["P.Z"][under] - 1) < 1e-3)  # double-sided, the roof is what the camera sees
 

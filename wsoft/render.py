@@ -77,7 +77,13 @@ class RenderContext:
     def scene_arrays(self) -> str:
         """Resource ``scene``: a :class:`DeviceScene` (BVH, triangles, cutouts, textures)."""
         key = "scene"
-        self.graph.add(Pass("upload_scene", (), (key,), lambda res: {key: upload_scene(self.scene, self.device)}))
+
+        def run(res):
+            ds, cached = self.scene.device_copy(self.device, upload_scene)
+            self.counters["scene_upload_cached"] = cached
+            return {key: ds}
+
+        self.graph.add(Pass("upload_scene", (), (key,), run))
         return key
 
     def gbuffer(self) -> str:
@@ -118,7 +124,11 @@ class RenderContext:
         key = f"{name}[{self.label(light)}]@{size}" + (f"+{margin:g}" if margin else "")
 
         def run(res):
-            return {key: rasterize(res[sk], res[vk], alpha_tested=alpha, conservative=conservative)}
+            dm = rasterize(res[sk], res[vk], alpha_tested=alpha, conservative=conservative)
+            if dm.private_maps:
+                self.counters[f"{key}.cpu_private_maps"] = dm.private_maps
+                self.counters[f"{key}.large_triangles"] = dm.big_triangles
+            return {key: dm}
 
         self.graph.add(Pass(key, (sk, vk), (key,), run))
         return key

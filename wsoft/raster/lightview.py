@@ -362,8 +362,8 @@ def raster_triangle(
 
 
 @wp.func
-def clip_point(p: wp.vec3, q: wp.vec3, wp_: wp.vec3, wq: wp.vec3, near: float) -> wp.vec4:
-    """Parameter of the near-plane crossing on segment p->q (returned as w of a vec4 with the point)."""
+def clip_point(p: wp.vec3, q: wp.vec3, near: float) -> wp.vec4:
+    """Where segment p->q crosses the near plane: the point (xyz) and its parameter along p->q (w)."""
     s = (near - p[2]) / (q[2] - p[2])
     r = p + (q - p) * s
     return wp.vec4(r[0], r[1], r[2], s)
@@ -466,8 +466,8 @@ def rasterize_depth(
         w0 = ec
         w1 = ea
         w2 = eb
-    k01 = clip_point(p0, p1, w0, w1, lv.near)
-    k02 = clip_point(p0, p2, w0, w2, lv.near)
+    k01 = clip_point(p0, p1, lv.near)
+    k02 = clip_point(p0, p2, lv.near)
     q01 = wp.vec3(k01[0], k01[1], k01[2])
     q02 = wp.vec3(k02[0], k02[1], k02[2])
     u01 = w0 + (w1 - w0) * k01[3]
@@ -554,6 +554,7 @@ def rasterize(ds: DeviceScene, view: LightView, alpha_tested: bool, conservative
         nb = max(1, min(view.height, cpu_threads() * 4))
         rows = (view.height + nb - 1) // nb
         nb = (view.height + rows - 1) // rows
+
         def band_task(b):
             return lambda: launch(depth, 0, len(big_list), 1, rows, band_start=b, tri_list=blist)
 

@@ -41,6 +41,14 @@ def stratified_sample(s: int, n: int, m: int, jitter: wp.vec2, shift: wp.vec2) -
     return wp.vec2(x - wp.floor(x), y - wp.floor(y))
 
 
+@wp.func
+def ray_origin(p: wp.vec3, n: wp.vec3, d: wp.vec3, eps: float) -> wp.vec3:
+    """Shadow-ray origin: ``p`` moved ``eps`` along the normal, to the side the ray leaves on."""
+    if wp.dot(n, d) < 0.0:
+        return p - n * eps
+    return p + n * eps
+
+
 @wp.kernel
 def trace_visibility(
     offset: int,
@@ -79,11 +87,7 @@ def trace_visibility(
         u = stratified_sample(s, samples, grid, j, shift)
         r = light_sample(light, p, u[0], u[1])
         d = wp.vec3(r[0], r[1], r[2])
-        side = n
-        if wp.dot(n, d) < 0.0:
-            side = -n
-        o = p + side * eps
-        if not occluded(mesh, cut, has_cutouts, o, d, r[3] - eps):
+        if not occluded(mesh, cut, has_cutouts, ray_origin(p, n, d, eps), d, r[3] - eps):
             visible += 1
     v = float(visible) / float(samples)
     pe = (float(visible) + 0.5) / (float(samples) + 1.0)
@@ -146,10 +150,7 @@ def generate_shadow_rays(
     u = stratified_sample(s, samples, grid, j, shift)
     ls = light_sample(light, p, u[0], u[1])
     d = wp.vec3(ls[0], ls[1], ls[2])
-    side = n
-    if wp.dot(n, d) < 0.0:
-        side = -n
-    origin[r] = p + side * eps
+    origin[r] = ray_origin(p, n, d, eps)
     dir[r] = d
     tmax[r] = ls[3] - eps
 

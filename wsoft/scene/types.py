@@ -186,6 +186,23 @@ class Scene:
     def has_cutouts(self) -> bool:
         return bool(self.cutout_triangle_counts())
 
+    def device_copy(self, device: str, build):
+        """This scene's arrays on ``device`` (a DeviceScene), built once by ``build(scene, device)``.
+
+        Renders of the same Scene object reuse the BVH and arrays. After editing the scene's
+        arrays in place, call :meth:`changed`.
+        """
+        cache = self.__dict__.setdefault("_device_cache", {})
+        if device not in cache:
+            cache[device] = build(self, device)
+            return cache[device], False
+        return cache[device], True
+
+    def changed(self) -> None:
+        """Forget device copies and derived values after the arrays were edited in place."""
+        self.__dict__.pop("_device_cache", None)
+        self.__dict__.pop("bounds", None)
+
     def find_light(self, path_or_name: str) -> Light:
         for light in self.lights:
             if path_or_name in (light.path, light.name):
