@@ -292,3 +292,25 @@ def test_no_shadow_casting_light_is_an_error():
     s = wsoft.load_scene(st)
     with pytest.raises(SceneError, match="no shadow-casting light"):
         wsoft.render(s, "hard", width=8, height=8, device="cpu")
+
+
+def test_closed_orientation():
+    from wsoft.scene.usd import closed_orientation
+
+    # a unit cube, outward counter-clockwise faces
+    p = np.array([[x, y, z] for z in (0, 1) for y in (0, 1) for x in (0, 1)], float)
+    quads = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
+    tris = np.array([t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))])
+    assert closed_orientation(p, tris) == 1
+    assert closed_orientation(p, tris[:, ::-1]) == -1  # inside out
+    assert closed_orientation(p, tris[:-2]) == 0  # a face missing: open
+    flipped = tris.copy()
+    flipped[0] = flipped[0][::-1]
+    assert closed_orientation(p, flipped) == 0  # inconsistent winding
+    assert closed_orientation(p, np.concatenate([tris, tris[:2]])) == 0  # non-manifold (doubled face)
+
+
+def test_closed_meshes_flagged_on_load():
+    s = wsoft.load_scene(__import__("conftest").scene_path("contact.usda"))
+    ground = s.tri_prim == next(i for i, p in enumerate(s.prims) if "Ground" in p)
+    assert np.all(s.tri_closed[ground] == 0) and np.all(s.tri_closed[~ground] == 1)

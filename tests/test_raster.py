@@ -118,3 +118,15 @@ def test_8192_map_on_contact(device):
     f = wsoft.render(scene, "hard", width=64, height=48, device=device, shadow_map_size=8192)
     assert np.all(np.isfinite(f.V))
     assert f.stats["memory_bytes"]["light_depth[Light]@8192.depth"] == 8192 * 8192 * 4
+
+
+@pytest.mark.parametrize("light", ["Rect", "Sun"])
+def test_skipping_far_faces_of_closed_meshes_changes_nothing(device, light):
+    scene = wsoft.load_scene(scene_path("multi_light.usda"))
+    ds = upload_scene(scene, device)
+    assert ds.culled_closed > 800  # the occluders are closed: the optimisation is in play
+    view = _view(scene, light, 512)
+    culled = rasterize(ds, view, alpha_tested=False).depth.numpy()
+    scene.tri_closed[:] = 0
+    plain = rasterize(upload_scene(scene, device), view, alpha_tested=False).depth.numpy()
+    assert np.array_equal(culled, plain)

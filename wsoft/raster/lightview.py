@@ -202,14 +202,15 @@ def edge(ax: float, ay: float, bx: float, by: float, px: float, py: float) -> fl
 
 @wp.func
 def span_limit(lim: wp.vec2, e: float, g: float, inv_g: float, pxr: float) -> wp.vec2:
-    """Narrow the row span [lim.x, lim.y] (in texel x) to where e + g * (px - pxr) >= 0."""
-    if g > 0.0:
-        return wp.vec2(wp.max(lim[0], pxr - e * inv_g), lim[1])
-    if g < 0.0:
-        return wp.vec2(lim[0], wp.min(lim[1], pxr - e * inv_g))
-    if e < 0.0:
-        return wp.vec2(lim[1], lim[0] - 1.0)  # empty
-    return lim
+    """Narrow the row span [lim.x, lim.y] (in texel x) to where e + g * (px - pxr) >= 0.
+
+    Written with selects rather than branches: the sign of ``g`` is unpredictable from one
+    row of one small triangle to the next."""
+    t = pxr - e * inv_g
+    lo = wp.max(lim[0], wp.where(g > 0.0, t, -1.0e30))
+    hi = wp.min(lim[1], wp.where(g < 0.0, t, 1.0e30))
+    hi = wp.where(g == 0.0 and e < 0.0, -1.0e30, hi)
+    return wp.vec2(lo, hi)
 
 
 @wp.func
@@ -400,9 +401,21 @@ def rasterize_depth(
         tri = tri_list[tri]
     row0 = band * band_rows
     row1 = wp.min(row0 + band_rows, lv.height)
-    a = view_of(lv, points[indices[3 * tri]])
-    b = view_of(lv, points[indices[3 * tri + 1]])
-    c = view_of(lv, points[indices[3 * tri + 2]])
+    pa = points[indices[3 * tri]]
+    pb = points[indices[3 * tri + 1]]
+    pc = points[indices[3 * tri + 2]]
+    cull = cut.cull[tri]
+    if cull != 0:
+        # closed surface: only faces turned toward the light can be nearest (+1 outward, -1 inward)
+        n = wp.cross(pb - pa, pc - pa)
+        toward = wp.dot(n, lv.az) < 0.0
+        if lv.persp != 0:
+            toward = wp.dot(n, pa - lv.origin) < 0.0
+        if toward != (cull > 0):
+            return
+    a = view_of(lv, pa)
+    b = view_of(lv, pb)
+    c = view_of(lv, pc)
     zmax = wp.max(a[2], wp.max(b[2], c[2]))
     zmin = wp.min(a[2], wp.min(b[2], c[2]))
     if lv.persp != 0 and (zmax < lv.near or zmin > lv.far):

@@ -18,10 +18,12 @@ from wsoft.scene.types import Scene
 class Surfaces:
     """Per-triangle surface data: cutouts (``tri_cut[t]`` is a cutout index or -1 = opaque),
     their alpha textures, and sidedness (``double_sided[t]``: 0 = back face culled in the eye view).
-    Shadows are cast by both sides of every triangle."""
+    Shadows are cast by both sides of every triangle; ``cull`` only lets the light-view
+    rasterizer skip faces of closed surfaces that can never be the nearest (exact)."""
 
     tri_cut: wp.array[wp.int32]  # [T]
     double_sided: wp.array[wp.int32]  # [T]
+    cull: wp.array[wp.int32]  # [T] light view: +1 skip faces turned away, -1 skip faces turned toward, 0 keep all
     tri_uv: wp.array[wp.vec2]  # [3T] texture coordinates per triangle corner
     threshold: wp.array[wp.float32]  # [C] opacityThreshold
     opacity: wp.array[wp.float32]  # [C] constant opacity (used when tex < 0)
@@ -128,6 +130,7 @@ class DeviceScene:
     indices: wp.array  # flat [3T] int32
     cutouts: Surfaces
     has_cutouts: int
+    culled_closed: int  # triangles of closed surfaces whose far-facing side the light view may skip
     tri_albedo: wp.array  # [T] vec3
     diagonal: float
     lo: np.ndarray
@@ -179,6 +182,12 @@ def upload_scene(scene: Scene, device: str) -> DeviceScene:
     cut = Surfaces()
     cut.tri_cut = arr(tri_cut.astype(np.int32), wp.int32)
     cut.double_sided = arr(scene.tri_double_sided.astype(np.int32), wp.int32)
+    cull = np.zeros(scene.triangle_count, np.int32) if scene.tri_closed is None else scene.tri_closed.astype(np.int32)
+    # a cutout lets the inside of a closed surface be seen: no culling for prims that have cutouts
+    if scene.triangle_count and np.any(tri_cut >= 0):
+        cut_prims = np.unique(scene.tri_prim[tri_cut >= 0])
+        cull[np.isin(scene.tri_prim, cut_prims)] = 0
+    cut.cull = arr(cull, wp.int32)
     cut.tri_uv = wp.array(scene.tri_uv.reshape(-1, 2).astype(np.float32), dtype=wp.vec2, device=device)
     cut.threshold = arr([m.opacity_threshold for m in cut_mats], wp.float32)
     cut.opacity = arr([m.opacity for m in cut_mats], wp.float32)
@@ -198,6 +207,7 @@ def upload_scene(scene: Scene, device: str) -> DeviceScene:
         indices=idx,
         cutouts=cut,
         has_cutouts=int(bool(cut_ids) and bool(np.any(tri_cut >= 0))),
+        culled_closed=int(np.count_nonzero(cull)),
         tri_albedo=wp.array(albedo, dtype=wp.vec3, device=device),
         diagonal=scene.diagonal,
         lo=lo,

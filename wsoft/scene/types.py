@@ -149,6 +149,7 @@ class Scene:
     tri_uv: np.ndarray  # [T, 3, 2] float32 texture coordinates (0 where the mesh has none)
     tri_double_sided: np.ndarray  # [T] bool
     prims: list[str] = field(default_factory=list)
+    tri_closed: np.ndarray | None = None  # [T] int8: +1/-1 closed surface facing out/in, 0 open (see closed_orientation)
     materials: list[Material] = field(default_factory=list)
     textures: list[Texture] = field(default_factory=list)
     lights: list[Light] = field(default_factory=list)  # shadow-casting lights

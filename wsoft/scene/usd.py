@@ -112,7 +112,7 @@ class _StageReader:
     # -- main --------------------------------------------------------------------
     def read(self) -> Scene:
         Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = _pxr()
-        pts, tris, tri_prim, tri_mat, tri_uv, tri_ds, prims = [], [], [], [], [], [], []
+        pts, tris, tri_prim, tri_mat, tri_uv, tri_ds, tri_cl, prims = [], [], [], [], [], [], [], []
         lights, unshadowed, skipped, cameras = [], [], [], []
         nverts = 0
         it = iter(Usd.PrimRange.Stage(self.stage, Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)))
@@ -131,7 +131,7 @@ class _StageReader:
                 mesh = self.read_mesh(prim)
                 if mesh is None:
                     continue
-                p, t, m, uv, ds = mesh
+                p, t, m, uv, ds, closed = mesh
                 prims.append(str(prim.GetPath()))
                 pts.append(p)
                 tris.append(t + nverts)
@@ -140,6 +140,7 @@ class _StageReader:
                 tri_mat.append(m)
                 tri_uv.append(uv)
                 tri_ds.append(np.full(len(t), ds, bool))
+                tri_cl.append(np.full(len(t), closed, np.int8))
             elif prim.IsA(UsdGeom.Gprim) and not prim.IsA(UsdGeom.Mesh):
                 self.warn(prim, f"{type_name} is not a Mesh; ignored (convert it to a mesh to cast shadows)")
             elif type_name in _HANDLED_LIGHTS:
@@ -168,6 +169,7 @@ class _StageReader:
             tri_material=np.concatenate(tri_mat).astype(np.int32) if tri_mat else np.zeros(0, np.int32),
             tri_uv=np.concatenate(tri_uv).astype(np.float32) if tri_uv else np.zeros((0, 3, 2), np.float32),
             tri_double_sided=np.concatenate(tri_ds) if tri_ds else np.zeros(0, bool),
+            tri_closed=np.concatenate(tri_cl) if tri_cl else np.zeros(0, np.int8),
             prims=prims,
             materials=self.materials,
             textures=self.textures,
@@ -228,7 +230,7 @@ class _StageReader:
         uv = self.read_st(prim, mesh, corners, face_of_tri, tris)
         mat = self.bind_materials(prim, mesh, len(counts), face_of_tri)
         ds = bool(self.get(mesh.GetDoubleSidedAttr(), False))
-        return pw, tris.astype(np.int32), mat, uv, ds
+        return pw, tris.astype(np.int32), mat, uv, ds, closed_orientation(pw, tris)
 
     def read_st(self, prim, mesh, corners, face_of_tri, tris, name: str = "st"):
         Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = _pxr()
@@ -436,6 +438,34 @@ class _StageReader:
             tan_half = (0.5 * ha / f, 0.5 * va / f)
             offset = (ho / f, vo / f)
         return Camera(path=str(prim.GetPath()), to_world=M, orthographic=ortho, tan_half=tan_half, offset=offset, clip=clip)
+
+
+def closed_orientation(points: np.ndarray, tris: np.ndarray) -> int:
+    """+1 if the triangles form a closed, consistently wound surface facing outward, -1 if it
+    faces inward, 0 if it is open, non-manifold or inconsistently wound.
+
+    Closed: every directed edge (a, b) appears once and its reverse (b, a) appears once. For
+    such a surface the nearest hit along any ray from outside is a face turned toward the ray,
+    which lets the light-view rasterizer skip the faces turned away (exactly).
+    """
+    if len(tris) < 4:
+        return 0
+    n = int(points.shape[0])
+    a = tris.astype(np.int64)
+    fwd = np.concatenate([a[:, 0] * n + a[:, 1], a[:, 1] * n + a[:, 2], a[:, 2] * n + a[:, 0]])
+    rev = np.concatenate([a[:, 1] * n + a[:, 0], a[:, 2] * n + a[:, 1], a[:, 0] * n + a[:, 2]])
+    fwd.sort()
+    if np.any(fwd[1:] == fwd[:-1]):
+        return 0
+    rev.sort()
+    if not np.array_equal(fwd, rev):
+        return 0
+    p = points[a].astype(np.float64)
+    vol = np.einsum("ij,ij->i", p[:, 0], np.cross(p[:, 1], p[:, 2])).sum() / 6.0
+    scale = float(np.ptp(points, axis=0).max()) ** 3 if len(points) else 0.0
+    if abs(vol) <= 1e-9 * max(scale, 1e-30):
+        return 0
+    return 1 if vol > 0 else -1
 
 
 def auto_camera(scene: Scene, aspect: float = 4.0 / 3.0) -> Camera:
