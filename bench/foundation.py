@@ -146,7 +146,6 @@ def _raster_vs_raycast(case: dict, ctx: dict) -> dict:
 
 
 def _throughput(case: dict, ctx: dict) -> dict:
-    import wsoft
     from wsoft.parallel import cpu_threads
     from wsoft.reference import shadow_rays, trace_reference, trace_rays
     from wsoft.render import RenderContext
@@ -317,6 +316,7 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
     plot_rel = Path("images") / ctx["stem"] / "error_vs_time.png"
     if renders:
         groups = sorted({(r["scene"], r["light"].split("/")[-1], r["device"]) for r in renders})
+        several_devices = len({r["device"] for r in renders}) > 1
         fig, ax = plt.subplots(figsize=(8, 5))
         for g in groups:
             pts = sorted((r["timings_ms"]["total"], r["error"]["mae"], r["technique"]) for r in renders if (r["scene"], r["light"].split("/")[-1], r["device"]) == g and r["width"] == max(x["width"] for x in renders))
@@ -324,7 +324,7 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
                 xs = [p[0] for p in pts if p[2] == tech]
                 ys = [max(p[1], 1e-5) for p in pts if p[2] == tech]
                 if xs:
-                    ax.plot(xs, ys, marker=mk, linestyle="-" if tech == "reference" else "--", label=f"{g[0]}/{g[1]} {tech}" + (f" ({g[2]})" if len(devs := {x['device'] for x in renders}) > 1 else ""))
+                    ax.plot(xs, ys, marker=mk, linestyle="-" if tech == "reference" else "--", label=f"{g[0]}/{g[1]} {tech}" + (f" ({g[2]})" if several_devices else ""))
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.set_xlabel("total frame time (ms)")

@@ -9,7 +9,7 @@ into per-pixel channels and ``shade`` makes ``R G B``. Only passes feeding those
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -20,8 +20,8 @@ from wsoft.graph import FrameGraph, Pass, buffer_bytes
 from wsoft.parallel import cpu_threads, resolve_device
 from wsoft.raster.camera import camera_gpu, fit_aspect
 from wsoft.raster.gbuffer import GBuffer, render_gbuffer
-from wsoft.raster.lightview import DepthMap, fit_light_view, rasterize
-from wsoft.scene.device import DeviceScene, upload_scene
+from wsoft.raster.lightview import fit_light_view, rasterize
+from wsoft.scene.device import upload_scene
 from wsoft.scene.light_gpu import light_gpu
 from wsoft.scene.types import Camera, Light, Scene
 from wsoft.scene.usd import auto_camera, load_scene
@@ -140,7 +140,6 @@ class Frame:
 
     channels: dict[str, np.ndarray]
     stats: dict[str, Any]
-    samples: dict[str, np.ndarray] = field(default_factory=dict)  # per-sample data [spp, H, W]
 
     def __getitem__(self, name: str) -> np.ndarray:
         return self.channels[name]
