@@ -249,6 +249,7 @@ def _fmt(x, nd=4):
 
 def report(rows: list[dict], md: Path, ctx: dict) -> None:
     import matplotlib
+    import matplotlib.ticker
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -315,22 +316,33 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
     # error vs time plot
     plot_rel = Path("images") / ctx["stem"] / "error_vs_time.png"
     if renders:
-        groups = sorted({(r["scene"], r["light"].split("/")[-1], r["device"]) for r in renders})
+        width = max(x["width"] for x in renders)
+        scenes = sorted({r["scene"] for r in renders})
         several_devices = len({r["device"] for r in renders}) > 1
-        fig, ax = plt.subplots(figsize=(8, 5))
-        for g in groups:
-            pts = sorted((r["timings_ms"]["total"], r["error"]["mae"], r["technique"]) for r in renders if (r["scene"], r["light"].split("/")[-1], r["device"]) == g and r["width"] == max(x["width"] for x in renders))
-            for tech, mk in (("hard", "s"), ("reference", "o")):
-                xs = [p[0] for p in pts if p[2] == tech]
-                ys = [max(p[1], 1e-5) for p in pts if p[2] == tech]
-                if xs:
-                    ax.plot(xs, ys, marker=mk, linestyle="-" if tech == "reference" else "--", label=f"{g[0]}/{g[1]} {tech}" + (f" ({g[2]})" if several_devices else ""))
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.set_xlabel("total frame time (ms)")
-        ax.set_ylabel("MAE of V against the reference")
-        ax.set_title("foundation: error vs time (largest resolution; reference over sample counts)")
-        ax.legend(fontsize=6, ncol=2)
+        ncols = min(3, len(scenes))
+        nrows = (len(scenes) + ncols - 1) // ncols
+        fig, axes = plt.subplots(nrows, ncols, figsize=(4.2 * ncols, 3.4 * nrows), squeeze=False)
+        for ax, scene in zip(axes.flat, scenes):
+            mine = [r for r in renders if r["scene"] == scene and r["width"] == width]
+            for i, (light, dev) in enumerate(sorted({(r["light"].split("/")[-1], r["device"]) for r in mine})):
+                color = f"C{i}"
+                for tech, mk, ls in (("hard", "s", "--"), ("reference", "o", "-")):
+                    pts = sorted((r["timings_ms"]["total"], max(r["error"]["mae"], 1e-5)) for r in mine
+                                 if r["technique"] == tech and (r["light"].split("/")[-1], r["device"]) == (light, dev))
+                    if pts:
+                        ax.plot(*zip(*pts), marker=mk, linestyle=ls, color=color, label=f"{light} {tech}" + (f" ({dev})" if several_devices else ""))
+            ax.set_xscale("log")
+            ax.set_yscale("log")
+            ax.set_title(scene, fontsize=9)
+            ax.set_xlabel("frame time (ms)", fontsize=8)
+            ax.set_ylabel("MAE of V", fontsize=8)
+            ax.tick_params(labelsize=7)
+            ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+            ax.yaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+            ax.legend(fontsize=6)
+        for ax in list(axes.flat)[len(scenes):]:
+            ax.axis("off")
+        fig.suptitle(f"foundation at {width} px wide: hard (map 1024, 2048) and reference (4, 16, 64 samples) vs a 256-sample reference", fontsize=9)
         fig.tight_layout()
         (md.parent / plot_rel).parent.mkdir(parents=True, exist_ok=True)
         fig.savefig(md.parent / plot_rel, dpi=110)
