@@ -105,3 +105,12 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, case, needle):
     assert len(lines) == 1 and needle in lines[0], p.stderr
     if case in ("missing", "broken", "face", "nolight"):
         assert str(tmp_path) in lines[0]  # names the file
+
+
+def test_unwritable_output_is_one_line(tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    p = run("render", scene_path("box_plane.usda"), "-t", "hard", "--width", "8", "--height", "8", "--device", "cpu",
+            "--out", str(blocker / "sub" / "o.exr"), check=False)
+    assert p.returncode == 2 and "Traceback" not in p.stderr
+    assert p.stderr.strip().splitlines()[-1].startswith("wsoft: error:")

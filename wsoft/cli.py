@@ -201,6 +201,10 @@ def main(argv: list[str] | None = None) -> int:
     except WsoftError as exc:
         print(f"wsoft: error: {exc.line()}", file=sys.stderr)
         return 2
+    except OSError as exc:  # an output that cannot be written, a full disk...
+        where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
+        print(f"wsoft: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         print("wsoft: interrupted", file=sys.stderr)
         return 130
