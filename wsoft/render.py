@@ -2,8 +2,9 @@
 
 Follow a render from here: :func:`render` makes a :class:`RenderContext`, the technique adds
 its passes per shadow-casting light (asking the context for the G-buffer, depth maps or the
-scene's arrays, which register their own passes), ``resolve`` turns per-sample visibility
-into per-pixel channels and ``shade`` makes ``R G B``. Only passes feeding those run.
+scene's arrays, which register their own passes), ``shade`` (a Warp kernel,
+:mod:`wsoft.raster.shade`) lights every G-buffer sample with the visibilities, and ``resolve``
+turns per-sample results into per-pixel channels. Only passes feeding those run.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from wsoft.parallel import cpu_threads, resolve_device
 from wsoft.raster.camera import camera_gpu, fit_aspect
 from wsoft.raster.gbuffer import GBuffer, render_gbuffer
 from wsoft.raster.lightview import fit_light_view, rasterize
+from wsoft.raster.shade import shade as shade_samples
 from wsoft.scene.device import upload_scene
 from wsoft.scene.light_gpu import light_gpu
 from wsoft.scene.types import Camera, Light, Scene
@@ -187,20 +189,32 @@ def build_graph(scene: Scene, technique, *, width: int, height: int, camera=None
     gk = ctx.gbuffer()
     labels = [ctx.label(l) for l in lights]
 
+    sk = ctx.scene_arrays()
+    light_structs = [ctx.light_gpu(l) for l in lights]
+
+    def shade_pass(res):
+        rgb = shade_samples(res[sk], res[gk], [(L, res[vk].vis) for L, vk in zip(light_structs, vis_keys)])
+        return {"rgb_samples": rgb}
+
+    ctx.graph.add(Pass("shade", (sk, gk, *vis_keys), ("rgb_samples",), shade_pass, kind="resolve"))
+
     def resolve(res):
+        """Per-sample results -> per-pixel channels (means over the pixel's covered samples)."""
         gb: GBuffer = res[gk]
         prim = gb.host("prim")
         hit = prim >= 0
         nhit = hit.sum(axis=0)
         cov = nhit / gb.spp
+        rgb = res["rgb_samples"].numpy().reshape(gb.spp, gb.height, gb.width, 3)
         if gb.spp == 1:
-            pos, nrm, dist, prim0 = gb.host("pos")[0], gb.host("nrm")[0], gb.host("dist")[0], prim[0]
+            pos, nrm, dist = gb.host("pos")[0], gb.host("nrm")[0], gb.host("dist")[0]
+            rgb = rgb[0]
         else:
             first = np.argmax(hit, axis=0)[None]  # first covered sample per pixel
             pos = np.take_along_axis(gb.host("pos"), first[..., None], axis=0)[0]
             nrm = np.take_along_axis(gb.host("nrm"), first[..., None], axis=0)[0]
             dist = np.take_along_axis(gb.host("dist"), first, axis=0)[0]
-            prim0 = np.take_along_axis(prim, first, axis=0)[0]
+            rgb = rgb.mean(axis=0)  # background samples are black: the mean is already coverage-weighted
         ch: dict[str, np.ndarray] = {}
         for label, vk in zip(labels, vis_keys):
             v = res[vk].vis.numpy().reshape(gb.spp, gb.height, gb.width)
@@ -218,30 +232,13 @@ def build_graph(scene: Scene, technique, *, width: int, height: int, camera=None
             ch[f"N.{axis}"] = np.ascontiguousarray(nrm[..., i], dtype=np.float32)
         ch["Z"] = dist.astype(np.float32)
         ch["A"] = cov.astype(np.float32)
-        ch["_prim"] = prim0
+        for i, c in enumerate("RGB"):
+            ch[c] = np.ascontiguousarray(rgb[..., i], dtype=np.float32)
         return {"channels": ch}
 
-    ctx.graph.add(Pass("resolve", (gk, *vis_keys), ("channels",), resolve, kind="resolve"))
+    ctx.graph.add(Pass("resolve", (gk, *vis_keys, "rgb_samples"), ("channels",), resolve, kind="resolve"))
+    return ctx, ["channels"], lights
 
-    def shade(res):
-        ch = dict(res["channels"])
-        prim = ch.pop("_prim")
-        P = np.stack([ch[f"P.{a}"] for a in "XYZ"], -1).astype(np.float64)
-        N = np.stack([ch[f"N.{a}"] for a in "XYZ"], -1).astype(np.float64)
-        albedo = np.array([m.albedo for m in scene.materials], np.float64)
-        alb = np.where((prim >= 0)[..., None], albedo[scene.tri_material[np.maximum(prim, 0)]], 0.0)
-        light_sum = np.zeros(P.shape[:2])
-        for label, l in zip(labels, lights):
-            Ldir = l.frame[:, 2][None, None, :] if not l.is_local else (np.asarray(l.position) - P)
-            Ldir = Ldir / np.maximum(np.linalg.norm(Ldir, axis=-1, keepdims=True), 1e-12)
-            cos = np.clip((N * Ldir).sum(-1), 0.0, 1.0)
-            light_sum += ch[f"V.{label}"] * cos
-        lum = 0.12 + 0.88 * light_sum / len(lights)
-        rgb = np.clip(alb * lum[..., None] * ch["A"][..., None], 0, 1).astype(np.float32)
-        return {"rgb": {"R": rgb[..., 0], "G": rgb[..., 1], "B": rgb[..., 2], **ch}}
-
-    ctx.graph.add(Pass("shade", ("channels",), ("rgb",), shade, kind="resolve"))
-    return ctx, ["rgb"], lights
 
 
 def render(
@@ -278,7 +275,7 @@ def render(
     with wp.ScopedDevice(dev):
         res, records = ctx.graph.execute(requested, dev)
     total = 1e3 * (time.perf_counter() - t0)
-    channels = res["rgb"]
+    channels = res["channels"]
     import dataclasses
 
     stats = {
@@ -301,7 +298,7 @@ def render(
         "light": lights[0].path,
         "timings_ms": {**{r["name"]: round(r["ms"], 3) for r in records}, "total": round(total, 3)},
         "cpu_ms": {r["name"]: round(r["cpu_ms"], 3) for r in records},
-        "memory_bytes": buffer_bytes({k: v for k, v in res.items() if k not in ("channels", "rgb")}),
+        "memory_bytes": buffer_bytes({k: v for k, v in res.items() if k != "channels"}),
         "counters": {**ctx.counters, "triangles": scene.triangle_count, "pixels": width * height, "gbuffer_samples": width * height * pixel_samples},
         "passes": [r["name"] for r in records],
         "warnings": list(scene.warnings),

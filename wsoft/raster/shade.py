@@ -1,0 +1,61 @@
+"""A simple diffuse shading of every G-buffer sample with the lights' visibilities (``R G B``)."""
+
+from __future__ import annotations
+
+import warp as wp
+
+from wsoft.parallel import launch_chunked
+from wsoft.scene.light_gpu import LightGPU, light_center_dir
+
+AMBIENT = 0.12  # share of the light that is unshadowed ambient
+
+
+@wp.kernel
+def accumulate_light(
+    offset: int,
+    L: LightGPU,
+    pos: wp.array[wp.vec3],
+    nrm: wp.array[wp.vec3],
+    prim: wp.array[wp.int32],
+    vis: wp.array[float],
+    weight: float,
+    # outputs
+    lum: wp.array[float],
+):
+    """lum += weight * V * max(0, N . L) per sample, L toward the light's centre."""
+    i = wp.tid() + offset
+    if prim[i] < 0:
+        return
+    d = light_center_dir(L, pos[i])
+    lum[i] = lum[i] + weight * vis[i] * wp.max(wp.dot(nrm[i], wp.vec3(d[0], d[1], d[2])), 0.0)
+
+
+@wp.kernel
+def finish_shading(
+    offset: int,
+    prim: wp.array[wp.int32],
+    tri_albedo: wp.array[wp.vec3],
+    lum: wp.array[float],
+    ambient: float,
+    # outputs
+    rgb: wp.array[wp.vec3],
+):
+    i = wp.tid() + offset
+    f = prim[i]
+    if f < 0:
+        rgb[i] = wp.vec3(0.0)
+        return
+    c = tri_albedo[f] * (ambient + (1.0 - ambient) * lum[i])
+    rgb[i] = wp.vec3(wp.clamp(c[0], 0.0, 1.0), wp.clamp(c[1], 0.0, 1.0), wp.clamp(c[2], 0.0, 1.0))
+
+
+def shade(ds, gb, lights_and_vis: list[tuple[LightGPU, wp.array]]) -> wp.array:
+    """RGB per G-buffer sample (vec3, background black): albedo x (ambient + mean over lights of V cos)."""
+    n = gb.count
+    lum = wp.zeros(n, dtype=float, device=ds.device)
+    w = 1.0 / max(len(lights_and_vis), 1)
+    for L, vis in lights_and_vis:
+        launch_chunked(accumulate_light, n, inputs=[L, gb.pos, gb.nrm, gb.prim, vis, w], outputs=[lum], device=ds.device, min_chunk=1 << 14)
+    rgb = wp.empty(n, dtype=wp.vec3, device=ds.device)
+    launch_chunked(finish_shading, n, inputs=[gb.prim, ds.tri_albedo, lum, AMBIENT], outputs=[rgb], device=ds.device, min_chunk=1 << 14)
+    return rgb
