@@ -130,3 +130,18 @@ def test_skipping_far_faces_of_closed_meshes_changes_nothing(device, light):
     scene.tri_closed[:] = 0
     plain = rasterize(upload_scene(scene, device), view, alpha_tested=False).depth.numpy()
     assert np.array_equal(culled, plain)
+
+
+@pytest.mark.parametrize("light", ["Rect", "Disk", "Sun"])
+def test_margin_widens_the_view_for_soft_techniques(light):
+    """Soft techniques widen the fitted window by the light's extent so every blocker of the whole light is mapped."""
+    scene = wsoft.load_scene(scene_path("multi_light.usda"))
+    L = scene.find_light(light)
+    lo, hi = scene.bounds
+    rec = scene.points[scene.triangles[scene.tri_prim == 0].ravel()]  # the ground as receivers
+    tight = fit_light_view(L, rec, lo, hi, 512)
+    margin = L.extent() if L.kind_name != "distant" else 0.05 * scene.diagonal
+    wide = fit_light_view(L, rec, lo, hi, 512, margin=margin)
+    tl, tr, tb, tt = tight.window
+    wl, wr, wb, wt = wide.window
+    assert wl < tl and wr > tr and wb < tb and wt > tt

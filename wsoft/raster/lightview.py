@@ -79,12 +79,6 @@ class LightView:
         g.height = int(self.height)
         return g
 
-    def texel_size(self, depth: float = 1.0) -> float:
-        """World size of the larger texel side at view depth ``depth`` (orthographic: any depth)."""
-        l, r, b, t = self.window
-        s = max((r - l) / self.width, (t - b) / self.height)
-        return s * depth if self.persp else s
-
     def to_view(self, p: np.ndarray) -> np.ndarray:
         return (np.asarray(p, np.float64) - self.origin) @ self.axes
 

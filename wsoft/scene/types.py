@@ -85,10 +85,6 @@ class Light:
         """World direction the light emits along (its −Z axis)."""
         return -self.frame[:, 2]
 
-    @property
-    def is_local(self) -> bool:
-        return self.kind != LIGHT_DISTANT
-
     def size_description(self) -> str:
         if self.kind == LIGHT_RECT:
             return f"{2 * self.half_size[0]:g} x {2 * self.half_size[1]:g}"
