@@ -289,39 +289,69 @@ def raster_triangle(
         hx1 = 0.5 * (wp.abs(g1x) + wp.abs(g1y))
         hx2 = 0.5 * (wp.abs(g2x) + wp.abs(g2y))
     # plain case (no alpha test, not conservative): walk the exact span of covered texel
-    # centres on each row and evaluate the depth plane directly at each texel
+    # centres on each line and evaluate the depth plane directly at each texel. Lines run along
+    # the bounding box's longer side (columns for a tall, thin triangle): fewer, longer spans.
     spans = conservative == 0 and alpha == 0
-    # x at which each barycentric crosses zero is pxr - e / g: keep 1/g (0 when g = 0)
+    cols = spans and (y1 - y0) > (x1 - x0)
+    o0 = y0
+    o1 = y1
+    n0 = x0
+    n1 = x1
+    h0 = g0x
+    h1 = g1x
+    h2 = g2x
+    qn = qx
+    if cols:
+        o0 = x0
+        o1 = x1
+        n0 = y0
+        n1 = y1
+        h0 = g0y
+        h1 = g1y
+        h2 = g2y
+        qn = qy
+    # where each barycentric crosses zero along a line is pr - e / h: keep 1/h (0 when h = 0)
     i0 = float(0.0)
     i1 = float(0.0)
     i2 = float(0.0)
-    if g0x != 0.0:
-        i0 = 1.0 / g0x
-    if g1x != 0.0:
-        i1 = 1.0 / g1x
-    if g2x != 0.0:
-        i2 = 1.0 / g2x
-    for y in range(y0, y1 + 1):
-        py = float(y) + 0.5
-        xs = x0
-        xe = x1
-        pxr = float(x0) + 0.5
-        e0 = edge(tb[0], tb[1], tc[0], tc[1], pxr, py) * inv_area
-        e1 = edge(tc[0], tc[1], ta[0], ta[1], pxr, py) * inv_area
-        # q at the row's first texel centre from the barycentrics (stable even when corners are
-        # far outside the map), then the plane's x slope from there
+    if h0 != 0.0:
+        i0 = 1.0 / h0
+    if h1 != 0.0:
+        i1 = 1.0 / h1
+    if h2 != 0.0:
+        i2 = 1.0 / h2
+    for o in range(o0, o1 + 1):
+        po = float(o) + 0.5
+        pr = float(n0) + 0.5  # the line's first texel centre, along the line
+        pxr = pr
+        pyr = po
+        if cols:
+            pxr = po
+            pyr = pr
+        ns = n0
+        ne = n1
+        e0 = edge(tb[0], tb[1], tc[0], tc[1], pxr, pyr) * inv_area
+        e1 = edge(tc[0], tc[1], ta[0], ta[1], pxr, pyr) * inv_area
+        # q at the line's first texel centre from the barycentrics (stable even when corners are
+        # far outside the map), then the plane's slope along the line from there
         q_row = e0 * qa + e1 * qb + (1.0 - e0 - e1) * qc
         if spans:
-            lim = wp.vec2(float(x0) - 1.0, float(x1) + 2.0)
-            lim = span_limit(lim, e0, g0x, i0, pxr)
-            lim = span_limit(lim, e1, g1x, i1, pxr)
-            lim = span_limit(lim, 1.0 - e0 - e1, g2x, i2, pxr)
-            xs = wp.max(x0, int(wp.ceil(lim[0] - 0.5)))
-            xe = wp.min(x1, int(wp.floor(lim[1] - 0.5)))
-        for x in range(xs, xe + 1):
+            lim = wp.vec2(float(n0) - 1.0, float(n1) + 2.0)
+            lim = span_limit(lim, e0, h0, i0, pr)
+            lim = span_limit(lim, e1, h1, i1, pr)
+            lim = span_limit(lim, 1.0 - e0 - e1, h2, i2, pr)
+            ns = wp.max(n0, int(wp.ceil(lim[0] - 0.5)))
+            ne = wp.min(n1, int(wp.floor(lim[1] - 0.5)))
+        for n in range(ns, ne + 1):
+            x = n
+            y = o
+            if cols:
+                x = o
+                y = n
             px = float(x) + 0.5
+            py = float(y) + 0.5
             covered = True
-            q = q_row + qx * (px - pxr)
+            q = q_row + qn * (float(n) + 0.5 - pr)
             if not spans:
                 # evaluated per texel, not stepped: stepping drifts on wide triangles
                 l0 = edge(tb[0], tb[1], tc[0], tc[1], px, py) * inv_area
