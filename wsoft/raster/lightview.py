@@ -519,6 +519,11 @@ def rasterize_depth(
 
 
 @wp.kernel
+def fill_depth(value: float, dst: wp.array[float]):
+    dst[wp.tid()] = value
+
+
+@wp.kernel
 def merge_min(offset: int, src: wp.array[float], dst: wp.array[float]):
     """dst = min(dst, src), element-wise over flat maps."""
     i = wp.tid() + offset
@@ -548,7 +553,7 @@ def rasterize(ds: DeviceScene, view: LightView, alpha_tested: bool, conservative
     shape = (view.height, view.width)
     alpha = int(alpha_tested and ds.has_cutouts)
     cons = int(conservative)
-    ensure_loaded(rasterize_depth, dev)
+    ensure_loaded(rasterize_depth, dev)  # the module also holds fill_depth and merge_min
     no_list = wp.zeros(1, dtype=wp.int32, device=dev)
 
     def launch(target, start, count, nbands, band_rows, band_start=0, tri_list=None, big_texels=0.0, big=None):
@@ -567,13 +572,14 @@ def rasterize(ds: DeviceScene, view: LightView, alpha_tested: bool, conservative
     # CPU phase 1: each worker rasterizes interleaved chunks of small triangles into its own map
     map_bytes = 4 * view.width * view.height
     nmaps = max(1, min(cpu_threads(), PRIVATE_MAP_BUDGET // map_bytes, (ntri + CPU_CHUNK - 1) // CPU_CHUNK))
-    maps = [wp.full(shape, DEPTH_CLEAR, dtype=float, device=dev) for _ in range(nmaps)]
+    maps = [wp.empty(shape, dtype=float, device=dev) for _ in range(nmaps)]  # each worker clears its own
     chunks = [(s, min(CPU_CHUNK, ntri - s)) for s in range(0, ntri, CPU_CHUNK)]
     big = wp.zeros(ntri, dtype=wp.int32, device=dev)
     big_texels = float(max(BIG_TRIANGLE_TEXELS, 1))
 
     def worker(m):
         def run():
+            wp.launch(fill_depth, dim=view.width * view.height, inputs=[DEPTH_CLEAR], outputs=[maps[m].reshape(-1)], device=dev)
             for start, count in chunks[m::nmaps]:
                 launch(maps[m], start, count, 1, view.height, big_texels=big_texels, big=big)
 
