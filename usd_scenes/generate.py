@@ -5,8 +5,8 @@ Usage::
 
     python usd_scenes/generate.py [--out DIR] [--only NAME ...]
 
-NAME is one of: box_plane, contact, multi_light, cutout, city (a file name
-with extension is accepted too).  The default output folder is the folder
+NAME is one of: box_plane, contact, multi_light, cutout, city, penumbra_ramp,
+lightmapped_bridge (a file name with extension is accepted too).  The default output folder is the folder
 holding this script.  Every run with the same arguments writes byte-identical
 files: all randomness uses fixed seeds and nothing time-dependent is written.
 
@@ -170,6 +170,180 @@ def signed_volume(m: MeshData) -> float:
     return vol / 6.0
 
 
+def grid_quad_mesh(origin: Sequence[float], u: Sequence[float], v: Sequence[float],
+                   nu: int, nv: int) -> MeshData:
+    """Planar nu x nv grid of quads spanning origin + [0, 1] * u + [0, 1] * v.
+
+    The quads are wound counter-clockwise seen from the side u x v points to.
+    """
+    o = np.asarray(origin, dtype=np.float64)
+    u = np.asarray(u, dtype=np.float64)
+    v = np.asarray(v, dtype=np.float64)
+    a = np.linspace(0.0, 1.0, nu + 1)
+    b = np.linspace(0.0, 1.0, nv + 1)
+    pts = o + a[None, :, None] * u + b[:, None, None] * v  # (nv+1, nu+1, 3)
+    idx: List[int] = []
+    for j in range(nv):
+        for i in range(nu):
+            p0 = j * (nu + 1) + i
+            idx += [p0, p0 + 1, p0 + nu + 2, p0 + nu + 1]
+    return pts.reshape(-1, 3), [4] * (nu * nv), idx
+
+
+def grid_box_mesh(lo: Sequence[float], hi: Sequence[float], n: Sequence[int]) -> MeshData:
+    """Axis-aligned closed box whose faces are grids of n[0] x n[1] x n[2] cells.
+
+    All six faces take their coordinates from the same per-axis arrays, so the
+    points along shared edges are bit-identical and `weld` joins them into one
+    closed, outward-wound surface.
+    """
+    vals = [np.linspace(float(lo[k]), float(hi[k]), int(n[k]) + 1) for k in range(3)]
+    parts: List[MeshData] = []
+    for a in range(3):
+        b, c = (a + 1) % 3, (a + 2) % 3  # e_b x e_c = +e_a
+        vb, vc = vals[b], vals[c]
+        nb, nc = len(vb), len(vc)
+        for side, val in ((-1, float(lo[a])), (1, float(hi[a]))):
+            pts = np.empty((nc, nb, 3), dtype=np.float64)
+            pts[:, :, a] = val
+            pts[:, :, b] = vb[None, :]
+            pts[:, :, c] = vc[:, None]
+            idx: List[int] = []
+            for j in range(nc - 1):
+                for i in range(nb - 1):
+                    p0 = j * nb + i
+                    q = [p0, p0 + 1, p0 + nb + 1, p0 + nb]  # normal +e_a
+                    idx += q if side > 0 else q[::-1]
+            parts.append((pts.reshape(-1, 3), [4] * ((nb - 1) * (nc - 1)), idx))
+    return weld(merge_meshes(parts))
+
+
+def z_sphere(radius: float, segments: int, stacks: int) -> MeshData:
+    """`uv_sphere_y` turned so its poles lie on the Z axis (bottom pole at z = -radius)."""
+    p, counts, idx = uv_sphere_y(radius, segments, stacks)
+    # rotation of +90 degrees about X: (x, y, z) -> (x, -z, y), keeps the winding outward
+    return np.stack([p[:, 0], -p[:, 2], p[:, 1]], axis=1), counts, idx
+
+
+def check_closed(m: MeshData, what: str) -> None:
+    """Raise unless every directed edge appears once with its reverse once and the
+    enclosed volume is positive (closed, consistently wound, normals out)."""
+    _, counts, idx = m
+    edges = set()
+    o = 0
+    for c in counts:
+        f = idx[o:o + c]
+        for k in range(c):
+            e = (f[k], f[(k + 1) % c])
+            if e in edges:
+                raise RuntimeError("%s: directed edge %s used twice" % (what, e))
+            edges.add(e)
+        o += c
+    if any((b, a) not in edges for a, b in edges):
+        raise RuntimeError("%s: mesh is not closed" % what)
+    if signed_volume(m) <= 0.0:
+        raise RuntimeError("%s: mesh is wound inward" % what)
+
+
+def face_normals(m: MeshData) -> np.ndarray:
+    """Unit normal of every face (Newell's method), as (F, 3)."""
+    p, counts, idx = m
+    out = np.zeros((len(counts), 3), dtype=np.float64)
+    o = 0
+    for f, c in enumerate(counts):
+        q = p[idx[o:o + c]]
+        r = np.roll(q, -1, axis=0)
+        n = np.array([np.sum((q[:, 1] - r[:, 1]) * (q[:, 2] + r[:, 2])),
+                      np.sum((q[:, 2] - r[:, 2]) * (q[:, 0] + r[:, 0])),
+                      np.sum((q[:, 0] - r[:, 0]) * (q[:, 1] + r[:, 1]))])
+        out[f] = n / math.sqrt(float(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]))
+        o += c
+    return out
+
+
+# ---------------------------------------------------------------------------
+# Baked lighting: per-vertex irradiance with static-geometry shadows.
+# ---------------------------------------------------------------------------
+
+
+def segments_blocked(p0: np.ndarray, p1: np.ndarray,
+                     boxes: Sequence[Tuple[Sequence[float], Sequence[float]]]) -> np.ndarray:
+    """(N,) bool: does the segment p0[i] -> p1[i] meet any axis-aligned box?
+
+    Slab test with the segment parameterised t in [0, 1]; a segment that
+    starts inside a box counts as blocked.
+    """
+    d = p1 - p0
+    blocked = np.zeros(len(p0), dtype=bool)
+    par = d == 0.0
+    safe = np.where(par, 1.0, d)
+    for lo, hi in boxes:
+        lo = np.asarray(lo, dtype=np.float64)
+        hi = np.asarray(hi, dtype=np.float64)
+        ta = (lo - p0) / safe
+        tb = (hi - p0) / safe
+        inside = (p0 >= lo) & (p0 <= hi)
+        tmin = np.where(par, np.where(inside, -np.inf, np.inf), np.minimum(ta, tb))
+        tmax = np.where(par, np.where(inside, np.inf, -np.inf), np.maximum(ta, tb))
+        tnear = np.max(tmin, axis=1)
+        tfar = np.min(tmax, axis=1)
+        blocked |= (tnear <= tfar) & (tfar > 0.0) & (tnear < 1.0)
+    return blocked
+
+
+BAKE_AMBIENT = 0.05
+BAKE_OFFSET = 1e-3  # start of the shadow segment, along the face normal
+BAKE_SUN_FAR = 1000.0  # length of the shadow segment toward a distant light
+
+
+def bake_vertex_irradiance(m: MeshData, lights: Sequence[Dict[str, object]],
+                           boxes: Sequence[Tuple[Sequence[float], Sequence[float]]]) -> np.ndarray:
+    """Per-vertex RGB irradiance (V, 3) of a static mesh.
+
+    For every face corner, with the face normal n:
+      E = sum over lights of color * weight * max(0, n.l) * falloff * visibility,
+    where a "distant" light has weight = intensity and falloff 1, and a
+    "sphere" light is a point at its centre with weight = intensity * pi * r^2
+    and falloff 1 / d^2.  Visibility is a segment-vs-box test against the
+    static boxes only.  A vertex gets the mean over its face corners, plus the
+    constant BAKE_AMBIENT.  Values are rounded to 4 decimals.
+    """
+    pts = np.asarray(m[0], dtype=np.float32).astype(np.float64)  # as written
+    counts, idx = m[1], m[2]
+    fn = face_normals((pts, counts, idx))
+    corner_v = np.asarray(idx, dtype=np.int64)
+    corner_n = np.repeat(fn, np.asarray(counts, dtype=np.int64), axis=0)
+    p = pts[corner_v]
+    start = p + BAKE_OFFSET * corner_n
+    e = np.zeros((len(p), 3), dtype=np.float64)
+    for light in lights:
+        color = np.asarray(light["color"], dtype=np.float64)
+        if light["kind"] == "distant":
+            to_l = np.broadcast_to(np.asarray(light["to_light"], dtype=np.float64), p.shape)
+            end = start + BAKE_SUN_FAR * to_l
+            falloff = np.ones(len(p))
+            weight = float(light["intensity"])
+        else:
+            c = np.asarray(light["position"], dtype=np.float64)
+            dv = c - p
+            d2 = dv[:, 0] * dv[:, 0] + dv[:, 1] * dv[:, 1] + dv[:, 2] * dv[:, 2]
+            to_l = dv / np.sqrt(d2)[:, None]
+            end = np.broadcast_to(c, p.shape)
+            falloff = 1.0 / d2
+            r = float(light["radius"])
+            weight = float(light["intensity"]) * math.pi * r * r
+        cos = (corner_n[:, 0] * to_l[:, 0] + corner_n[:, 1] * to_l[:, 1]
+               + corner_n[:, 2] * to_l[:, 2])
+        vis = ~segments_blocked(start, end, boxes)
+        term = weight * np.maximum(cos, 0.0) * falloff * vis
+        e += term[:, None] * color[None, :]
+    total = np.zeros((len(pts), 3), dtype=np.float64)
+    np.add.at(total, corner_v, e)
+    n_corners = np.bincount(corner_v, minlength=len(pts)).astype(np.float64)
+    out = total / np.maximum(n_corners, 1.0)[:, None] + BAKE_AMBIENT
+    return np.round(out, 4)
+
+
 # ---------------------------------------------------------------------------
 # USD helpers
 # ---------------------------------------------------------------------------
@@ -263,6 +437,19 @@ def check_points_down(prim: Usd.Prim, down: Sequence[float], min_cos: float = 0.
 def set_doc_attr(prim: Usd.Prim, name: str, value: float) -> None:
     attr = prim.CreateAttribute(name, Sdf.ValueTypeNames.Double, custom=True)
     attr.Set(float(value))
+
+
+def set_doc_string(prim: Usd.Prim, name: str, value: str) -> None:
+    prim.CreateAttribute(name, Sdf.ValueTypeNames.String, custom=True).Set(value)
+
+
+def set_custom_bool(prim: Usd.Prim, name: str, value: bool) -> None:
+    prim.CreateAttribute(name, Sdf.ValueTypeNames.Bool, custom=True).Set(bool(value))
+
+
+def set_display_color(mesh: UsdGeom.Mesh, color: Sequence[float]) -> None:
+    mesh.CreateDisplayColorPrimvar(UsdGeom.Tokens.constant).Set(
+        Vt.Vec3fArray([Gf.Vec3f(*map(float, color))]))
 
 
 # ---------------------------------------------------------------------------
@@ -641,12 +828,211 @@ def scene_city(out_dir: str) -> Dict[str, object]:
             "prototype_triangles": proto_tris}
 
 
+# --- penumbra ramp ----------------------------------------------------------
+
+# (x, z) of the plate centres: penumbra width on the ground grows with z.
+PENUMBRA_PLATES = [(-6.0, 0.25), (-3.0, 0.75), (0.0, 1.5), (3.0, 2.5), (6.0, 3.5)]
+PENUMBRA_LIGHT_Z = 6.0
+PENUMBRA_LIGHT_SIZE = 1.5
+PENUMBRA_PLATE_SIZE = 0.8
+PENUMBRA_PLATE_THICK = 0.05
+
+
+def scene_penumbra_ramp(out_dir: str) -> Dict[str, object]:
+    path = os.path.join(out_dir, "penumbra_ramp.usda")
+    stage = new_stage(path, "Z")
+    world = stage.GetPrimAtPath("/World")
+    L, s, hs, ht = PENUMBRA_LIGHT_Z, PENUMBRA_LIGHT_SIZE, PENUMBRA_PLATE_SIZE / 2, PENUMBRA_PLATE_THICK / 2
+    widths = ", ".join("z=%g: %.4g" % (z, s * z / (L - z)) for _, z in PENUMBRA_PLATES)
+    shadow_x = [x * L / (L - z) for x, z in PENUMBRA_PLATES]
+    # Ground: 16 x 16 around the middle, extended in +X so that the shadow of
+    # the highest plate (x = 6, z = 3.5), which falls around x = 14.4, is on it.
+    gx0, gx1, gy = -8.0, 18.0, 8.0
+    set_doc_string(world, "wsoft:doc", (
+        "Penumbra-width ramp. Five 0.8 x 0.8 x 0.05 square plates (closed boxes) in a row at "
+        "y = 0, centred at x = -6, -3, 0, 3, 6 and heights z = 0.25, 0.75, 1.5, 2.5, 3.5, under "
+        "one 1.5 x 1.5 RectLight at (0, 0, 6) emitting straight down onto a single-sided ground "
+        "at z = 0 spanning x in [%g, %g], y in [%g, %g]. All planes are parallel, so each plate's "
+        "shadow is the plate scaled by 6 / (6 - z) about the light point, and its penumbra "
+        "width on the ground is 1.5 * z / (6 - z) (plate thickness ignored): %s. Shadow centres "
+        "at x = %s. Tests that a soft-shadow technique widens the penumbra with the "
+        "occluder-receiver distance (PCSS-style blocker search) and stays sharp near contact."
+        % (gx0, gx1, -gy, gy, widths, ", ".join("%.3g" % v for v in shadow_x))))
+
+    ground = quad_mesh([(gx0, -gy, 0), (gx1, -gy, 0), (gx1, gy, 0), (gx0, gy, 0)])
+    make_mesh(stage, "/World/Ground", ground, False,
+              make_material(stage, "/World/Looks/GroundMat", (0.8, 0.8, 0.8)))
+    tris = triangle_count(ground[1])
+
+    plate_mat = make_material(stage, "/World/Looks/PlateMat", (0.8, 0.3, 0.2))
+    stage.DefinePrim("/World/Plates", "Xform")
+    for k, (x, z) in enumerate(PENUMBRA_PLATES):
+        plate = box_mesh((x - hs, -hs, z - ht), (x + hs, hs, z + ht))
+        check_closed(plate, "Plate%d" % k)
+        make_mesh(stage, "/World/Plates/Plate%d" % k, plate, False, plate_mat)
+        tris += triangle_count(plate[1])
+
+    light = UsdLux.RectLight.Define(stage, "/World/Light")
+    light.CreateWidthAttr(s)
+    light.CreateHeightAttr(s)
+    light.CreateIntensityAttr(10.0)
+    light.AddTranslateOp().Set(Gf.Vec3d(0.0, 0.0, L))  # identity rotation: emits -Z
+    check_points_down(light.GetPrim(), (0, 0, -1), 0.999)
+
+    make_camera(stage, (5.0, -15.0, 12.0), (5.0, 0.0, 0.6), (0.0, 0.0, 1.0), clip=(0.1, 200.0))
+    stage.GetRootLayer().Save()
+    return {"file": path, "triangles": tris}
+
+
+# --- lightmapped bridge (Salzman, "Simpler Soft Shadow Mapping") -------------
+
+BRIDGE_STATIC_BOXES = [
+    # (name, lo, hi, color)
+    ("BridgeDeck", (-6.0, -1.5, 2.6), (6.0, 1.5, 3.0), (0.55, 0.42, 0.3)),
+    ("PillarWest", (-5.4, -1.0, 0.0), (-4.6, 1.0, 2.6), (0.5, 0.5, 0.48)),
+    ("PillarEast", (4.6, -1.0, 0.0), (5.4, 1.0, 2.6), (0.5, 0.5, 0.48)),
+    ("Crate", (1.6, 0.2, 0.0), (2.4, 1.0, 0.8), (0.6, 0.45, 0.25)),
+    ("BoxA", (-10.0, 3.0, 0.0), (-8.5, 4.5, 1.5), (0.45, 0.55, 0.7)),
+    ("BoxB", (8.0, -6.0, 0.0), (10.0, -4.5, 1.0), (0.7, 0.5, 0.45)),
+    ("BoxC", (9.0, 4.0, 0.0), (10.5, 7.0, 2.5), (0.5, 0.65, 0.45)),
+]
+BRIDGE_CELL = 0.25  # target grid spacing of the static boxes' faces
+BRIDGE_TORCH = (0.0, 0.0, 1.2)
+BRIDGE_FRAMES = (1, 48)
+
+
+def humanoid_parts() -> List[Tuple[str, MeshData]]:
+    """Boxes of a ~1.8 tall figure facing +X, feet on z = 0, centred on x = y = 0."""
+    return [
+        ("LegLeft", box_mesh((-0.09, 0.03, 0.0), (0.09, 0.19, 0.85))),
+        ("LegRight", box_mesh((-0.09, -0.19, 0.0), (0.09, -0.03, 0.85))),
+        ("Torso", box_mesh((-0.12, -0.22, 0.85), (0.12, 0.22, 1.47))),
+        ("ArmLeft", box_mesh((-0.07, 0.23, 0.8), (0.07, 0.33, 1.44))),
+        ("ArmRight", box_mesh((-0.07, -0.33, 0.8), (0.07, -0.23, 1.44))),
+        ("Head", box_mesh((-0.11, -0.11, 1.5), (0.11, 0.11, 1.8))),
+    ]
+
+
+def scene_lightmapped_bridge(out_dir: str) -> Dict[str, object]:
+    path = os.path.join(out_dir, "lightmapped_bridge.usda")
+    stage = new_stage(path, "Z")
+    world = stage.GetPrimAtPath("/World")
+    f0, f1 = BRIDGE_FRAMES
+    stage.SetStartTimeCode(f0)
+    stage.SetEndTimeCode(f1)
+    stage.SetTimeCodesPerSecond(24.0)
+    tris = 0
+
+    # Lights first: the bake reads their world transforms.
+    stage.DefinePrim("/World/Lights", "Xform")
+    sun = UsdLux.DistantLight.Define(stage, "/World/Lights/Sun")
+    sun.CreateAngleAttr(1.5)
+    sun.CreateIntensityAttr(1.0)
+    sun.AddRotateXYZOp().Set(Gf.Vec3f(18.0, 0.0, 117.0))
+    check_points_down(sun.GetPrim(), (0, 0, -1), 0.9)
+    sun_dir = world_dir(sun.GetPrim())
+
+    torch = UsdLux.SphereLight.Define(stage, "/World/Lights/Torch")
+    torch.CreateRadiusAttr(0.15)
+    torch.CreateIntensityAttr(30.0)
+    torch_color = (1.0, 0.62, 0.3)
+    torch.CreateColorAttr(Gf.Vec3f(*torch_color))
+    torch.AddTranslateOp().Set(Gf.Vec3d(*BRIDGE_TORCH))
+    set_custom_bool(torch.GetPrim(), "wsoft:torch", True)
+
+    bake_lights = [
+        {"kind": "distant", "to_light": [-sun_dir[0], -sun_dir[1], -sun_dir[2]],
+         "intensity": 1.0, "color": (1.0, 1.0, 1.0)},
+        {"kind": "sphere", "position": BRIDGE_TORCH, "radius": 0.15,
+         "intensity": 30.0, "color": torch_color},
+    ]
+    boxes = [(lo, hi) for _, lo, hi, _ in BRIDGE_STATIC_BOXES]
+    deck_lo, deck_hi = BRIDGE_STATIC_BOXES[0][1], BRIDGE_STATIC_BOXES[0][2]
+    if not (0.0 + 0.15 < BRIDGE_TORCH[2] < deck_lo[2] - 0.15):
+        raise RuntimeError("torch must sit between the riverbed and the deck underside")
+
+    # Static world with baked per-vertex irradiance.
+    stage.DefinePrim("/World/Static", "Xform")
+
+    def add_static(name: str, m: MeshData, color) -> None:
+        nonlocal tris
+        mesh = make_mesh(stage, "/World/Static/%s" % name, m, False,
+                         make_material(stage, "/World/Looks/%sMat" % name, color))
+        set_display_color(mesh, color)
+        baked = bake_vertex_irradiance(m, bake_lights, boxes)
+        pv = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar(
+            "wsoft:bakedLight", Sdf.ValueTypeNames.Color3fArray, UsdGeom.Tokens.vertex)
+        pv.Set(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(baked, dtype=np.float32)))
+        tris += triangle_count(m[1])
+
+    add_static("Ground", grid_quad_mesh((-15.0, -15.0, 0.0), (30.0, 0.0, 0.0),
+                                        (0.0, 30.0, 0.0), 60, 60), (0.45, 0.42, 0.35))
+    for name, lo, hi, color in BRIDGE_STATIC_BOXES:
+        n = [max(1, int(round((hi[k] - lo[k]) / BRIDGE_CELL))) for k in range(3)]
+        m = grid_box_mesh(lo, hi, n)
+        check_closed(m, name)
+        add_static(name, m, color)
+
+    # Dynamic objects: not in the bake; they need real-time shadows.
+    stage.DefinePrim("/World/Dynamic", "Xform")
+    char = UsdGeom.Xform.Define(stage, "/World/Dynamic/Character")
+    set_custom_bool(char.GetPrim(), "wsoft:dynamic", True)
+    walk = char.AddTranslateOp()
+    for t in range(f0, f1 + 1):
+        x = -4.0 + 8.0 * (t - f0) / (f1 - f0)
+        walk.Set(Gf.Vec3d(round(x, 6), 0.0, deck_hi[2]), Usd.TimeCode(t))
+    body_color = (0.25, 0.35, 0.75)
+    body_mat = make_material(stage, "/World/Looks/CharacterMat", body_color)
+    for name, m in humanoid_parts():
+        check_closed(m, name)
+        mesh = make_mesh(stage, "/World/Dynamic/Character/%s" % name, m, False, body_mat)
+        set_display_color(mesh, body_color)
+        tris += triangle_count(m[1])
+
+    ball_r, ball_color = 0.4, (0.85, 0.2, 0.2)
+    ball = z_sphere(ball_r, 24, 12)
+    check_closed(ball, "Ball")
+    bmesh = make_mesh(stage, "/World/Dynamic/Ball", ball, False,
+                      make_material(stage, "/World/Looks/BallMat", ball_color))
+    # float32(r) so the float32 bottom pole vertex lands exactly on the deck top
+    bmesh.AddTranslateOp().Set(Gf.Vec3d(2.5, 0.9, deck_hi[2] + float(np.float32(ball_r))))
+    set_display_color(bmesh, ball_color)
+    set_custom_bool(bmesh.GetPrim(), "wsoft:dynamic", True)
+    tris += triangle_count(ball[1])
+
+    set_doc_string(world, "wsoft:doc", (
+        "Lightmapped world with a dynamic character, after Salzman's 'Simpler Soft Shadow "
+        "Mapping'. Static meshes under /World/Static (riverbed ground 30 x 30 at z = 0, a "
+        "12 x 3 x 0.4 bridge deck with its top at z = 3 on two pillars, a crate under the "
+        "bridge and three boxes) carry baked lighting in the vertex-interpolated color3f "
+        "primvar 'primvars:wsoft:bakedLight': per-vertex irradiance 0.05 (ambient) + sum over "
+        "/World/Lights/Sun and /World/Lights/Torch of color * weight * max(0, n.l) * falloff * "
+        "visibility, with sun weight = intensity, falloff 1, and torch weight = intensity * pi * "
+        "r^2, falloff 1 / d^2 (each light as a point at its centre), visibility from "
+        "segment-vs-box tests against the static boxes only, averaged over the face corners "
+        "at each vertex. Dynamic prims are marked with the custom bool 'wsoft:dynamic = true': "
+        "/World/Dynamic/Character (box humanoid, 1.8 tall, time-sampled translate walking "
+        "along X on the deck from x = -4 at time 1 to x = 4 at time 48, 24 tcps) and "
+        "/World/Dynamic/Ball (r 0.4, static transform, resting on the deck). They are not in "
+        "the bake and need real-time shadows from both lights. The torch is "
+        "/World/Lights/Torch (SphereLight r 0.15 at (0, 0, 1.2) under the deck, custom bool "
+        "'wsoft:torch = true'); the sun is /World/Lights/Sun (DistantLight, angle 1.5 deg, "
+        "slanted). The riverbed under the deck is in the deck's sun shadow and lit mainly by "
+        "the torch."))
+
+    make_camera(stage, (-2.5, -10.5, 4.6), (0.0, 0.0, 1.9), (0.0, 0.0, 1.0), clip=(0.1, 200.0))
+    stage.GetRootLayer().Save()
+    return {"file": path, "triangles": tris}
+
+
 SCENES: Dict[str, Callable[[str], Dict[str, object]]] = {
     "box_plane": scene_box_plane,
     "contact": scene_contact,
     "multi_light": scene_multi_light,
     "cutout": scene_cutout,
     "city": scene_city,
+    "penumbra_ramp": scene_penumbra_ramp,
+    "lightmapped_bridge": scene_lightmapped_bridge,
 }
 
 
@@ -676,7 +1062,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         if "instances" in info:
             extra = "  (%d instances of %d prototypes)" % (
                 info["instances"], len(info["prototype_triangles"]))
-        print("%-12s %-40s %9d triangles%s" % (name, info["file"], info["triangles"], extra))
+        print("%-18s %-40s %9d triangles%s" % (name, info["file"], info["triangles"], extra))
         if name == "city":
             print("city total triangle count: %d" % info["triangles"])
     return 0

@@ -100,30 +100,32 @@ class RenderContext:
         self.graph.add(Pass("gbuffer_alpha" if alpha else "gbuffer", (sk,), ("gbuffer",), run))
         return "gbuffer"
 
-    def light_view(self, light: Light, size: int, margin: float = 0.0) -> str:
-        """Resource: a :class:`LightView` of ``light`` fitted to the receivers in view."""
+    def light_view(self, light: Light, size: int, soft: bool = False) -> str:
+        """Resource: a :class:`LightView` of ``light`` fitted to the receivers in view.
+
+        ``soft``: widened so that casters blocking any part of the whole light are mapped."""
         gk = self.gbuffer()
-        key = f"light_view[{self.label(light)}]@{size}" + (f"+{margin:g}" if margin else "")
+        key = f"light_view[{self.label(light)}]@{size}" + ("+soft" if soft else "")
 
         def run(res):
             gb: GBuffer = res[gk]
             prim = gb.prim.numpy()
             rec = gb.pos.numpy()[prim >= 0]
             lo, hi = self.scene.bounds
-            view = fit_light_view(light, rec, lo, hi, size, margin=margin)
+            view = fit_light_view(light, rec, lo, hi, size, casters=self.scene.points if soft else None)
             self.counters[f"receivers_outside_light_view[{self.label(light)}]"] = view.receivers_outside
             return {key: view}
 
         self.graph.add(Pass(f"fit_{key}", (gk,), (key,), run))
         return key
 
-    def light_depth(self, light: Light, size: int, conservative: bool = False, margin: float = 0.0) -> str:
+    def light_depth(self, light: Light, size: int, conservative: bool = False, soft: bool = False) -> str:
         """Resource: a :class:`DepthMap` (alpha-tested only if the scene has cutouts)."""
         sk = self.scene_arrays()
-        vk = self.light_view(light, size, margin)
+        vk = self.light_view(light, size, soft)
         alpha = self.scene.has_cutouts
         name = "light_depth" + ("_alpha" if alpha else "") + ("_conservative" if conservative else "")
-        key = f"{name}[{self.label(light)}]@{size}" + (f"+{margin:g}" if margin else "")
+        key = f"{name}[{self.label(light)}]@{size}" + ("+soft" if soft else "")
 
         def run(res):
             dm = rasterize(res[sk], res[vk], alpha_tested=alpha, conservative=conservative)

@@ -100,13 +100,17 @@ def fit_light_view(
     size: int,
     margin: float = 0.0,
     margin_texels: float = 1.0,
+    casters: np.ndarray | None = None,
 ) -> LightView:
     """Fit a view of ``light`` to ``receivers`` (world points [N, 3], the camera's visible surface).
 
-    ``margin`` widens the window by a world distance at the receivers (soft techniques pass
-    the light's extent so blockers of the whole light are inside); ``margin_texels`` keeps a
-    border of texels. Perspective windows are clamped to ±80° around the view axis; receivers
-    beyond are counted in ``receivers_outside``.
+    ``margin`` widens the window by a world distance at the receivers; ``margin_texels`` keeps
+    a border of texels. ``casters`` (world points, e.g. the scene's vertices) asks for a view
+    for soft shadows: the window is widened so that every caster that can block part of the
+    *whole* light from a receiver is mapped (for a local light of half-extent w, a caster at
+    depth z blocks within w (1/z - 1/z_r) of a receiver's tangent; for a distant light of cone
+    half-angle a, within (z_r - z) tan a). Perspective windows are clamped to ±80° around the
+    view axis; receivers beyond are counted in ``receivers_outside``.
     """
     if not 256 <= size <= 8192:
         from wsoft.errors import ParameterError
@@ -124,6 +128,8 @@ def fit_light_view(
         vr = (rec - origin) @ axes
         vc = (corners - origin) @ axes
         pad = margin + 1e-4 * diag
+        if casters is not None and light.angle_deg > 0:
+            pad += math.tan(math.radians(0.5 * light.angle_deg)) * max(float(vr[:, 2].max() - vc[:, 2].min()), 0.0)
         l, r = vr[:, 0].min() - pad, vr[:, 0].max() + pad
         b, t = vr[:, 1].min() - pad, vr[:, 1].max() + pad
         near = max(vc[:, 2].min() - 1e-3 * diag, 0.0)
@@ -150,10 +156,22 @@ def fit_light_view(
             inside[ok] = (np.abs(tx) <= MAX_TAN) & (np.abs(ty) <= MAX_TAN)
         else:
             l, r, b, t = -1.0, 1.0, -1.0, 1.0
+        zr = vr[ok, 2]
+        w = light.extent()
+        if casters is not None and w > 0 and len(zr):
+            zr_max = float(zr.max())
+            vc = (np.asarray(casters, np.float64).reshape(-1, 3) - origin) @ axes
+            vc = vc[(vc[:, 2] > 1e-3 * diag) & (vc[:, 2] < zr_max)]
+            if len(vc):
+                grow = w * (1.0 / vc[:, 2] - 1.0 / zr_max)
+                cx, cy = vc[:, 0] / vc[:, 2], vc[:, 1] / vc[:, 2]
+                near_window = (cx >= l - grow) & (cx <= r + grow) & (cy >= b - grow) & (cy <= t + grow)
+                if near_window.any():
+                    g = float(grow[near_window].max())
+                    l, r, b, t = l - g, r + g, b - g, t + g
         l, r = max(l, -MAX_TAN), min(r, MAX_TAN)
         b, t = max(b, -MAX_TAN), min(t, MAX_TAN)
         outside = int(np.count_nonzero(~inside))
-        zr = vr[ok, 2]
         near = max(1e-4 * diag, 1e-7)
         if len(zr):
             near = min(near, 0.5 * float(zr.min()))

@@ -5,9 +5,11 @@ from __future__ import annotations
 from wsoft.errors import ParameterError
 from wsoft.techniques.base import Technique
 from wsoft.techniques.hard import Hard
+from wsoft.techniques.pcf import PCF
+from wsoft.techniques.pcss import PCSS
 from wsoft.techniques.reference import Reference
 
-TECHNIQUES: dict[str, type[Technique]] = {t.name: t for t in (Reference, Hard)}
+TECHNIQUES: dict[str, type[Technique]] = {t.name: t for t in (Reference, Hard, PCF, PCSS)}
 
 
 def get_technique(name: str) -> type[Technique]:

@@ -1,0 +1,148 @@
+"""``pcf``: percentage-closer filtering of the light's depth map (Reeves et al. 1987).
+
+Each G-buffer sample is compared against the depth map at ``taps`` points of a square kernel of
+``radius`` texels (a disk for the Poisson pattern) around its projection; the visibility is the
+fraction of taps where the sample is not behind the stored depth. With ``receiver_plane`` the
+sample's depth at each tap is that of its tangent plane at the tap's texel centre (the
+receiver-plane depth bias), so wide kernels do not shadow sloped receivers; otherwise a
+slope-scaled bias as in ``hard`` is used.
+
+| parameter | type | default | meaning |
+|---|---|---|---|
+| shadow_map_size | int | 1024 | texels per side of the depth map |
+| radius | float | 2.0 | kernel half-width in texels |
+| taps | int | 16 | depth comparisons per sample (a perfect square for the grid pattern) |
+| pattern | str | grid | grid (square kernel) or poisson (disk kernel) |
+| bias | float | 1e-4 | constant depth bias, fraction of the scene's bounding diagonal |
+| receiver_plane | bool | true | receiver-plane depth at each tap (else slope-scaled bias) |
+| slope_bias | float | 1.5 | slope-scaled bias in texels when ``receiver_plane`` is off |
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import warp as wp
+
+from wsoft.parallel import launch_chunked
+from wsoft.raster.lightview import LightViewGPU, view_of
+from wsoft.scene.light_gpu import LightGPU
+from wsoft.techniques.base import Technique, check, param
+from wsoft.techniques.filtering import depth_at, map_coords, receiver_depth, tap_offset, taps_on, texel_center, texel_size, view_dir
+from wsoft.techniques.hard import receiver_bias
+
+
+@dataclass(frozen=True)
+class PCFParams:
+    shadow_map_size: int = param(1024, "texels per side of the light depth map (256..8192)")
+    radius: float = param(2.0, "kernel half-width in texels")
+    taps: int = param(16, "depth comparisons per sample (a perfect square for the grid pattern)")
+    pattern: str = param("grid", "tap pattern: grid (square kernel) or poisson (disk kernel)")
+    bias: float = param(1e-4, "constant depth bias as a fraction of the scene's bounding diagonal")
+    receiver_plane: bool = param(True, "compare against the receiver's tangent plane at each tap (receiver-plane bias)")
+    slope_bias: float = param(1.5, "slope-scaled bias in texels, used when receiver_plane is off")
+
+    def __post_init__(self):
+        check(256 <= self.shadow_map_size <= 8192, f"shadow_map_size {self.shadow_map_size} out of range [256, 8192]")
+        check(0.0 <= self.radius <= 512.0, "radius must be in [0, 512] texels")
+        check(1 <= self.taps <= 1024, "taps must be in [1, 1024]")
+        check(self.pattern in ("grid", "poisson"), f"pattern {self.pattern!r} is not grid or poisson")
+        check(self.pattern != "grid" or math.isqrt(self.taps) ** 2 == self.taps, f"the grid pattern needs a square tap count, not {self.taps}")
+        check(self.bias >= 0.0 and self.slope_bias >= 0.0, "biases must be >= 0")
+
+
+@wp.func
+def pcf_visibility(
+    lv: LightViewGPU,
+    depth: wp.array2d[float],
+    pv: wp.vec3,
+    nv: wp.vec3,
+    m0: wp.vec2,
+    half: wp.vec2,
+    disk: int,
+    taps: wp.array[wp.vec2],
+    ntaps: int,
+    bias: float,
+    use_plane: int,
+) -> float:
+    """Fraction of ``taps`` (offsets ``half`` x pattern around ``m0``) where the receiver is lit."""
+    lit = float(0.0)
+    for i in range(ntaps):
+        o = tap_offset(disk, taps[i])
+        m = wp.vec2(m0[0] + o[0] * half[0], m0[1] + o[1] * half[1])
+        c = texel_center(lv, m)
+        zr = pv[2]
+        if use_plane != 0 and c[2] > 0.0:
+            zr = receiver_depth(lv, pv, nv, wp.vec2(c[0], c[1]))
+        if zr - bias <= depth_at(lv, depth, m):
+            lit += 1.0
+    return lit / float(ntaps)
+
+
+@wp.kernel
+def shade_pcf(
+    offset: int,
+    lv: LightViewGPU,
+    L: LightGPU,
+    depth: wp.array2d[float],
+    pos: wp.array[wp.vec3],
+    nrm: wp.array[wp.vec3],
+    prim: wp.array[wp.int32],
+    taps: wp.array[wp.vec2],
+    ntaps: int,
+    disk: int,
+    radius: float,
+    bias: float,
+    use_plane: int,
+    slope_texels: float,
+    # outputs
+    vis: wp.array[float],
+):
+    i = wp.tid() + offset
+    if prim[i] < 0:
+        vis[i] = 1.0
+        return
+    p = pos[i]
+    pv = view_of(lv, p)
+    if lv.persp != 0 and pv[2] <= lv.near:
+        vis[i] = 1.0
+        return
+    b = bias
+    if use_plane == 0:
+        b = receiver_bias(lv, L, p, nrm[i], pv[2], bias, slope_texels)
+    half = texel_size(lv) * radius
+    vis[i] = pcf_visibility(lv, depth, pv, view_dir(lv, nrm[i]), map_coords(lv, pv), half, disk, taps, ntaps, b, use_plane)
+
+
+class PCF(Technique):
+    """Percentage-closer filtering with a fixed kernel."""
+
+    name = "pcf"
+    summary = "percentage-closer filtering: fixed kernel, grid or Poisson taps, receiver-plane bias"
+    Params = PCFParams
+    reads = ("gbuffer", "light_depth")
+    writes = ("visibility",)
+
+    def add_passes(self, ctx, light) -> str:
+        p = self.params
+        gbuf = ctx.gbuffer()
+        depth = ctx.light_depth(light, size=p.shadow_map_size)
+        out = ctx.visibility_key(light)
+        L = ctx.light_gpu(light)
+        bias = p.bias * ctx.scene.diagonal
+
+        def run(res):
+            gb, dm = res[gbuf], res[depth]
+            taps = taps_on(ctx.device, p.pattern, p.taps)
+            vis = wp.empty(gb.count, dtype=float, device=ctx.device)
+            launch_chunked(
+                shade_pcf, gb.count,
+                inputs=[dm.view.gpu(), L, dm.depth, gb.pos, gb.nrm, gb.prim, taps.array, taps.count, int(p.pattern == "poisson"),
+                        p.radius, bias, int(p.receiver_plane), p.slope_bias],
+                outputs=[vis], device=ctx.device, min_chunk=256,
+            )
+            return {out: ctx.visibility(vis)}
+
+        ctx.add_pass(f"pcf[{ctx.label(light)}]", inputs=(gbuf, depth), outputs=(out,), run=run)
+        return out
