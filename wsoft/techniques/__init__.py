@@ -4,12 +4,14 @@ from __future__ import annotations
 
 from wsoft.errors import ParameterError
 from wsoft.techniques.base import Technique
+from wsoft.techniques.esm import ESM
 from wsoft.techniques.hard import Hard
 from wsoft.techniques.pcf import PCF
 from wsoft.techniques.pcss import PCSS
 from wsoft.techniques.reference import Reference
+from wsoft.techniques.vsm import VSM
 
-TECHNIQUES: dict[str, type[Technique]] = {t.name: t for t in (Reference, Hard, PCF, PCSS)}
+TECHNIQUES: dict[str, type[Technique]] = {t.name: t for t in (Reference, Hard, PCF, PCSS, VSM, ESM)}
 
 
 def get_technique(name: str) -> type[Technique]:

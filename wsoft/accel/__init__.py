@@ -1,0 +1,1 @@
+"""Map-space acceleration and filtering: separable blurs (later: pyramids, summed-area tables)."""
