@@ -10,7 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.harness import load, measure_render, reference
+from bench.common import accuracy_table, error_vs_time, image_list, render_row, report_header
+from bench.harness import load
 
 FULL_VIEWS = [
     ("box_plane", None), ("contact", None), ("cutout", None),
@@ -48,50 +49,10 @@ def cases(quick: bool, devices: list[str]) -> list[dict]:
 
 
 def run_case(case: dict, ctx: dict) -> dict:
-    return {"render": _render, "raster_vs_raycast": _raster_vs_raycast, "ray_throughput": _throughput}[case["kind"]](case, ctx)
+    return {"render": render_row, "raster_vs_raycast": _raster_vs_raycast, "ray_throughput": _throughput}[case["kind"]](case, ctx)
 
 
 # -- rows --------------------------------------------------------------------------------------
-
-
-def _render(case: dict, ctx: dict) -> dict:
-    from wsoft.metrics import visibility_error
-
-    ref = reference(case["scene"], width=case["width"], height=case["height"], light=case["light"], samples=case["ref_samples"], device=case["device"])
-    fr = measure_render(case["scene"], case["technique"], case["params"], device=case["device"], width=case["width"], height=case["height"], light=case["light"])
-    err = visibility_error(fr.V, ref["V"], ref["V_stderr"], ref["A"])
-    st = fr.stats
-    row = {
-        "scene": case["scene"], "technique": st["technique"], "params": st["params"], "device": st["device"],
-        "width": case["width"], "height": case["height"], "light": st["light"], "ref_samples": case["ref_samples"],
-        "timings_ms": st["timings_ms"], "timings_ms_runs": st["timings_ms_runs"], "cpu_ms": st["cpu_ms"],
-        "memory_bytes": st["memory_bytes"], "counters": st["counters"], "passes": st["passes"], "error": err,
-        "reference_ms": float(ref["ms"]),
-    }
-    if case.get("image"):
-        row["image"] = _side_by_side(case, fr.V, ref["V"], ref["A"], ctx)
-    return row
-
-
-def _side_by_side(case, v, ref, cov, ctx) -> str:
-    from PIL import Image, ImageDraw
-
-    from wsoft.io import to_srgb8
-
-    diff = np.clip(np.abs(v - ref) * 4.0, 0, 1)
-    panels = [to_srgb8(v * (cov > 0) + (cov == 0) * 0.15), to_srgb8(ref * (cov > 0) + (cov == 0) * 0.15), (diff * 255).astype(np.uint8)]
-    h, w = v.shape
-    img = Image.new("L", (3 * w, h + 18), 255)
-    for i, p in enumerate(panels):
-        img.paste(Image.fromarray(p, "L"), (i * w, 18))
-    d = ImageDraw.Draw(img)
-    for i, label in enumerate([f"hard {case['params']['shadow_map_size']}", f"reference {case['ref_samples']} spp", "|difference| x4"]):
-        d.text((i * w + 4, 3), label, fill=0)
-    rel = Path("images") / ctx["stem"] / f"{case['scene']}-{case['light'] or 'light'}-{case['device'].replace(':', '')}.png"
-    path = ctx["out_dir"] / rel
-    path.parent.mkdir(parents=True, exist_ok=True)
-    img.save(path)
-    return str(rel)
 
 
 def _timed(fn, repeats=3):
@@ -248,37 +209,11 @@ def _fmt(x, nd=4):
 
 
 def report(rows: list[dict], md: Path, ctx: dict) -> None:
-    import matplotlib
-    import matplotlib.ticker
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     renders = [r for r in rows if r["case"]["kind"] == "render"]
     raster = [r for r in rows if r["case"]["kind"] == "raster_vs_raycast"]
     thr = [r for r in rows if r["case"]["kind"] == "ray_throughput"]
-    m = rows[0]["machine"] if rows else {}
-    L = [f"# Sweep `foundation`{' (quick)' if ctx['quick'] else ''}", ""]
-    L.append(f"Produced by `{ctx['command']}` (rows: `{md.with_suffix('.jsonl').name}`; rerun resumes, `--fresh` starts over).")
-    L.append(f"Machine: {m.get('cpu', '?')}, {m.get('threads', '?')} CPU threads for Warp launches, Python {m.get('python', '?')}.")
-    L.append("Error is against the cached ray-traced reference on the same covered pixels; penumbra = reference in (0.01, 0.99);")
-    L.append("`>3se` = fraction of pixels further than 3 reference standard errors from it. Times: median of 3 runs after a warm-up.")
-    L.append("")
-    L.append("## Accuracy and time")
-    L.append("")
-    L.append("`frame ms`: the whole render with the scene already on the device (its BVH is built once per scene and device);")
-    L.append("`G-buffer ms`: the eye-view pass; `shadow ms`: the light views, depth maps and the technique's own passes.")
-    L.append("")
-    L.append("| scene | light | device | res | technique | params | frame ms | G-buffer ms | shadow ms | MAE | RMSE | max | MAE penumbra | >3se |")
-    L.append("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
-    for r in sorted(renders, key=lambda r: (r["scene"], r["light"], r["device"], r["width"], r["technique"], str(r["params"]))):
-        gb_ms = sum(v for k, v in r["timings_ms"].items() if k.startswith("gbuffer"))
-        shadow_ms = sum(v for k, v in r["timings_ms"].items() if k not in ("total", "upload_scene", "resolve", "shade") and not k.startswith("gbuffer"))
-        p = r["case"]["params"]
-        e = r["error"]
-        L.append(f"| {r['scene']} | {r['light'].split('/')[-1]} | {r['device']} | {r['width']}x{r['height']} | {r['technique']} | "
-                 f"{', '.join(f'{k}={v}' for k, v in p.items())} | {r['timings_ms']['total']:.1f} | {gb_ms:.1f} | {shadow_ms:.1f} | {e['mae']:.4f} | "
-                 f"{e['rmse']:.4f} | {e['max']:.3f} | {e['mae_penumbra']:.4f} | {e.get('frac_outside_3se', 0):.3f} |")
+    L = report_header("foundation", rows, md, ctx)
+    L += accuracy_table(renders)
     if raster:
         L += ["", "## Light depth map: rasterizer vs one BVH ray per texel (target: >= 10x; CPU time / wall >= 1.7 on 2 cores)", ""]
         L.append("| scene | light | device | size | triangles | raster ms | ray/texel ms | speedup | raster CPU/wall | ray CPU/wall | coverage mismatch | depth rel. err p99 |")
@@ -313,47 +248,6 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
         L.append("|---|---|---|---|---|")
         for s, w, k, ms, u in sorted(util):
             L.append(f"| {s} | {w} | {k} | {ms:.1f} | {u:.2f} |")
-    # error vs time plot
-    plot_rel = Path("images") / ctx["stem"] / "error_vs_time.png"
-    if renders:
-        width = max(x["width"] for x in renders)
-        scenes = sorted({r["scene"] for r in renders})
-        several_devices = len({r["device"] for r in renders}) > 1
-        ncols = min(3, len(scenes))
-        nrows = (len(scenes) + ncols - 1) // ncols
-        fig, axes = plt.subplots(nrows, ncols, figsize=(4.2 * ncols, 3.4 * nrows), squeeze=False)
-        for ax, scene in zip(axes.flat, scenes):
-            mine = [r for r in renders if r["scene"] == scene and r["width"] == width]
-            for i, (light, dev) in enumerate(sorted({(r["light"].split("/")[-1], r["device"]) for r in mine})):
-                color = f"C{i}"
-                for tech, mk, ls in (("hard", "s", "--"), ("reference", "o", "-")):
-                    pts = sorted((r["timings_ms"]["total"], max(r["error"]["mae"], 1e-5)) for r in mine
-                                 if r["technique"] == tech and (r["light"].split("/")[-1], r["device"]) == (light, dev))
-                    if pts:
-                        ax.plot(*zip(*pts), marker=mk, linestyle=ls, color=color, label=f"{light} {tech}" + (f" ({dev})" if several_devices else ""))
-            ax.set_xscale("log")
-            ax.set_yscale("log")
-            ax.set_title(scene, fontsize=9)
-            ax.set_xlabel("frame time (ms)", fontsize=8)
-            ax.set_ylabel("MAE of V", fontsize=8)
-            ax.tick_params(labelsize=7)
-            ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
-            ax.yaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
-            ax.legend(fontsize=6)
-        for ax in list(axes.flat)[len(scenes):]:
-            ax.axis("off")
-        fig.suptitle(f"foundation at {width} px wide: hard (map 1024, 2048) and reference (4, 16, 64 samples) vs a 256-sample reference", fontsize=9)
-        fig.tight_layout()
-        (md.parent / plot_rel).parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(md.parent / plot_rel, dpi=110)
-        plt.close(fig)
-        L += ["", "## Error against time", "", f"![error vs time]({plot_rel.as_posix()})"]
-    imgs = [r for r in renders if r.get("image")]
-    if imgs:
-        L += ["", "## Images (hard, reference, |difference| x4)", ""]
-        for r in imgs:
-            L.append(f"**{r['scene']} / {r['light'].split('/')[-1]}** ({r['device']})")
-            L.append("")
-            L.append(f"![{r['scene']}]({r['image']})")
-            L.append("")
+    L += error_vs_time(renders, md, ctx, "foundation: hard (map 1024, 2048) and reference (4, 16, 64 samples) vs a 256-sample reference")
+    L += image_list(renders, "hard, reference, |difference| x4")
     md.write_text("\n".join(L) + "\n")

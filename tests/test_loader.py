@@ -314,3 +314,42 @@ def test_closed_meshes_flagged_on_load():
     s = wsoft.load_scene(__import__("conftest").scene_path("contact.usda"))
     ground = s.tri_prim == next(i for i, p in enumerate(s.prims) if "Ground" in p)
     assert np.all(s.tri_closed[ground] == 0) and np.all(s.tri_closed[~ground] == 1)
+
+
+def test_dynamic_casters_and_baked_light():
+    """Salzman's split: dynamic casters (animated transform, time-sampled points or wsoft:dynamic)
+    and static receivers with baked lighting."""
+    from pxr import Gf, Sdf, UsdGeom
+
+    st = make_stage()
+    g = add_quad(st, "/World/Static/Ground", (0, 0, 0), 5)
+    pv = UsdGeom.PrimvarsAPI(g).CreatePrimvar("wsoft:bakedLight", Sdf.ValueTypeNames.Color3fArray, UsdGeom.Tokens.vertex)
+    pv.Set([(0.1, 0.2, 0.3), (0.4, 0.5, 0.6), (0.7, 0.8, 0.9), (1.0, 1.0, 1.0)])
+    UsdGeom.Xform.Define(st, "/World/Walker")
+    add_quad(st, "/World/Walker/Body", (0, 0, 1), 0.3)
+    op = UsdGeom.Xformable(st.GetPrimAtPath("/World/Walker")).AddTranslateOp()
+    op.Set(Gf.Vec3d(0, 0, 0), 1.0)
+    op.Set(Gf.Vec3d(1, 0, 0), 2.0)
+    flagged = add_quad(st, "/World/Ball", (2, 0, 1), 0.3)
+    flagged.GetPrim().CreateAttribute("wsoft:dynamic", Sdf.ValueTypeNames.Bool).Set(True)
+    morph = add_quad(st, "/World/Morph", (-2, 0, 1), 0.3)
+    morph.GetPointsAttr().Set([(-2.3, -0.3, 1), (-1.7, -0.3, 1), (-1.7, 0.3, 1), (-2.3, 0.3, 1)], 1.0)
+    morph.GetPointsAttr().Set([(-2.3, -0.3, 2), (-1.7, -0.3, 2), (-1.7, 0.3, 2), (-2.3, 0.3, 2)], 2.0)
+    add_rect_light(st, "/World/L", (0, 0, 4), 1, 1)
+    s = wsoft.load_scene(st)
+    assert s.dynamic_prims() == ["/World/Walker/Body", "/World/Ball", "/World/Morph"]
+    ground = s.tri_prim == s.prims.index("/World/Static/Ground")
+    assert not s.tri_dynamic[ground].any()
+    assert np.allclose(s.tri_baked[ground][0, 0], (0.1, 0.2, 0.3))
+    assert np.isnan(s.tri_baked[~ground]).all()
+    p = wsoft.plan(s, ["hard"])
+    assert p["dynamic_prims"] == s.dynamic_prims() and p["baked_light_triangles"] == 2
+
+
+def test_lightmapped_bridge_scene():
+    s = wsoft.load_scene(__import__("conftest").scene_path("lightmapped_bridge.usda"))
+    assert {"/World/Dynamic/Ball"} <= set(s.dynamic_prims())
+    assert any(p.startswith("/World/Dynamic/Character/") for p in s.dynamic_prims())
+    assert not any(p.startswith("/World/Static/") for p in s.dynamic_prims())
+    assert s.tri_baked is not None and np.isfinite(s.tri_baked[~s.tri_dynamic]).all()
+    assert s.time == 1.0 and [l.name for l in s.lights] == ["Sun", "Torch"]

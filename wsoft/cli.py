@@ -67,6 +67,8 @@ def cmd_plan(args) -> int:
     print("cutout (perforated) materials:")
     for m in p["cutout_materials"] or [{"path": "(none)", "triangles": ""}]:
         print(f"  {m['path']:<32} {m['triangles']} triangles")
+    print(f"dynamic casters: {', '.join(p['dynamic_prims']) or '(none)'}")
+    print(f"triangles with baked light: {p['baked_light_triangles']}")
     for w in p["warnings"]:
         print(f"warning: {w}")
     for name, passes in p["techniques"].items():

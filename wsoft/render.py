@@ -321,6 +321,8 @@ def plan(scene: Scene, techniques: list[str] | None = None, *, width: int = 640,
         "skipped_lights": [{"path": l.path, "kind": l.kind_name, "reason": "shadow:enable = false"} for l in scene.unshadowed_lights]
         + [{"path": s.path, "kind": s.kind, "reason": s.reason} for s in scene.skipped_lights],
         "cutout_materials": [{"path": p, "triangles": n} for p, n in scene.cutout_triangle_counts().items()],
+        "dynamic_prims": scene.dynamic_prims(),
+        "baked_light_triangles": 0 if scene.tri_baked is None else int(np.count_nonzero(~np.isnan(scene.tri_baked[:, 0, 0]))),
         "cameras": [c.path for c in scene.cameras],
         "warnings": list(scene.warnings),
         "techniques": {},

@@ -146,6 +146,8 @@ class Scene:
     tri_double_sided: np.ndarray  # [T] bool
     prims: list[str] = field(default_factory=list)
     tri_closed: np.ndarray | None = None  # [T] int8: +1/-1 closed surface facing out/in, 0 open (see closed_orientation)
+    tri_dynamic: np.ndarray | None = None  # [T] bool: dynamic caster (time-sampled, animated or wsoft:dynamic)
+    tri_baked: np.ndarray | None = None  # [T, 3, 3] float32 baked light per corner (primvars:wsoft:bakedLight), NaN where absent
     materials: list[Material] = field(default_factory=list)
     textures: list[Texture] = field(default_factory=list)
     lights: list[Light] = field(default_factory=list)  # shadow-casting lights
@@ -182,6 +184,12 @@ class Scene:
     @property
     def has_cutouts(self) -> bool:
         return bool(self.cutout_triangle_counts())
+
+    def dynamic_prims(self) -> list[str]:
+        """Prims whose triangles are dynamic casters."""
+        if self.tri_dynamic is None or not self.tri_dynamic.any():
+            return []
+        return [self.prims[i] for i in np.unique(self.tri_prim[self.tri_dynamic])]
 
     def device_copy(self, device: str, build):
         """This scene's arrays on ``device`` (a DeviceScene), built once by ``build(scene, device)``.

@@ -89,6 +89,7 @@ class _StageReader:
         self.materials.append(Material(path="(default)"))
         self.textures: list[Texture] = []
         self.texture_index: dict[tuple, int] = {}
+        self.dynamic_cache: dict[str, bool] = {}
 
     # -- helpers -----------------------------------------------------------------
     def warn(self, prim, msg: str):
@@ -111,7 +112,7 @@ class _StageReader:
     # -- main --------------------------------------------------------------------
     def read(self) -> Scene:
         Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = _pxr()
-        pts, tris, tri_prim, tri_mat, tri_uv, tri_ds, tri_cl, prims = [], [], [], [], [], [], [], []
+        pts, tris, tri_prim, tri_mat, tri_uv, tri_ds, tri_cl, tri_dyn, tri_bk, prims = [], [], [], [], [], [], [], [], [], []
         lights, unshadowed, skipped, cameras = [], [], [], []
         nverts = 0
         it = iter(Usd.PrimRange.Stage(self.stage, Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)))
@@ -130,7 +131,7 @@ class _StageReader:
                 mesh = self.read_mesh(prim)
                 if mesh is None:
                     continue
-                p, t, m, uv, ds, closed = mesh
+                p, t, m, uv, ds, closed, dynamic, baked = mesh
                 prims.append(str(prim.GetPath()))
                 pts.append(p)
                 tris.append(t + nverts)
@@ -140,6 +141,8 @@ class _StageReader:
                 tri_uv.append(uv)
                 tri_ds.append(np.full(len(t), ds, bool))
                 tri_cl.append(np.full(len(t), closed, np.int8))
+                tri_dyn.append(np.full(len(t), dynamic, bool))
+                tri_bk.append((baked, len(t)))
             elif prim.IsA(UsdGeom.Gprim) and not prim.IsA(UsdGeom.Mesh):
                 self.warn(prim, f"{type_name} is not a Mesh; ignored (convert it to a mesh to cast shadows)")
             elif type_name in _HANDLED_LIGHTS:
@@ -169,6 +172,8 @@ class _StageReader:
             tri_uv=np.concatenate(tri_uv).astype(np.float32) if tri_uv else np.zeros((0, 3, 2), np.float32),
             tri_double_sided=np.concatenate(tri_ds) if tri_ds else np.zeros(0, bool),
             tri_closed=np.concatenate(tri_cl) if tri_cl else np.zeros(0, np.int8),
+            tri_dynamic=np.concatenate(tri_dyn) if tri_dyn else np.zeros(0, bool),
+            tri_baked=_baked(tri_bk),
             prims=prims,
             materials=self.materials,
             textures=self.textures,
@@ -229,18 +234,43 @@ class _StageReader:
         uv = self.read_st(prim, mesh, corners, face_of_tri, tris)
         mat = self.bind_materials(prim, mesh, len(counts), face_of_tri)
         ds = bool(self.get(mesh.GetDoubleSidedAttr(), False))
-        return pw, tris.astype(np.int32), mat, uv, ds, closed_orientation(pw, tris)
+        baked = self.read_primvar(prim, corners, face_of_tri, tris, "wsoft:bakedLight", 3)
+        return pw, tris.astype(np.int32), mat, uv, ds, closed_orientation(pw, tris), self.is_dynamic(prim, mesh), baked
+
+    def is_dynamic(self, prim, mesh) -> bool:
+        """A *dynamic caster* (Salzman's sense): time-sampled points, a time-varying transform on the
+        prim or an ancestor, or ``wsoft:dynamic = true`` on the prim or an ancestor."""
+        Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = _pxr()
+        if mesh.GetPointsAttr().GetNumTimeSamples() > 1:
+            return True
+        p = prim
+        while p and not p.IsPseudoRoot():
+            key = str(p.GetPath())
+            if key not in self.dynamic_cache:
+                attr = p.GetAttribute("wsoft:dynamic")
+                flag = bool(attr and attr.HasAuthoredValue() and attr.Get(self.timecode))
+                if not flag and p.IsA(UsdGeom.Xformable):
+                    flag = UsdGeom.Xformable(p).TransformMightBeTimeVarying()
+                self.dynamic_cache[key] = flag
+            if self.dynamic_cache[key]:
+                return True
+            p = p.GetParent()
+        return False
 
     def read_st(self, prim, mesh, corners, face_of_tri, tris, name: str = "st"):
+        out = self.read_primvar(prim, corners, face_of_tri, tris, name, 2)
+        return np.zeros((len(tris), 3, 2), np.float32) if out is None else out
+
+    def read_primvar(self, prim, corners, face_of_tri, tris, name: str, width: int):
+        """A primvar's values at each triangle corner, shape [T, 3, width]; None when absent."""
         Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = _pxr()
-        out = np.zeros((len(tris), 3, 2), np.float32)
         pv = UsdGeom.PrimvarsAPI(prim).GetPrimvar(name)
         if not pv or not pv.HasValue():
-            return out
+            return None
         vals = pv.ComputeFlattened(self.timecode)
         if vals is None or len(vals) == 0:
-            return out
-        v = np.asarray(vals, dtype=np.float32).reshape(-1, 2)
+            return None
+        v = np.asarray(vals, dtype=np.float32).reshape(-1, width)
         interp = pv.GetInterpolation()
         try:
             if interp == UsdGeom.Tokens.faceVarying:
@@ -250,7 +280,7 @@ class _StageReader:
             elif interp == UsdGeom.Tokens.uniform:
                 out = np.repeat(v[face_of_tri][:, None, :], 3, axis=1)
             else:  # constant
-                out = np.broadcast_to(v[0], (len(tris), 3, 2)).copy()
+                out = np.broadcast_to(v[0], (len(tris), 3, width)).copy()
         except IndexError:
             raise self.err(prim, f"primvars:{name} has {len(v)} values, too few for {interp} interpolation") from None
         return out.astype(np.float32)
@@ -437,6 +467,13 @@ class _StageReader:
             tan_half = (0.5 * ha / f, 0.5 * va / f)
             offset = (ho / f, vo / f)
         return Camera(path=str(prim.GetPath()), to_world=M, orthographic=ortho, tan_half=tan_half, offset=offset, clip=clip)
+
+
+def _baked(parts: list[tuple[np.ndarray | None, int]]) -> np.ndarray | None:
+    """Per-corner baked light [T, 3, 3] (NaN where a mesh has none), or None if no mesh has any."""
+    if all(b is None for b, _ in parts):
+        return None
+    return np.concatenate([np.full((n, 3, 3), np.nan, np.float32) if b is None else b.astype(np.float32) for b, n in parts])
 
 
 def closed_orientation(points: np.ndarray, tris: np.ndarray) -> int:

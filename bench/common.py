@@ -1,0 +1,142 @@
+"""What sweeps share: a measured render row against the cached reference, side-by-side images,
+the accuracy table and the error-versus-time plot of a report."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from bench.harness import measure_render, reference
+
+
+def render_row(case: dict, ctx: dict) -> dict:
+    """Render ``case`` (median of 3 after a warm-up) and measure its error against the cached reference."""
+    from wsoft.metrics import visibility_error
+
+    ref = reference(case["scene"], width=case["width"], height=case["height"], light=case["light"], samples=case["ref_samples"], device=case["device"])
+    fr = measure_render(case["scene"], case["technique"], case["params"], device=case["device"], width=case["width"], height=case["height"], light=case["light"])
+    err = visibility_error(fr.V, ref["V"], ref["V_stderr"], ref["A"])
+    st = fr.stats
+    row = {
+        "scene": case["scene"], "technique": st["technique"], "params": st["params"], "device": st["device"],
+        "width": case["width"], "height": case["height"], "light": st["light"], "ref_samples": case["ref_samples"],
+        "timings_ms": st["timings_ms"], "timings_ms_runs": st["timings_ms_runs"], "cpu_ms": st["cpu_ms"],
+        "memory_bytes": st["memory_bytes"], "counters": st["counters"], "passes": st["passes"], "error": err,
+        "reference_ms": float(ref["ms"]),
+    }
+    if case.get("image"):
+        label = f"{case['technique']} " + " ".join(f"{k}={v}" for k, v in case["params"].items())
+        row["image"] = side_by_side(case, label, fr.V, ref["V"], ref["A"], ctx)
+    return row
+
+
+def side_by_side(case: dict, label: str, v: np.ndarray, ref: np.ndarray, cov: np.ndarray, ctx: dict) -> str:
+    """A PNG of the technique's V, the reference's V and 4x their absolute difference; returns its path under the report."""
+    from PIL import Image, ImageDraw
+
+    from wsoft.io import to_srgb8
+
+    diff = np.clip(np.abs(v - ref) * 4.0, 0, 1)
+    panels = [to_srgb8(v * (cov > 0) + (cov == 0) * 0.15), to_srgb8(ref * (cov > 0) + (cov == 0) * 0.15), (diff * 255).astype(np.uint8)]
+    h, w = v.shape
+    img = Image.new("L", (3 * w, h + 18), 255)
+    for i, p in enumerate(panels):
+        img.paste(Image.fromarray(p, "L"), (i * w, 18))
+    d = ImageDraw.Draw(img)
+    for i, text in enumerate([label, f"reference {case['ref_samples']} spp", "|difference| x4"]):
+        d.text((i * w + 4, 3), text, fill=0)
+    name = f"{case['scene']}-{case['light'] or 'light'}-{case['technique']}-{case['device'].replace(':', '')}.png"
+    rel = Path("images") / ctx["stem"] / name
+    path = ctx["out_dir"] / rel
+    path.parent.mkdir(parents=True, exist_ok=True)
+    img.save(path)
+    return str(rel)
+
+
+def report_header(sweep: str, rows: list[dict], md: Path, ctx: dict) -> list[str]:
+    m = rows[0]["machine"] if rows else {}
+    L = [f"# Sweep `{sweep}`{' (quick)' if ctx['quick'] else ''}", ""]
+    L.append(f"Produced by `{ctx['command']}` (rows: `{md.with_suffix('.jsonl').name}`; rerun resumes, `--fresh` starts over).")
+    L.append(f"Machine: {m.get('cpu', '?')}, {m.get('threads', '?')} CPU threads for Warp launches, Python {m.get('python', '?')}.")
+    L.append("Error is against the cached ray-traced reference on the same covered pixels; penumbra = reference in (0.01, 0.99);")
+    L.append("`>3se` = fraction of pixels further than 3 reference standard errors from it. Times: median of 3 runs after a warm-up.")
+    L.append("")
+    return L
+
+
+def accuracy_table(renders: list[dict]) -> list[str]:
+    L = ["## Accuracy and time", ""]
+    L.append("`frame ms`: the whole render with the scene already on the device (its BVH is built once per scene and device);")
+    L.append("`G-buffer ms`: the eye-view pass; `shadow ms`: the light views, depth maps and the technique's own passes.")
+    L.append("")
+    L.append("| scene | light | device | res | technique | params | frame ms | G-buffer ms | shadow ms | MAE | RMSE | max | MAE penumbra | >3se |")
+    L.append("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for r in sorted(renders, key=lambda r: (r["scene"], r["light"], r["device"], r["width"], r["technique"], str(r["params"]))):
+        gb_ms = sum(v for k, v in r["timings_ms"].items() if k.startswith("gbuffer"))
+        shadow_ms = sum(v for k, v in r["timings_ms"].items() if k not in ("total", "upload_scene", "resolve", "shade") and not k.startswith("gbuffer"))
+        p = r["case"]["params"]
+        e = r["error"]
+        L.append(f"| {r['scene']} | {r['light'].split('/')[-1]} | {r['device']} | {r['width']}x{r['height']} | {r['technique']} | "
+                 f"{', '.join(f'{k}={v}' for k, v in p.items())} | {r['timings_ms']['total']:.1f} | {gb_ms:.1f} | {shadow_ms:.1f} | {e['mae']:.4f} | "
+                 f"{e['rmse']:.4f} | {e['max']:.3f} | {e['mae_penumbra']:.4f} | {e.get('frac_outside_3se', 0):.3f} |")
+    return L
+
+
+def error_vs_time(renders: list[dict], md: Path, ctx: dict, title: str) -> list[str]:
+    """One panel per scene: MAE against frame time, a line per (light, technique) over its sweep."""
+    if not renders:
+        return []
+    import matplotlib
+    import matplotlib.ticker
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    plot_rel = Path("images") / ctx["stem"] / "error_vs_time.png"
+    width = max(x["width"] for x in renders)
+    scenes = sorted({r["scene"] for r in renders})
+    techniques = sorted({r["technique"] for r in renders})
+    several_devices = len({r["device"] for r in renders}) > 1
+    markers = "so^Dvx*P"
+    ncols = min(3, len(scenes))
+    nrows = (len(scenes) + ncols - 1) // ncols
+    fig, axes = plt.subplots(nrows, ncols, figsize=(4.6 * ncols, 3.6 * nrows), squeeze=False)
+    for ax, scene in zip(axes.flat, scenes):
+        mine = [r for r in renders if r["scene"] == scene and r["width"] == width]
+        groups = sorted({(r["light"].split("/")[-1], r["device"], r["technique"]) for r in mine})
+        for i, (light, dev, tech) in enumerate(groups):
+            pts = sorted((r["timings_ms"]["total"], max(r["error"]["mae"], 1e-5)) for r in mine
+                         if (r["light"].split("/")[-1], r["device"], r["technique"]) == (light, dev, tech))
+            ax.plot(*zip(*pts), marker=markers[techniques.index(tech) % len(markers)], linestyle="-" if tech == "reference" else "--",
+                    color=f"C{i % 10}", label=f"{light} {tech}" + (f" ({dev})" if several_devices else ""))
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_title(scene, fontsize=9)
+        ax.set_xlabel("frame time (ms)", fontsize=8)
+        ax.set_ylabel("MAE of V", fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+        ax.yaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+        ax.legend(fontsize=6)
+    for ax in list(axes.flat)[len(scenes):]:
+        ax.axis("off")
+    fig.suptitle(f"{title} ({width} px wide)", fontsize=9)
+    fig.tight_layout()
+    (md.parent / plot_rel).parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(md.parent / plot_rel, dpi=110)
+    plt.close(fig)
+    return ["", "## Error against time", "", f"![error vs time]({plot_rel.as_posix()})"]
+
+
+def image_list(renders: list[dict], what: str) -> list[str]:
+    imgs = [r for r in renders if r.get("image")]
+    if not imgs:
+        return []
+    L = ["", f"## Images ({what})", ""]
+    for r in sorted(imgs, key=lambda r: (r["scene"], r["light"], r["technique"])):
+        L.append(f"**{r['scene']} / {r['light'].split('/')[-1]} / {r['technique']}** ({r['device']})")
+        L.append("")
+        L.append(f"![{r['scene']}]({r['image']})")
+        L.append("")
+    return L
