@@ -36,7 +36,7 @@ def test_render_reference_multi_light(tmp_path):
     assert np.array_equal(ch["V"], ch["V.Rect"])
     s = json.loads(stats.read_text())
     assert STATS_KEYS <= set(s)
-    assert s["params"] == {"samples": 4, "seed": 0, "jitter": True}
+    assert s["params"] == {"samples": 4, "seed": 0, "jitter": True, "casters": "all"}
     assert "total" in s["timings_ms"] and s["passes"][0] == "upload_scene"
     assert png.stat().st_size > 0
 
@@ -76,7 +76,7 @@ def _bad_mesh(tmp_path):
         ("broken", "cannot open USD stage"),
         ("face", "/Tri: faceVertexIndices[2] = 9 is out of range"),
         ("nolight", "no shadow-casting light"),
-        ("technique", "unknown technique 'nope'; techniques: esm, hard, pcf, pcss, reference, vsm"),
+        ("technique", "unknown technique 'nope'; techniques: esm, hard, pcf, pcss, reference, salzman, vsm"),
         ("param", "technique 'hard' has no parameter samples"),
         ("value", "shadow_map_size='abc' is not a valid int"),
         ("camera", "no camera '/World/Nope'"),

@@ -108,3 +108,45 @@ def blur_log(src: wp.array, kind: str, radius: int) -> wp.array:
     """Separable blur of ``exp(src)`` kept in log space: returns ``log(blur(exp(src)))``."""
     return _separable(blur_log_pass, src, kind, radius)
 
+
+
+@wp.kernel
+def blur_vec4_listed(
+    offset: int,
+    texels: wp.array[wp.int32],
+    src: wp.array2d[wp.vec4],
+    weights: wp.array[float],
+    radius: int,
+    axis: int,
+    # outputs
+    dst: wp.array2d[wp.vec4],
+):
+    """One pass of a separable blur, written only at the listed texels (flat indices)."""
+    t = texels[wp.tid() + offset]
+    w = src.shape[1]
+    h = src.shape[0]
+    y = t // w
+    x = t - y * w
+    acc = wp.vec4(0.0)
+    for k in range(-radius, radius + 1):
+        if axis == 0:
+            acc += src[y, wp.clamp(x + k, 0, w - 1)] * weights[k + radius]
+        else:
+            acc += src[wp.clamp(y + k, 0, h - 1), x] * weights[k + radius]
+    dst[y, x] = acc
+
+
+def blur_vec4_within(src: wp.array, texels: np.ndarray, kind: str, radius: int) -> wp.array:
+    """Separable blur of a vec4 map computed only at ``texels`` (flat indices); other texels keep
+    their values. Exact where every texel within ``radius`` of a changing value is listed."""
+    dev = str(src.device)
+    out = wp.clone(src)
+    if radius <= 0 or len(texels) == 0:
+        return out
+    weights = wp.array(blur_weights(kind, radius), dtype=float, device=dev)
+    idx = wp.array(np.asarray(texels, np.int32), dtype=wp.int32, device=dev)
+    tmp = wp.clone(src)
+    n = len(texels)
+    launch_chunked(blur_vec4_listed, n, inputs=[idx, src, weights, radius, 0], outputs=[tmp], device=dev, min_chunk=1 << 14)
+    launch_chunked(blur_vec4_listed, n, inputs=[idx, tmp, weights, radius, 1], outputs=[out], device=dev, min_chunk=1 << 14)
+    return out

@@ -243,9 +243,14 @@ def raster_triangle(
     cut: Surfaces,
     alpha: int,
     conservative: int,
+    gate: wp.array2d[float],
+    use_gate: int,
     depth: wp.array2d[float],
 ):
     """Scan-convert one (clipped) triangle into rows [row0, row1).
+
+    With ``use_gate``, a texel is written only where the surface lies behind ``gate`` (the
+    inverted depth test of Salzman's far bound: surfaces behind the casters).
 
     ``ta, tb, tc``: corners in texel coordinates; ``za, zb, zc``: their view depths;
     ``wa, wb, wc``: the corners' weights of the original triangle (for the uv of the alpha test).
@@ -401,7 +406,10 @@ def raster_triangle(
                 z = q
                 if lv.persp != 0:
                     z = 1.0 / wp.max(q, 1.0e-30)
-                wp.atomic_min(depth, y, x, z)
+                if use_gate == 0:
+                    wp.atomic_min(depth, y, x, z)
+                elif z > gate[y, x] * 1.0001:
+                    wp.atomic_min(depth, y, x, z)
 
 
 @wp.func
@@ -426,6 +434,8 @@ def rasterize_depth(
     cut: Surfaces,
     alpha: int,
     conservative: int,
+    gate: wp.array2d[float],
+    use_gate: int,
     # outputs
     depth: wp.array2d[float],
     big: wp.array[wp.int32],
@@ -489,7 +499,7 @@ def rasterize_depth(
     eb = wp.vec3(0.0, 1.0, 0.0)
     ec = wp.vec3(0.0, 0.0, 1.0)
     if not clipped:
-        raster_triangle(lv, tri, ta, tb, tc, a[2], b[2], c[2], ea, eb, ec, row0, row1, cut, alpha_on, conservative, depth)
+        raster_triangle(lv, tri, ta, tb, tc, a[2], b[2], c[2], ea, eb, ec, row0, row1, cut, alpha_on, conservative, gate, use_gate, depth)
         return
     # Sutherland-Hodgman against z >= near: 1 or 2 triangles
     n_in = int(0)
@@ -528,12 +538,12 @@ def rasterize_depth(
     u01 = w0 + (w1 - w0) * k01[3]
     u02 = w0 + (w2 - w0) * k02[3]
     if odd_in:  # only p0 in front: one triangle p0, q01, q02
-        raster_triangle(lv, tri, texel_of(lv, p0), texel_of(lv, q01), texel_of(lv, q02), p0[2], q01[2], q02[2], w0, u01, u02, row0, row1, cut, alpha_on, conservative, depth)
+        raster_triangle(lv, tri, texel_of(lv, p0), texel_of(lv, q01), texel_of(lv, q02), p0[2], q01[2], q02[2], w0, u01, u02, row0, row1, cut, alpha_on, conservative, gate, use_gate, depth)
     else:  # p0 behind: quad q01, p1, p2, q02
         t01 = texel_of(lv, q01)
         t2 = texel_of(lv, p2)
-        raster_triangle(lv, tri, t01, texel_of(lv, p1), t2, q01[2], p1[2], p2[2], u01, w1, w2, row0, row1, cut, alpha_on, conservative, depth)
-        raster_triangle(lv, tri, t01, t2, texel_of(lv, q02), q01[2], p2[2], q02[2], u01, w2, u02, row0, row1, cut, alpha_on, conservative, depth)
+        raster_triangle(lv, tri, t01, texel_of(lv, p1), t2, q01[2], p1[2], p2[2], u01, w1, w2, row0, row1, cut, alpha_on, conservative, gate, use_gate, depth)
+        raster_triangle(lv, tri, t01, t2, texel_of(lv, q02), q01[2], p2[2], q02[2], u01, w2, u02, row0, row1, cut, alpha_on, conservative, gate, use_gate, depth)
 
 
 @wp.kernel
@@ -563,25 +573,45 @@ class DepthMap:
         return {"depth": self.depth}
 
 
-def rasterize(ds: DeviceScene, view: LightView, alpha_tested: bool, conservative: bool = False) -> DepthMap:
-    """Rasterize the whole scene into a depth map for ``view``."""
+def rasterize(
+    ds: DeviceScene,
+    view: LightView,
+    alpha_tested: bool,
+    conservative: bool = False,
+    triangles: np.ndarray | None = None,
+    behind: wp.array | None = None,
+) -> DepthMap:
+    """Rasterize the scene (or only ``triangles``, an index array) into a depth map for ``view``.
+
+    ``behind``: a depth map of the same size; only surfaces behind it are written (the
+    inverted depth test; texels where it is empty receive nothing).
+    """
     dev = ds.device
     lv = view.gpu()
-    ntri = ds.indices.shape[0] // 3
     shape = (view.height, view.width)
     alpha = int(alpha_tested and ds.has_cutouts)
     cons = int(conservative)
     ensure_loaded(rasterize_depth, dev)  # the module also holds fill_depth and merge_min
     no_list = wp.zeros(1, dtype=wp.int32, device=dev)
+    no_gate = wp.zeros((1, 1), dtype=float, device=dev)
+    gate = behind if behind is not None else no_gate
+    subset = None
+    if triangles is not None:
+        subset = wp.array(np.asarray(triangles, np.int32), dtype=wp.int32, device=dev)
+    ntri = ds.indices.shape[0] // 3 if subset is None else subset.shape[0]
 
     def launch(target, start, count, nbands, band_rows, band_start=0, tri_list=None, big_texels=0.0, big=None):
+        if tri_list is None:
+            tri_list = subset
         wp.launch(
             rasterize_depth, dim=(nbands, count),
             inputs=[start, band_start, band_rows, tri_list if tri_list is not None else no_list, int(tri_list is not None), float(big_texels),
-                    ds.points, ds.indices, lv, ds.cutouts, alpha, cons],
+                    ds.points, ds.indices, lv, ds.cutouts, alpha, cons, gate, int(behind is not None)],
             outputs=[target, big if big is not None else no_list], device=dev,
         )
 
+    if ntri == 0:
+        return DepthMap(view=view, depth=wp.full(shape, DEPTH_CLEAR, dtype=float, device=dev), alpha_tested=bool(alpha), conservative=conservative)
     if not dev.startswith("cpu"):
         depth = wp.full(shape, DEPTH_CLEAR, dtype=float, device=dev)
         nb = (view.height + GPU_BAND_ROWS - 1) // GPU_BAND_ROWS
@@ -592,7 +622,7 @@ def rasterize(ds: DeviceScene, view: LightView, alpha_tested: bool, conservative
     nmaps = max(1, min(cpu_threads(), PRIVATE_MAP_BUDGET // map_bytes, (ntri + CPU_CHUNK - 1) // CPU_CHUNK))
     maps = [wp.empty(shape, dtype=float, device=dev) for _ in range(nmaps)]  # each worker clears its own
     chunks = [(s, min(CPU_CHUNK, ntri - s)) for s in range(0, ntri, CPU_CHUNK)]
-    big = wp.zeros(ntri, dtype=wp.int32, device=dev)
+    big = wp.zeros(ds.indices.shape[0] // 3, dtype=wp.int32, device=dev)  # flags by triangle index
     big_texels = float(max(BIG_TRIANGLE_TEXELS, 1))
 
     def worker(m):

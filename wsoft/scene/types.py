@@ -191,6 +191,25 @@ class Scene:
             return []
         return [self.prims[i] for i in np.unique(self.tri_prim[self.tri_dynamic])]
 
+    def subset(self, tri_mask: np.ndarray) -> "Scene":
+        """A scene of the selected triangles only (same points, materials, lights and cameras)."""
+        from dataclasses import replace
+
+        m = np.asarray(tri_mask, bool)
+        pick = lambda a: None if a is None else a[m]  # noqa: E731
+        sub = replace(
+            self, triangles=self.triangles[m], tri_prim=self.tri_prim[m], tri_material=self.tri_material[m], tri_uv=self.tri_uv[m],
+            tri_double_sided=self.tri_double_sided[m], tri_closed=pick(self.tri_closed), tri_dynamic=pick(self.tri_dynamic), tri_baked=pick(self.tri_baked),
+        )
+        sub.changed()
+        return sub
+
+    def dynamic_subset(self) -> "Scene":
+        """The dynamic casters as a scene of their own (built once; see :meth:`changed`)."""
+        if "_dynamic_subset" not in self.__dict__:
+            self.__dict__["_dynamic_subset"] = self.subset(self.tri_dynamic)
+        return self.__dict__["_dynamic_subset"]
+
     def device_copy(self, device: str, build):
         """This scene's arrays on ``device`` (a DeviceScene), built once by ``build(scene, device)``.
 
@@ -205,8 +224,8 @@ class Scene:
 
     def changed(self) -> None:
         """Forget device copies and derived values after the arrays were edited in place."""
-        self.__dict__.pop("_device_cache", None)
-        self.__dict__.pop("bounds", None)
+        for k in ("_device_cache", "bounds", "_dynamic_subset"):
+            self.__dict__.pop(k, None)
 
     def find_light(self, path_or_name: str) -> Light:
         for light in self.lights:

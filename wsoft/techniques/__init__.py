@@ -9,9 +9,10 @@ from wsoft.techniques.hard import Hard
 from wsoft.techniques.pcf import PCF
 from wsoft.techniques.pcss import PCSS
 from wsoft.techniques.reference import Reference
+from wsoft.techniques.salzman import Salzman
 from wsoft.techniques.vsm import VSM
 
-TECHNIQUES: dict[str, type[Technique]] = {t.name: t for t in (Reference, Hard, PCF, PCSS, VSM, ESM)}
+TECHNIQUES: dict[str, type[Technique]] = {t.name: t for t in (Reference, Hard, PCF, PCSS, VSM, ESM, Salzman)}
 
 
 def get_technique(name: str) -> type[Technique]:

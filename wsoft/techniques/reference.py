@@ -14,6 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from wsoft.reference import trace_reference
+from wsoft.scene.device import upload_scene
 from wsoft.techniques.base import Technique, check, param
 
 
@@ -22,9 +23,11 @@ class ReferenceParams:
     samples: int = param(256, "light samples per pixel sample (stratified; perfect squares use a jittered grid)")
     seed: int = param(0, "random seed")
     jitter: bool = param(True, "jitter inside strata (false: stratum centres; one sample = the light's centre)")
+    casters: str = param("all", "which prims occlude: all, or dynamic (the ground truth of a dynamic-caster shadow mask)")
 
     def __post_init__(self):
         check(1 <= self.samples <= 1 << 20, f"samples {self.samples} out of range [1, 1048576]")
+        check(self.casters in ("all", "dynamic"), f"casters {self.casters!r} is not all or dynamic")
 
 
 class Reference(Technique):
@@ -42,11 +45,20 @@ class Reference(Technique):
         scene_key = ctx.scene_arrays()
         out = ctx.visibility_key(light)
         L = ctx.light_gpu(light)
+        scene = ctx.scene
+        dynamic = p.casters == "dynamic"
+        if dynamic and (scene.tri_dynamic is None or not scene.tri_dynamic.any()):
+            from wsoft.errors import ParameterError
+
+            raise ParameterError("reference: casters=dynamic but the scene has no dynamic prims", file=scene.path)
 
         def run(res):
-            vis, err = trace_reference(res[scene_key], L, res[gbuf], p.samples, p.seed, p.jitter)
+            ds = res[scene_key]
+            if dynamic:  # occluders: the dynamic casters only (their own BVH, built once per device)
+                ds, _ = scene.dynamic_subset().device_copy(ctx.device, upload_scene)
+            vis, err = trace_reference(ds, L, res[gbuf], p.samples, p.seed, p.jitter)
             return {out: ctx.visibility(vis, err)}
 
-        name = "reference_alpha" if ctx.scene.has_cutouts else "reference"
+        name = ("reference_alpha" if scene.has_cutouts else "reference") + ("_dynamic" if dynamic else "")
         ctx.add_pass(f"{name}[{ctx.label(light)}]", inputs=(gbuf, scene_key), outputs=(out,), run=run, kind="technique")
         return out

@@ -1,0 +1,304 @@
+"""``salzman``: Salzman's "Simpler Soft Shadow Mapping" (2007), for lightmapped scenes.
+
+Only *dynamic casters* go into the shadow map (prims with time-sampled points or transforms, or
+``wsoft:dynamic = true``; with ``casters = auto`` a scene without any uses every prim). The
+map, cleared to depth 1 and mask 0, holds per texel
+
+* ``d``: the casters' normalised depth (1 where none) and ``m``: the mask (1 on a caster),
+* ``f``: the far bound — the nearest *receiver* behind the casters, rendered with the inverted
+  depth test (1 where none) — so a shadow stops at the surface right behind its caster,
+* ``o``: the casters' opacity (the transparency extension; ``m`` for opaque casters),
+
+all blurred by one separable linear filter. Shading reconstructs the unfiltered caster depth
+``s = (d - 1) / m + 1`` (and the far bound the same way); a receiver farther than ``s`` (and
+nearer than the far bound) is shadowed with intensity ``o`` (``m`` without transparency). Where
+``m`` is ~0 nothing is reconstructed (lit). The blur runs only inside rectangles merged from a
+coarse grid of the casters' bounding squares (rows as bit vectors, run-length merged); the same
+grid rejects receivers outside every caster's influence. ``bits = 8`` stores the filtered map
+in 8 bits per component, as the paper suggests is feasible.
+
+Known failure (pinned by a test): a receiver between two casters along a light ray gets a
+reconstructed depth averaged behind it and escapes the shadow.
+
+| parameter | type | default | meaning |
+|---|---|---|---|
+| shadow_map_size | int | 1024 | texels per side of the map |
+| filter | str | gaussian | box or gaussian |
+| radius | int | 4 | blur radius in texels |
+| far_bound | bool | true | stop shadows at the first receiver behind the casters |
+| transparency | bool | true | shadow with the casters' opacity instead of the mask |
+| bits | int | 32 | storage of the filtered map: 32 (float) or 8 |
+| grid | int | 32 | cells per side of the caster grid (0: blur the whole map, no receiver rejection) |
+| casters | str | auto | dynamic, all, or auto (dynamic if the scene has any) |
+| bias | float | 1e-4 | depth bias, fraction of the scene's bounding diagonal (8 bits: at least 1.5 steps) |
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+
+from wsoft.accel.blur import blur_vec4_within
+from wsoft.accel.grid import build_grid
+from wsoft.parallel import launch_chunked
+from wsoft.raster.lightview import DEPTH_CLEAR, LightViewGPU, rasterize, view_of
+from wsoft.techniques.base import Technique, check, param
+from wsoft.techniques.filtering import map_coords
+
+
+@dataclass(frozen=True)
+class SalzmanParams:
+    shadow_map_size: int = param(1024, "texels per side of the map (256..8192)")
+    filter: str = param("gaussian", "blur: box or gaussian")
+    radius: int = param(4, "blur radius in texels")
+    far_bound: bool = param(True, "stop the shadow at the first receiver behind the casters")
+    transparency: bool = param(True, "shadow with the casters' opacity instead of the mask")
+    bits: int = param(32, "storage of the filtered map: 32 (float) or 8 bits per component")
+    grid: int = param(32, "cells per side of the caster grid (0: blur everything, no rejection)")
+    casters: str = param("auto", "which prims cast: dynamic, all, or auto (dynamic if any)")
+    bias: float = param(1e-4, "depth bias as a fraction of the scene's bounding diagonal")
+
+    def __post_init__(self):
+        check(256 <= self.shadow_map_size <= 8192, f"shadow_map_size {self.shadow_map_size} out of range [256, 8192]")
+        check(self.filter in ("box", "gaussian"), f"filter {self.filter!r} is not box or gaussian")
+        check(0 <= self.radius <= 64, "radius must be in [0, 64] texels")
+        check(self.bits in (8, 32), "bits must be 8 or 32")
+        check(self.grid == 0 or 2 <= self.grid <= 1024, "grid must be 0 or in [2, 1024]")
+        check(self.casters in ("auto", "dynamic", "all"), f"casters {self.casters!r} is not auto, dynamic or all")
+        check(self.bias >= 0.0, "bias must be >= 0")
+
+
+@wp.func
+def salzman_shadow(e: wp.vec4, z: float, bias: float, far_bound: int, transparency: int) -> float:
+    """Shadow intensity at normalised receiver depth ``z`` from a filtered texel (d, m, f, o)."""
+    m = e[1]
+    if m < 1.0e-3:  # no caster influence: nothing to reconstruct (guards the division)
+        return 0.0
+    s = (e[0] - 1.0) / m + 1.0
+    if z <= s + bias:
+        return 0.0
+    if far_bound != 0:
+        f = (e[2] - 1.0) / m + 1.0
+        if z > f + bias:
+            return 0.0
+    if transparency != 0:
+        return wp.clamp(e[3], 0.0, 1.0)
+    return wp.clamp(m, 0.0, 1.0)
+
+
+@wp.kernel
+def make_salzman_map(
+    offset: int,
+    caster: wp.array[float],
+    far: wp.array[float],
+    opacity: wp.array[float],
+    znear: float,
+    zfar: float,
+    # outputs
+    out: wp.array[wp.vec4],
+):
+    i = wp.tid() + offset
+    c = caster[i]
+    if c >= 1.0e29:
+        out[i] = wp.vec4(1.0, 0.0, 1.0, 0.0)
+        return
+    d = wp.clamp((c - znear) / (zfar - znear), 0.0, 1.0)
+    f = float(1.0)
+    if far[i] < 1.0e29:
+        f = wp.clamp((far[i] - znear) / (zfar - znear), 0.0, 1.0)
+    out[i] = wp.vec4(d, 1.0, f, opacity[i])
+
+
+@wp.kernel
+def quantize8(offset: int, m: wp.array[wp.vec4]):
+    i = wp.tid() + offset
+    v = m[i]
+    m[i] = wp.vec4(
+        wp.round(wp.clamp(v[0], 0.0, 1.0) * 255.0) / 255.0,
+        wp.round(wp.clamp(v[1], 0.0, 1.0) * 255.0) / 255.0,
+        wp.round(wp.clamp(v[2], 0.0, 1.0) * 255.0) / 255.0,
+        wp.round(wp.clamp(v[3], 0.0, 1.0) * 255.0) / 255.0,
+    )
+
+
+@wp.func
+def bilinear_vec4(lv: LightViewGPU, smap: wp.array2d[wp.vec4], m: wp.vec2) -> wp.vec4:
+    fx = (m[0] - lv.window[0]) * lv.scale[0] - 0.5
+    fy = (m[1] - lv.window[2]) * lv.scale[1] - 0.5
+    x0 = int(wp.floor(fx))
+    y0 = int(wp.floor(fy))
+    ax = fx - float(x0)
+    ay = fy - float(y0)
+    xa = wp.clamp(x0, 0, lv.width - 1)
+    xb = wp.clamp(x0 + 1, 0, lv.width - 1)
+    ya = wp.clamp(y0, 0, lv.height - 1)
+    yb = wp.clamp(y0 + 1, 0, lv.height - 1)
+    top = smap[ya, xa] * (1.0 - ax) + smap[ya, xb] * ax
+    bot = smap[yb, xa] * (1.0 - ax) + smap[yb, xb] * ax
+    return top * (1.0 - ay) + bot * ay
+
+
+@wp.kernel
+def shade_salzman(
+    offset: int,
+    lv: LightViewGPU,
+    smap: wp.array2d[wp.vec4],
+    cells: wp.array[wp.int32],
+    gsize: int,
+    znear: float,
+    zfar: float,
+    pos: wp.array[wp.vec3],
+    prim: wp.array[wp.int32],
+    bias: float,
+    far_bound: int,
+    transparency: int,
+    # outputs
+    vis: wp.array[float],
+    rejected: wp.array[wp.int32],
+):
+    i = wp.tid() + offset
+    vis[i] = 1.0
+    rejected[i] = 0
+    if prim[i] < 0:
+        return
+    pv = view_of(lv, pos[i])
+    if lv.persp != 0 and pv[2] <= lv.near:
+        return
+    m = map_coords(lv, pv)
+    fx = (m[0] - lv.window[0]) * lv.scale[0]
+    fy = (m[1] - lv.window[2]) * lv.scale[1]
+    if fx < 0.0 or fy < 0.0 or fx >= float(lv.width) or fy >= float(lv.height):
+        return
+    if gsize > 0:
+        cx = int(fx) * gsize / lv.width
+        cy = int(fy) * gsize / lv.height
+        if cells[cy * gsize + cx] == 0:  # outside every caster's influence
+            rejected[i] = 1
+            return
+    z = (pv[2] - znear) / (zfar - znear)
+    vis[i] = 1.0 - salzman_shadow(bilinear_vec4(lv, smap, m), z, bias, far_bound, transparency)
+
+
+class Salzman(Technique):
+    """Salzman's depth + mask map of dynamic casters, with far bound, transparency and a caster grid."""
+
+    name = "salzman"
+    summary = "Salzman 2007: blurred depth+mask map of dynamic casters, reconstructed caster depth, far bound, transparency, caster grid, 8-bit option"
+    Params = SalzmanParams
+    reads = ("gbuffer", "scene.triangles", "light_view")
+    writes = ("visibility",)
+
+    def caster_triangles(self, scene) -> tuple[np.ndarray, str]:
+        dyn = scene.tri_dynamic if scene.tri_dynamic is not None else np.zeros(scene.triangle_count, bool)
+        mode = self.params.casters
+        if mode == "auto":
+            mode = "dynamic" if dyn.any() else "all"
+        sel = dyn if mode == "dynamic" else np.ones(scene.triangle_count, bool)
+        return np.flatnonzero(sel).astype(np.int32), mode
+
+    def add_passes(self, ctx, light) -> str:
+        p = self.params
+        scene = ctx.scene
+        gbuf = ctx.gbuffer()
+        sk = ctx.scene_arrays()
+        view_key = ctx.light_view(light, p.shadow_map_size, soft=True)
+        label = ctx.label(light)
+        map_key = f"salzman_map[{label}]@{p.shadow_map_size}"
+        out = ctx.visibility_key(light)
+        casters, mode = self.caster_triangles(scene)
+        receivers = np.setdiff1d(np.arange(scene.triangle_count, dtype=np.int32), casters) if mode == "dynamic" else np.arange(scene.triangle_count, dtype=np.int32)
+        mats = scene.materials
+        tri_opacity = np.array([1.0 if m.is_cutout else min(max(m.opacity, 0.0), 1.0) for m in mats], np.float32)[scene.tri_material]
+
+        def build(res):
+            ds, view = res[sk], res[view_key]
+            dev = ctx.device
+            n = view.width * view.height
+            alpha = scene.has_cutouts
+            cmap = rasterize(ds, view, alpha, triangles=casters)
+            # opacity of the casters per texel: the strongest caster covering it (one pass per opacity)
+            omap = np.zeros(n, np.float32)
+            for o in np.unique(tri_opacity[casters]) if len(casters) else []:
+                sub = casters[tri_opacity[casters] == o]
+                covered = rasterize(ds, view, alpha, triangles=sub).depth.numpy().reshape(-1) < DEPTH_CLEAR
+                omap[covered] = np.maximum(omap[covered], o)
+            fmap = rasterize(ds, view, alpha, triangles=receivers, behind=cmap.depth) if p.far_bound and len(receivers) else None
+            cd = cmap.depth.numpy()
+            has = cd < DEPTH_CLEAR
+            znear = float(cd[has].min()) * 0.99 if has.any() else view.near
+            zfar = float(view.far)
+            smap = wp.empty(n, dtype=wp.vec4, device=dev)
+            launch_chunked(
+                make_salzman_map, n,
+                inputs=[cmap.depth.reshape(-1), (fmap.depth if fmap is not None else cmap.depth).reshape(-1) if fmap is not None else wp.full(n, DEPTH_CLEAR, dtype=float, device=dev),
+                        wp.array(omap, dtype=float, device=dev), znear, zfar],
+                outputs=[smap], device=dev, min_chunk=1 << 15,
+            )
+            smap = smap.reshape((view.height, view.width))
+            # the caster grid: bounding squares of the caster prims, grown by the blur radius
+            gsize = p.grid
+            if gsize > 0:
+                squares = []
+                for prim_id in np.unique(scene.tri_prim[casters]) if len(casters) else []:
+                    pts = scene.points[scene.triangles[casters[scene.tri_prim[casters] == prim_id]].ravel()]
+                    v = view.to_view(pts)
+                    if view.persp:
+                        v = v[v[:, 2] > view.near]
+                        if len(v) == 0:
+                            continue
+                        tx, ty = v[:, 0] / v[:, 2], v[:, 1] / v[:, 2]
+                    else:
+                        tx, ty = v[:, 0], v[:, 1]
+                    l, r, b, t = view.window
+                    xs = (tx - l) / (r - l) * view.width
+                    ys = (ty - b) / (t - b) * view.height
+                    g = p.radius + 1
+                    squares.append((xs.min() - g, xs.max() + g, ys.min() - g, ys.max() + g))
+                grid = build_grid(squares, view.width, view.height, gsize)
+                texels = grid.texels(view.width, view.height)
+                cells = grid.marked().astype(np.int32).ravel()
+                ctx.counters[f"salzman[{label}].grid_rectangles"] = len(grid.rects)
+            else:
+                texels = np.arange(n, dtype=np.int32)
+                cells = np.ones(1, np.int32)
+            ctx.counters[f"salzman[{label}].fraction_blurred"] = len(texels) / n
+            ctx.counters[f"salzman[{label}].casters"] = mode
+            ctx.counters[f"salzman[{label}].caster_triangles"] = int(len(casters))
+            blurred = blur_vec4_within(smap, texels, p.filter, p.radius)
+            if p.bits == 8:
+                launch_chunked(quantize8, n, inputs=[blurred.reshape(-1)], outputs=[], device=dev, min_chunk=1 << 15)
+            return {map_key: SalzmanMap(blurred, wp.array(cells, dtype=wp.int32, device=dev), gsize, znear, zfar)}
+
+        def run(res):
+            gb, view, sm = res[gbuf], res[view_key], res[map_key]
+            bias = p.bias * scene.diagonal / max(sm.zfar - sm.znear, 1e-12)
+            if p.bits == 8:
+                bias = max(bias, 1.5 / 255.0)
+            vis = wp.empty(gb.count, dtype=float, device=ctx.device)
+            rej = wp.empty(gb.count, dtype=wp.int32, device=ctx.device)
+            launch_chunked(
+                shade_salzman, gb.count,
+                inputs=[view.gpu(), sm.map, sm.cells, sm.grid, sm.znear, sm.zfar, gb.pos, gb.prim, bias, int(p.far_bound), int(p.transparency)],
+                outputs=[vis, rej], device=ctx.device,
+            )
+            covered = int((gb.prim.numpy() >= 0).sum())
+            ctx.counters[f"salzman[{label}].receivers_rejected_by_grid"] = int(rej.numpy().sum()) / max(covered, 1)
+            return {out: ctx.visibility(vis)}
+
+        ctx.add_pass(map_key, inputs=(sk, view_key), outputs=(map_key,), run=build)
+        ctx.add_pass(f"salzman[{label}]", inputs=(gbuf, view_key, map_key), outputs=(out,), run=run)
+        return out
+
+
+@dataclass
+class SalzmanMap:
+    map: wp.array  # [H, W] vec4 (d, m, f, o), filtered
+    cells: wp.array  # [G*G] int32 marked cells
+    grid: int
+    znear: float
+    zfar: float
+
+    def arrays(self) -> dict[str, wp.array]:
+        return {"map": self.map, "cells": self.cells}
