@@ -14,7 +14,8 @@ def render_row(case: dict, ctx: dict) -> dict:
     """Render ``case`` (median of 3 after a warm-up) and measure its error against the cached reference."""
     from wsoft.metrics import visibility_error
 
-    ref = reference(case["scene"], width=case["width"], height=case["height"], light=case["light"], samples=case["ref_samples"], device=case["device"])
+    ref = reference(case["scene"], width=case["width"], height=case["height"], light=case["light"], samples=case["ref_samples"], device=case["device"],
+                    casters=case.get("ref_casters", "all"))
     fr = measure_render(case["scene"], case["technique"], case["params"], device=case["device"], width=case["width"], height=case["height"], light=case["light"])
     err = visibility_error(fr.V, ref["V"], ref["V_stderr"], ref["A"])
     st = fr.stats
@@ -23,7 +24,7 @@ def render_row(case: dict, ctx: dict) -> dict:
         "width": case["width"], "height": case["height"], "light": st["light"], "ref_samples": case["ref_samples"],
         "timings_ms": st["timings_ms"], "timings_ms_runs": st["timings_ms_runs"], "cpu_ms": st["cpu_ms"],
         "memory_bytes": st["memory_bytes"], "counters": st["counters"], "passes": st["passes"], "error": err,
-        "reference_ms": float(ref["ms"]),
+        "reference_ms": float(ref["ms"]), "ref_casters": case.get("ref_casters", "all"),
     }
     if case.get("image"):
         label = f"{case['technique']} " + " ".join(f"{k}={v}" for k, v in case["params"].items())
@@ -44,7 +45,8 @@ def side_by_side(case: dict, label: str, v: np.ndarray, ref: np.ndarray, cov: np
     for i, p in enumerate(panels):
         img.paste(Image.fromarray(p, "L"), (i * w, 18))
     d = ImageDraw.Draw(img)
-    for i, text in enumerate([label, f"reference {case['ref_samples']} spp", "|difference| x4"]):
+    ref_label = f"reference {case['ref_samples']} spp" + (" (dynamic casters)" if case.get("ref_casters", "all") != "all" else "")
+    for i, text in enumerate([label, ref_label, "|difference| x4"]):
         d.text((i * w + 4, 3), text, fill=0)
     name = f"{case['scene']}-{case['light'] or 'light'}-{case['technique']}-{case['device'].replace(':', '')}.png"
     rel = Path("images") / ctx["stem"] / name
@@ -70,8 +72,8 @@ def accuracy_table(renders: list[dict]) -> list[str]:
     L.append("`frame ms`: the whole render with the scene already on the device (its BVH is built once per scene and device);")
     L.append("`G-buffer ms`: the eye-view pass; `shadow ms`: the light views, depth maps and the technique's own passes.")
     L.append("")
-    L.append("| scene | light | device | res | technique | params | frame ms | G-buffer ms | shadow ms | MAE | RMSE | max | MAE penumbra | >3se |")
-    L.append("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    L.append("| scene | light | device | res | technique | params | frame ms | G-buffer ms | shadow ms | MAE | RMSE | max | MAE penumbra | >3se | reference occluders |")
+    L.append("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in sorted(renders, key=lambda r: (r["scene"], r["light"], r["device"], r["width"], r["technique"], str(r["params"]))):
         gb_ms = sum(v for k, v in r["timings_ms"].items() if k.startswith("gbuffer"))
         shadow_ms = sum(v for k, v in r["timings_ms"].items() if k not in ("total", "upload_scene", "resolve", "shade") and not k.startswith("gbuffer"))
@@ -79,7 +81,7 @@ def accuracy_table(renders: list[dict]) -> list[str]:
         e = r["error"]
         L.append(f"| {r['scene']} | {r['light'].split('/')[-1]} | {r['device']} | {r['width']}x{r['height']} | {r['technique']} | "
                  f"{', '.join(f'{k}={v}' for k, v in p.items())} | {r['timings_ms']['total']:.1f} | {gb_ms:.1f} | {shadow_ms:.1f} | {e['mae']:.4f} | "
-                 f"{e['rmse']:.4f} | {e['max']:.3f} | {e['mae_penumbra']:.4f} | {e.get('frac_outside_3se', 0):.3f} |")
+                 f"{e['rmse']:.4f} | {e['max']:.3f} | {e['mae_penumbra']:.4f} | {e.get('frac_outside_3se', 0):.3f} | {r.get('ref_casters', 'all')} |")
     return L
 
 

@@ -57,18 +57,22 @@ def load(name: str):
     return _SCENES[f]
 
 
-def reference(name: str, *, width: int, height: int, light: str | None, samples: int, seed: int = 0, camera: str | None = None, device: str | None = None) -> dict:
-    """The cached reference (V, V_stderr, A and the ms it took) for a view of a scene."""
+def reference(name: str, *, width: int, height: int, light: str | None, samples: int, seed: int = 0, camera: str | None = None,
+              device: str | None = None, casters: str = "all") -> dict:
+    """The cached reference (V, V_stderr, A and the ms it took) for a view of a scene.
+
+    ``casters = "dynamic"``: only the dynamic casters occlude (the ground truth of Salzman's mask)."""
     import wsoft
 
     f = scene_file(name)
     st = os.stat(f)
-    ident = json.dumps([os.path.abspath(f), st.st_size, st.st_mtime_ns, camera, light, width, height, samples, seed, REFERENCE_VERSION])
+    ident = json.dumps([os.path.abspath(f), st.st_size, st.st_mtime_ns, camera, light, width, height, samples, seed, REFERENCE_VERSION]
+                       + ([casters] if casters != "all" else []))
     path = cache_dir() / (hashlib.sha256(ident.encode()).hexdigest()[:24] + ".npz")
     if path.exists():
         z = np.load(path)
         return {k: z[k] for k in z.files} | {"cached": True}
-    fr = wsoft.render(load(name), "reference", width=width, height=height, camera=camera, light=light, device=device, samples=samples, seed=seed)
+    fr = wsoft.render(load(name), "reference", width=width, height=height, camera=camera, light=light, device=device, samples=samples, seed=seed, casters=casters)
     out = {"V": fr.V, "V_stderr": fr["V_stderr"], "A": fr["A"], "ms": np.float64(fr.stats["timings_ms"]["total"])}
     tmp = path.with_suffix(".tmp.npz")
     np.savez_compressed(tmp, **out)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import add_camera, add_quad, add_rect_light, make_stage, parallel_rect_exact, scene_path
+from conftest import add_camera, add_quad, make_stage, parallel_rect_exact, scene_path
 
 import wsoft
 from wsoft.raster.lightview import fit_light_view
@@ -82,13 +82,9 @@ def test_receiver_plane_bias_removes_acne_on_wide_kernels(device):
 def test_pcss_underestimates_umbra_with_overlapping_blockers(device):
     """Known failure (pinned): blockers at two depths average to one too near the light, so the
     filter grows and lets light into the umbra of the lower occluder."""
-    st = make_stage()
-    add_quad(st, "/World/G", (0, 0, 0), 6)
-    add_quad(st, "/World/Low", (0, 0, 0.6), 1.5)  # large, close to the ground: a wide umbra
-    add_quad(st, "/World/High", (0.2, 0, 3.0), 0.2)  # small, near the light, inside the blocker search
-    add_rect_light(st, "/World/L", (0, 0, 4), 1.0, 1.0)
-    add_camera(st, "/World/Cam", (0, -5, 0.35), (0, 0, 0), focal=16)  # low, to see the ground under Low
-    scene = wsoft.load_scene(st)
+    from bench.failures import pcss_overlapping_blockers
+
+    scene = wsoft.load_scene(pcss_overlapping_blockers())
     ref = wsoft.render(scene, "reference", width=96, height=96, device=device, samples=256)
     pcss = wsoft.render(scene, "pcss", width=96, height=96, device=device)
     umbra = (ref["A"] > 0) & (np.abs(ref["P.Z"]) < 1e-3) & (ref.V == 0.0)
@@ -96,8 +92,7 @@ def test_pcss_underestimates_umbra_with_overlapping_blockers(device):
     leaked = pcss.V[umbra] > 0.05
     assert leaked.mean() > 0.05, "the failure case no longer shows: update the test and the docs"
     # with only the low occluder, the same umbra is dark
-    st.RemovePrim("/World/High")
-    alone = wsoft.render(wsoft.load_scene(st), "pcss", width=96, height=96, device=device)
+    alone = wsoft.render(wsoft.load_scene(pcss_overlapping_blockers(high=False)), "pcss", width=96, height=96, device=device)
     assert np.mean(alone.V[umbra] > 0.05) < 0.25 * leaked.mean()
 
 
@@ -107,18 +102,6 @@ def test_bad_parameters():
         wsoft.render(scene, "pcf", width=8, height=8, device="cpu", taps=10)
     with pytest.raises(wsoft.ParameterError, match="not grid or poisson"):
         wsoft.render(scene, "pcss", width=8, height=8, device="cpu", pattern="hex")
-
-
-def _closed_box(stage, path, lo, hi):
-    from pxr import UsdGeom
-
-    m = UsdGeom.Mesh.Define(stage, path)
-    p = [(x, y, z) for z in (lo[2], hi[2]) for y in (lo[1], hi[1]) for x in (lo[0], hi[0])]
-    quads = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
-    m.CreatePointsAttr(p)
-    m.CreateFaceVertexCountsAttr([4] * 6)
-    m.CreateFaceVertexIndicesAttr([i for q in quads for i in q])
-    return m
 
 
 @pytest.mark.parametrize("technique", ["vsm", "esm"])
@@ -141,17 +124,9 @@ def test_vsm_light_bleeding_with_stacked_occluders(device):
     """Known failure (pinned): an upper occluder's edge over a lower occluder's umbra makes the
     blurred moments' variance large there, and Chebyshev's bound lets light bleed in; the
     light-bleeding reduction removes it."""
-    def stage(upper: bool):
-        st = make_stage()
-        add_quad(st, "/World/G", (0, 0, 0), 6)
-        add_quad(st, "/World/Lower", (0, 0, 0.5), 1.5)
-        if upper:
-            add_quad(st, "/World/Upper", (-0.8, 0, 2.5), 0.8)  # its edge at x = 0, over Lower's umbra
-        add_rect_light(st, "/World/L", (0, 0, 4), 0.3, 0.3)
-        add_camera(st, "/World/Cam", (0, -5, 0.3), (0, 0, 0.1), focal=16)  # low: sees under Lower
-        return wsoft.load_scene(st)
+    from bench.failures import vsm_stacked_occluders
 
-    both, lower = stage(True), stage(False)
+    both, lower = wsoft.load_scene(vsm_stacked_occluders()), wsoft.load_scene(vsm_stacked_occluders(upper=False))
     ref = wsoft.render(both, "reference", width=96, height=96, device=device, samples=64)
     kw = dict(width=96, height=96, device=device, radius=4)
     alone = wsoft.render(lower, "vsm", bleed_reduction=0.0, **kw)
@@ -167,16 +142,9 @@ def test_vsm_light_bleeding_with_stacked_occluders(device):
 def test_esm_light_leaks_near_contact(device):
     """Known failure (pinned): a thin plate just above the ground; the shadowed ground is only a
     little behind the plate, exp(-c (z - d)) stays above 0 and light leaks in unless c is large."""
-    from pxr import Gf, UsdGeom, UsdLux
+    from bench.failures import esm_contact
 
-    st = make_stage()
-    add_quad(st, "/World/G", (0, 0, 0), 4)
-    _closed_box(st, "/World/Plate", (-1.0, -1.0, 0.1), (1.0, 1.0, 0.13))
-    sun = UsdLux.DistantLight.Define(st, "/World/Sun")
-    sun.CreateAngleAttr(0.5)
-    UsdGeom.XformCommonAPI(sun).SetRotate(Gf.Vec3f(0, -45, 0))
-    add_camera(st, "/World/Cam", (1, -3, 3), (0.3, 0, 0), focal=18)
-    scene = wsoft.load_scene(st)
+    scene = wsoft.load_scene(esm_contact())
     ref = wsoft.render(scene, "reference", width=96, height=96, device=device, samples=64)
     umbra = (ref["A"] > 0) & (np.abs(ref["P.Z"]) < 1e-3) & (ref.V == 0.0)
     assert umbra.sum() > 50

@@ -457,6 +457,13 @@ def set_display_color(mesh: UsdGeom.Mesh, color: Sequence[float]) -> None:
 # ---------------------------------------------------------------------------
 
 
+def mark_casters(stage: Usd.Stage, paths: Sequence[str]) -> None:
+    """Mark the occluders of a test scene as the *dynamic casters* of Salzman's method
+    (``wsoft:dynamic = true``); the ground stays a static receiver. Other techniques ignore it."""
+    for path in paths:
+        stage.GetPrimAtPath(path).CreateAttribute("wsoft:dynamic", Sdf.ValueTypeNames.Bool, custom=True).Set(True)
+
+
 def scene_box_plane(out_dir: str) -> Dict[str, object]:
     path = os.path.join(out_dir, "box_plane.usda")
     stage = new_stage(path, "Z")
@@ -481,6 +488,7 @@ def scene_box_plane(out_dir: str) -> Dict[str, object]:
     check_points_down(light.GetPrim(), (0, 0, -1), 0.999)
 
     make_camera(stage, (0.0, -6.0, 9.0), (0.0, 0.0, 0.0), (0.0, 0.0, 1.0), clip=(0.1, 100.0))
+    mark_casters(stage, ['/World/Occluder'])
     stage.GetRootLayer().Save()
     return {"file": path, "triangles": triangle_count(ground[1]) + triangle_count(occluder[1])}
 
@@ -533,6 +541,7 @@ def scene_contact(out_dir: str) -> Dict[str, object]:
     check_points_down(light.GetPrim(), (0, -1, 0), 0.999)
 
     make_camera(stage, (0.5, 4.0, 7.0), (0.3, 0.4, 0.3), (0.0, 1.0, 0.0), clip=(0.1, 100.0))
+    mark_casters(stage, ['/World/Cube', '/World/Sphere', '/World/Plank'])
     stage.GetRootLayer().Save()
     return {"file": path, "triangles": tris}
 
@@ -880,6 +889,7 @@ def scene_penumbra_ramp(out_dir: str) -> Dict[str, object]:
     check_points_down(light.GetPrim(), (0, 0, -1), 0.999)
 
     make_camera(stage, (5.0, -15.0, 12.0), (5.0, 0.0, 0.6), (0.0, 0.0, 1.0), clip=(0.1, 200.0))
+    mark_casters(stage, ['/World/Plates'])
     stage.GetRootLayer().Save()
     return {"file": path, "triangles": tris}
 

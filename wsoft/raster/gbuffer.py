@@ -47,6 +47,7 @@ def trace_gbuffer(
     dist: wp.array[float],
     prim: wp.array[wp.int32],
     uv: wp.array[wp.vec2],
+    bary: wp.array[wp.vec2],
 ):
     idx = wp.tid() + offset
     npix = width * height
@@ -110,12 +111,14 @@ def trace_gbuffer(
         dist[idx] = wp.length(p - o)
         prim[idx] = face
         uv[idx] = cut.tri_uv[3 * face] * bu + cut.tri_uv[3 * face + 1] * bv + cut.tri_uv[3 * face + 2] * (1.0 - bu - bv)
+        bary[idx] = wp.vec2(bu, bv)
     else:
         pos[idx] = wp.vec3(0.0)
         nrm[idx] = wp.vec3(0.0)
         dist[idx] = 0.0
         prim[idx] = -1
         uv[idx] = wp.vec2(0.0)
+        bary[idx] = wp.vec2(0.0)
 
 
 @dataclass
@@ -123,7 +126,8 @@ class GBuffer:
     """Eye-view samples, flat arrays of length ``spp*height*width`` (sample-major).
 
     ``pos``/``nrm`` vec3 world position and viewer-facing unit normal; ``dist`` float32 camera
-    distance; ``prim`` int32 triangle index (-1 = background); ``uv`` vec2 texture coordinates.
+    distance; ``prim`` int32 triangle index (-1 = background); ``uv`` vec2 texture coordinates;
+    ``bary`` vec2 weights (u, v) of the triangle's first two corners (the third is 1 - u - v).
     """
 
     width: int
@@ -134,13 +138,14 @@ class GBuffer:
     dist: wp.array
     prim: wp.array
     uv: wp.array
+    bary: wp.array
 
     @property
     def count(self) -> int:
         return self.width * self.height * self.spp
 
     def arrays(self) -> dict[str, wp.array]:
-        return {"pos": self.pos, "nrm": self.nrm, "dist": self.dist, "prim": self.prim, "uv": self.uv}
+        return {"pos": self.pos, "nrm": self.nrm, "dist": self.dist, "prim": self.prim, "uv": self.uv, "bary": self.bary}
 
     def host(self, name: str) -> np.ndarray:
         """A field as numpy, shape [spp, H, W(, C)]."""
@@ -160,12 +165,13 @@ def render_gbuffer(ds: DeviceScene, cam: CameraGPU, width: int, height: int, spp
         dist=wp.empty(n, dtype=float, device=dev),
         prim=wp.empty(n, dtype=wp.int32, device=dev),
         uv=wp.empty(n, dtype=wp.vec2, device=dev),
+        bary=wp.empty(n, dtype=wp.vec2, device=dev),
     )
     launch_chunked(
         trace_gbuffer,
         n,
         inputs=[ds.mesh.id, ds.cutouts, int(alpha_tested and ds.has_cutouts), cam, width, height, spp],
-        outputs=[g.pos, g.nrm, g.dist, g.prim, g.uv],
+        outputs=[g.pos, g.nrm, g.dist, g.prim, g.uv, g.bary],
         device=dev,
     )
     return g

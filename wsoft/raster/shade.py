@@ -1,4 +1,9 @@
-"""A simple diffuse shading of every G-buffer sample with the lights' visibilities (``R G B``)."""
+"""A simple diffuse shading of every G-buffer sample with the lights' visibilities (``R G B``).
+
+Surfaces with baked lighting (``primvars:wsoft:bakedLight``) are lit by it, masked by the mean
+visibility of the rendered lights (a lightmap masked by a shadow map, as Salzman intends);
+others get albedo x (ambient + mean over lights of V max(0, N.L)).
+"""
 
 from __future__ import annotations
 
@@ -21,21 +26,27 @@ def accumulate_light(
     weight: float,
     # outputs
     lum: wp.array[float],
+    vmean: wp.array[float],
 ):
-    """lum += weight * V * max(0, N . L) per sample, L toward the light's centre."""
+    """lum += weight * V * max(0, N . L) per sample, L toward the light's centre; vmean += weight * V."""
     i = wp.tid() + offset
     if prim[i] < 0:
         return
     d = light_center_dir(L, pos[i])
     lum[i] = lum[i] + weight * vis[i] * wp.max(wp.dot(nrm[i], wp.vec3(d[0], d[1], d[2])), 0.0)
+    vmean[i] = vmean[i] + weight * vis[i]
 
 
 @wp.kernel
 def finish_shading(
     offset: int,
     prim: wp.array[wp.int32],
+    bary: wp.array[wp.vec2],
     tri_albedo: wp.array[wp.vec3],
+    tri_baked: wp.array[wp.vec3],
+    tri_has_baked: wp.array[wp.int32],
     lum: wp.array[float],
+    vmean: wp.array[float],
     ambient: float,
     # outputs
     rgb: wp.array[wp.vec3],
@@ -46,6 +57,10 @@ def finish_shading(
         rgb[i] = wp.vec3(0.0)
         return
     c = tri_albedo[f] * (ambient + (1.0 - ambient) * lum[i])
+    if tri_has_baked[f] != 0:
+        b = bary[i]
+        light = tri_baked[3 * f] * b[0] + tri_baked[3 * f + 1] * b[1] + tri_baked[3 * f + 2] * (1.0 - b[0] - b[1])
+        c = wp.cw_mul(tri_albedo[f], light) * vmean[i]
     rgb[i] = wp.vec3(wp.clamp(c[0], 0.0, 1.0), wp.clamp(c[1], 0.0, 1.0), wp.clamp(c[2], 0.0, 1.0))
 
 
@@ -53,9 +68,13 @@ def shade(ds, gb, lights_and_vis: list[tuple[LightGPU, wp.array]]) -> wp.array:
     """RGB per G-buffer sample (vec3, background black): albedo x (ambient + mean over lights of V cos)."""
     n = gb.count
     lum = wp.zeros(n, dtype=float, device=ds.device)
+    vmean = wp.zeros(n, dtype=float, device=ds.device)
     w = 1.0 / max(len(lights_and_vis), 1)
     for L, vis in lights_and_vis:
-        launch_chunked(accumulate_light, n, inputs=[L, gb.pos, gb.nrm, gb.prim, vis, w], outputs=[lum], device=ds.device, min_chunk=1 << 14)
+        launch_chunked(accumulate_light, n, inputs=[L, gb.pos, gb.nrm, gb.prim, vis, w], outputs=[lum, vmean], device=ds.device, min_chunk=1 << 14)
     rgb = wp.empty(n, dtype=wp.vec3, device=ds.device)
-    launch_chunked(finish_shading, n, inputs=[gb.prim, ds.tri_albedo, lum, AMBIENT], outputs=[rgb], device=ds.device, min_chunk=1 << 14)
+    launch_chunked(
+        finish_shading, n, inputs=[gb.prim, gb.bary, ds.tri_albedo, ds.tri_baked, ds.tri_has_baked, lum, vmean, AMBIENT],
+        outputs=[rgb], device=ds.device, min_chunk=1 << 14,
+    )
     return rgb

@@ -132,6 +132,8 @@ class DeviceScene:
     has_cutouts: int
     culled_closed: int  # triangles of closed surfaces whose far-facing side the light view may skip
     tri_albedo: wp.array  # [T] vec3
+    tri_baked: wp.array  # [3T] vec3 baked light per corner (primvars:wsoft:bakedLight)
+    tri_has_baked: wp.array  # [T] int32
     diagonal: float
     lo: np.ndarray
     hi: np.ndarray
@@ -199,6 +201,12 @@ def upload_scene(scene: Scene, device: str) -> DeviceScene:
     cut.tex_wrap_t = arr([t.wrap_t for t in scene.textures], wp.int32)
     cut.tex_data = wp.array(tex_data.astype(np.float32), dtype=wp.float32, device=device)
     albedo = np.array([m.albedo for m in scene.materials], np.float32)[scene.tri_material]
+    if scene.tri_baked is not None and scene.triangle_count:
+        baked = scene.tri_baked.astype(np.float32)
+        has_baked = np.isfinite(baked[:, 0, 0]).astype(np.int32)
+    else:
+        baked = np.zeros((max(scene.triangle_count, 1), 3, 3), np.float32)
+        has_baked = np.zeros(max(scene.triangle_count, 1), np.int32)
     lo, hi = scene.bounds
     return DeviceScene(
         device=device,
@@ -209,6 +217,8 @@ def upload_scene(scene: Scene, device: str) -> DeviceScene:
         has_cutouts=int(bool(cut_ids) and bool(np.any(tri_cut >= 0))),
         culled_closed=int(np.count_nonzero(cull)),
         tri_albedo=wp.array(albedo, dtype=wp.vec3, device=device),
+        tri_baked=wp.array(np.nan_to_num(baked).reshape(-1, 3), dtype=wp.vec3, device=device),
+        tri_has_baked=wp.array(has_baked, dtype=wp.int32, device=device),
         diagonal=scene.diagonal,
         lo=lo,
         hi=hi,

@@ -364,7 +364,7 @@ class _StageReader:
             v = op.Get(self.timecode)
             mat.opacity = float(v) if v is not None else 1.0
             if mat.opacity < 1.0 and mat.opacity_threshold <= 0.0:
-                self.warn(material.GetPrim(), f"constant opacity {mat.opacity:g} (translucency) is not modelled; opaque")
+                self.warn(material.GetPrim(), f"constant opacity {mat.opacity:g} (translucency): opaque for every technique but salzman (its transparency component)")
         return mat
 
     def read_texture(self, tex_shader, channel: str, mat_prim) -> int:
