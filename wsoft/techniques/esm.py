@@ -27,7 +27,7 @@ from wsoft.accel.blur import blur_log
 from wsoft.parallel import launch_chunked
 from wsoft.raster.lightview import LightViewGPU, view_of
 from wsoft.techniques.base import Technique, check, param
-from wsoft.techniques.filtering import map_coords
+from wsoft.techniques.filtering import bilinear_cell, map_coords
 from wsoft.techniques.vsm import normalised
 
 
@@ -55,17 +55,14 @@ def make_exponent(offset: int, depth: wp.array[float], near: float, far: float, 
 
 @wp.func
 def bilinear_log(lv: LightViewGPU, lmap: wp.array2d[float], m: wp.vec2) -> float:
-    """log of the bilinear interpolation of exp(lmap)."""
-    fx = (m[0] - lv.window[0]) * lv.scale[0] - 0.5
-    fy = (m[1] - lv.window[2]) * lv.scale[1] - 0.5
-    x0 = int(wp.floor(fx))
-    y0 = int(wp.floor(fy))
-    ax = fx - float(x0)
-    ay = fy - float(y0)
-    xa = wp.clamp(x0, 0, lv.width - 1)
-    xb = wp.clamp(x0 + 1, 0, lv.width - 1)
-    ya = wp.clamp(y0, 0, lv.height - 1)
-    yb = wp.clamp(y0 + 1, 0, lv.height - 1)
+    """log of the bilinear interpolation of exp(lmap), evaluated around the largest of the four."""
+    cell = bilinear_cell(lv, m)
+    ax = cell[2]
+    ay = cell[3]
+    xa = wp.clamp(int(cell[0]), 0, lv.width - 1)
+    xb = wp.clamp(int(cell[0]) + 1, 0, lv.width - 1)
+    ya = wp.clamp(int(cell[1]), 0, lv.height - 1)
+    yb = wp.clamp(int(cell[1]) + 1, 0, lv.height - 1)
     a = lmap[ya, xa]
     b = lmap[ya, xb]
     c = lmap[yb, xa]

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import warp as wp
@@ -81,6 +82,30 @@ def depth_at(lv: LightViewGPU, depth: wp.array2d[float], m: wp.vec2) -> float:
     if fx < 0.0 or fy < 0.0 or fx >= float(lv.width) or fy >= float(lv.height):
         return DEPTH_CLEAR
     return depth[int(fy), int(fx)]
+
+
+@wp.func
+def bilinear_cell(lv: LightViewGPU, m: wp.vec2) -> wp.vec4:
+    """Bilinear footprint of window coordinates ``m``: (x0, y0, ax, ay) with the texel pair
+    (x0, x0 + 1) x (y0, y0 + 1) and weights ax, ay toward the second of each pair."""
+    fx = (m[0] - lv.window[0]) * lv.scale[0] - 0.5
+    fy = (m[1] - lv.window[2]) * lv.scale[1] - 0.5
+    x0 = wp.floor(fx)
+    y0 = wp.floor(fy)
+    return wp.vec4(x0, y0, fx - x0, fy - y0)
+
+
+@wp.func
+def bilinear(lv: LightViewGPU, tex: wp.array2d(dtype=Any), m: wp.vec2):
+    """Bilinear read of a map (any vector or float texel type) at window coordinates ``m``, clamped at the edges."""
+    c = bilinear_cell(lv, m)
+    xa = wp.clamp(int(c[0]), 0, lv.width - 1)
+    xb = wp.clamp(int(c[0]) + 1, 0, lv.width - 1)
+    ya = wp.clamp(int(c[1]), 0, lv.height - 1)
+    yb = wp.clamp(int(c[1]) + 1, 0, lv.height - 1)
+    top = tex[ya, xa] * (1.0 - c[2]) + tex[ya, xb] * c[2]
+    bot = tex[yb, xa] * (1.0 - c[2]) + tex[yb, xb] * c[2]
+    return top * (1.0 - c[3]) + bot * c[3]
 
 
 @wp.func

@@ -45,7 +45,7 @@ from wsoft.accel.grid import build_grid
 from wsoft.parallel import launch_chunked
 from wsoft.raster.lightview import DEPTH_CLEAR, LightViewGPU, rasterize, view_of
 from wsoft.techniques.base import Technique, check, param
-from wsoft.techniques.filtering import map_coords
+from wsoft.techniques.filtering import bilinear, map_coords
 
 
 @dataclass(frozen=True)
@@ -123,23 +123,6 @@ def quantize8(offset: int, m: wp.array[wp.vec4]):
     )
 
 
-@wp.func
-def bilinear_vec4(lv: LightViewGPU, smap: wp.array2d[wp.vec4], m: wp.vec2) -> wp.vec4:
-    fx = (m[0] - lv.window[0]) * lv.scale[0] - 0.5
-    fy = (m[1] - lv.window[2]) * lv.scale[1] - 0.5
-    x0 = int(wp.floor(fx))
-    y0 = int(wp.floor(fy))
-    ax = fx - float(x0)
-    ay = fy - float(y0)
-    xa = wp.clamp(x0, 0, lv.width - 1)
-    xb = wp.clamp(x0 + 1, 0, lv.width - 1)
-    ya = wp.clamp(y0, 0, lv.height - 1)
-    yb = wp.clamp(y0 + 1, 0, lv.height - 1)
-    top = smap[ya, xa] * (1.0 - ax) + smap[ya, xb] * ax
-    bot = smap[yb, xa] * (1.0 - ax) + smap[yb, xb] * ax
-    return top * (1.0 - ay) + bot * ay
-
-
 @wp.kernel
 def shade_salzman(
     offset: int,
@@ -178,7 +161,7 @@ def shade_salzman(
             rejected[i] = 1
             return
     z = (pv[2] - znear) / (zfar - znear)
-    vis[i] = 1.0 - salzman_shadow(bilinear_vec4(lv, smap, m), z, bias, far_bound, transparency)
+    vis[i] = 1.0 - salzman_shadow(bilinear(lv, smap, m), z, bias, far_bound, transparency)
 
 
 class Salzman(Technique):

@@ -29,7 +29,7 @@ from wsoft.accel.blur import blur_moments
 from wsoft.parallel import launch_chunked
 from wsoft.raster.lightview import LightViewGPU, view_of
 from wsoft.techniques.base import Technique, check, param
-from wsoft.techniques.filtering import map_coords
+from wsoft.techniques.filtering import bilinear, map_coords
 
 
 @dataclass(frozen=True)
@@ -62,23 +62,6 @@ def make_moments(offset: int, depth: wp.array[float], near: float, far: float, o
     out[i] = wp.vec2(d, d * d)
 
 
-@wp.func
-def bilinear_vec2(lv: LightViewGPU, mom: wp.array2d[wp.vec2], m: wp.vec2) -> wp.vec2:
-    fx = (m[0] - lv.window[0]) * lv.scale[0] - 0.5
-    fy = (m[1] - lv.window[2]) * lv.scale[1] - 0.5
-    x0 = int(wp.floor(fx))
-    y0 = int(wp.floor(fy))
-    ax = fx - float(x0)
-    ay = fy - float(y0)
-    xa = wp.clamp(x0, 0, lv.width - 1)
-    xb = wp.clamp(x0 + 1, 0, lv.width - 1)
-    ya = wp.clamp(y0, 0, lv.height - 1)
-    yb = wp.clamp(y0 + 1, 0, lv.height - 1)
-    top = mom[ya, xa] * (1.0 - ax) + mom[ya, xb] * ax
-    bot = mom[yb, xa] * (1.0 - ax) + mom[yb, xb] * ax
-    return top * (1.0 - ay) + bot * ay
-
-
 @wp.kernel
 def shade_vsm(
     offset: int,
@@ -105,7 +88,7 @@ def shade_vsm(
         vis[i] = 1.0
         return
     z = normalised(pv[2], lv.near, lv.far) - bias
-    e = bilinear_vec2(lv, mom, m)
+    e = bilinear(lv, mom, m)
     mu = e[0]
     if z <= mu:
         vis[i] = 1.0
