@@ -114,3 +114,10 @@ def test_unwritable_output_is_one_line(tmp_path):
             "--out", str(blocker / "sub" / "o.exr"), check=False)
     assert p.returncode == 2 and "Traceback" not in p.stderr
     assert p.stderr.strip().splitlines()[-1].startswith("wsoft: error:")
+
+
+def test_plan_text():
+    out = run("plan", scene_path("multi_light.usda"), "-t", "hard").stdout
+    assert "/World/Lights/Dome" in out and "shadow:enable = false" in out
+    assert "cutout (perforated) materials: (none)" in out
+    assert "hard: upload_scene -> gbuffer -> " in out

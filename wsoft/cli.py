@@ -58,14 +58,14 @@ def cmd_plan(args) -> int:
         print(json.dumps(p, indent=2))
         return 0
     print(f"scene {p['scene']}: {p['triangles']} triangles, up {p['up_axis']}, {p['meters_per_unit']:g} m/unit")
-    print("shadow-casting lights:")
-    for l in p["lights"] or [{"path": "(none)", "kind": "", "size": ""}]:
+    print("shadow-casting lights:" + ("" if p["lights"] else " (none)"))
+    for l in p["lights"]:
         print(f"  {l['path']:<32} {l['kind']:<8} {l['size']}")
-    print("lights skipped:")
-    for l in p["skipped_lights"] or [{"path": "(none)", "kind": "", "reason": ""}]:
+    print("lights skipped:" + ("" if p["skipped_lights"] else " (none)"))
+    for l in p["skipped_lights"]:
         print(f"  {l['path']:<32} {l['kind']:<12} {l['reason']}")
-    print("cutout (perforated) materials:")
-    for m in p["cutout_materials"] or [{"path": "(none)", "triangles": ""}]:
+    print("cutout (perforated) materials:" + ("" if p["cutout_materials"] else " (none)"))
+    for m in p["cutout_materials"]:
         print(f"  {m['path']:<32} {m['triangles']} triangles")
     print(f"dynamic casters: {', '.join(p['dynamic_prims']) or '(none)'}")
     print(f"triangles with baked light: {p['baked_light_triangles']}")
