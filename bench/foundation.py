@@ -204,10 +204,6 @@ class _threads:
 # -- report ------------------------------------------------------------------------------------
 
 
-def _fmt(x, nd=4):
-    return f"{x:.{nd}f}" if isinstance(x, float) else str(x)
-
-
 def report(rows: list[dict], md: Path, ctx: dict) -> None:
     renders = [r for r in rows if r["case"]["kind"] == "render"]
     raster = [r for r in rows if r["case"]["kind"] == "raster_vs_raycast"]
