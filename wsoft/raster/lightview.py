@@ -27,6 +27,7 @@ from wsoft.scene.types import LIGHT_DISTANT, LIGHT_SPHERE, LIGHT_POINT, Light
 
 DEPTH_CLEAR = 1.0e30  # value of texels no triangle covers (finite on purpose)
 GPU_BAND_ROWS = 64  # CUDA: rows per band (one thread per triangle and band)
+SMALL_BOX_TEXELS = wp.constant(8)  # triangles whose texel box is this small take the flat loop
 CPU_CHUNK = 32768  # CPU: triangles per launch; a worker's chunks are interleaved with the others'
 BIG_TRIANGLE_TEXELS = 4096  # CPU: triangles with a larger texel bounding box go to the banded pass
 PRIVATE_MAP_BUDGET = 1 << 30  # CPU: bytes allowed for per-worker private depth maps
@@ -311,6 +312,35 @@ def raster_triangle(
         hx0 = 0.5 * (wp.abs(g0x) + wp.abs(g0y))
         hx1 = 0.5 * (wp.abs(g1x) + wp.abs(g1y))
         hx2 = 0.5 * (wp.abs(g2x) + wp.abs(g2y))
+    nx = x1 - x0 + 1
+    if conservative == 0 and alpha == 0 and nx * (y1 - y0 + 1) <= SMALL_BOX_TEXELS:
+        # a small triangle: test every texel centre of its box in one flat loop (fewer branches
+        # than lines and spans); barycentrics and q from the box's first centre (no drift this small)
+        pxb = float(x0) + 0.5
+        pyb = float(y0) + 0.5
+        b0 = edge(tb[0], tb[1], tc[0], tc[1], pxb, pyb) * inv_area
+        b1 = edge(tc[0], tc[1], ta[0], ta[1], pxb, pyb) * inv_area
+        qb0 = b0 * qa + b1 * qb + (1.0 - b0 - b1) * qc
+        dx = int(0)
+        dy = int(0)
+        for _k in range(nx * (y1 - y0 + 1)):
+            fx = float(dx)
+            fy = float(dy)
+            l0 = b0 + g0x * fx + g0y * fy
+            l1 = b1 + g1x * fx + g1y * fy
+            if l0 >= 0.0 and l1 >= 0.0 and 1.0 - l0 - l1 >= 0.0:
+                z = qb0 + qx * fx + qy * fy
+                if lv.persp != 0:
+                    z = 1.0 / wp.max(z, 1.0e-30)
+                if use_gate == 0:
+                    wp.atomic_min(depth, y0 + dy, x0 + dx, z)
+                elif z > gate[y0 + dy, x0 + dx] * 1.0001:
+                    wp.atomic_min(depth, y0 + dy, x0 + dx, z)
+            dx += 1
+            if dx == nx:
+                dx = 0
+                dy += 1
+        return
     # plain case (no alpha test, not conservative): walk the exact span of covered texel
     # centres on each line and evaluate the depth plane directly at each texel. Lines run along
     # the bounding box's longer side (columns for a tall, thin triangle): fewer, longer spans.
