@@ -60,16 +60,11 @@ def test_conservative_covers_every_touched_texel(device, file, light):
     assert (cons < DEPTH_CLEAR).sum() > (std < DEPTH_CLEAR).sum()  # it really added texels
     # every point on every triangle lands in a texel whose conservative depth is not behind it
     pts = _triangle_samples(scene)
-    v = view.to_view(pts)
-    l, r, b, t = view.window
     if view.persp:
-        keep = v[:, 2] > view.near
-        v = v[keep]
-        x, y = v[:, 0] / v[:, 2], v[:, 1] / v[:, 2]
-    else:
-        x, y = v[:, 0], v[:, 1]
-    tx = np.floor((x - l) / (r - l) * view.width).astype(int)
-    ty = np.floor((y - b) / (t - b) * view.height).astype(int)
+        pts = pts[view.to_view(pts)[:, 2] > view.near]  # texel_coords keeps only these
+    v = view.to_view(pts)
+    fx, fy = view.texel_coords(pts)
+    tx, ty = np.floor(fx).astype(int), np.floor(fy).astype(int)
     inside = (tx >= 0) & (ty >= 0) & (tx < view.width) & (ty < view.height)
     assert inside.sum() > 1000
     d = cons[ty[inside], tx[inside]]

@@ -83,6 +83,18 @@ class LightView:
     def to_view(self, p: np.ndarray) -> np.ndarray:
         return (np.asarray(p, np.float64) - self.origin) @ self.axes
 
+    def texel_coords(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Continuous texel coordinates (x, y) of the world points ``p`` in front of the view
+        (perspective: beyond the near plane), as the rasterizer places them."""
+        v = self.to_view(p)
+        if self.persp:
+            v = v[v[:, 2] > self.near]
+            x, y = v[:, 0] / v[:, 2], v[:, 1] / v[:, 2]
+        else:
+            x, y = v[:, 0], v[:, 1]
+        l, r, b, t = self.window
+        return (x - l) / (r - l) * self.width, (y - b) / (t - b) * self.height
+
 
 def _basis_from_axis(z: np.ndarray) -> np.ndarray:
     z = z / np.linalg.norm(z)
@@ -194,6 +206,13 @@ def fit_light_view(
 def view_of(lv: LightViewGPU, p: wp.vec3) -> wp.vec3:
     d = p - lv.origin
     return wp.vec3(wp.dot(d, lv.ax), wp.dot(d, lv.ay), wp.dot(d, lv.az))
+
+
+@wp.func
+def in_front_of_light(lv: LightViewGPU, v: wp.vec3) -> bool:
+    """Is the view-space point inside the view's depth range on the light's side (perspective:
+    beyond the near plane)? Receivers that are not have nothing mapped between them and the light."""
+    return lv.persp == 0 or v[2] > lv.near
 
 
 @wp.func

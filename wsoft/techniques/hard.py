@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import warp as wp
 
 from wsoft.parallel import launch_chunked
-from wsoft.raster.lightview import LightViewGPU, texel_of, view_of
+from wsoft.raster.lightview import LightViewGPU, in_front_of_light, texel_of, view_of
 from wsoft.scene.light_gpu import LightGPU, light_center_dir
 from wsoft.techniques.base import Technique, check, param
 
@@ -74,7 +74,7 @@ def shade_hard(
         return
     p = pos[i]
     v = view_of(lv, p)
-    if lv.persp != 0 and v[2] <= lv.near:
+    if not in_front_of_light(lv, v):
         vis[i] = 1.0  # outside the light's view: nothing between it and the light was mapped
         return
     t = texel_of(lv, v)

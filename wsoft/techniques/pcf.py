@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import warp as wp
 
 from wsoft.parallel import launch_chunked
-from wsoft.raster.lightview import LightViewGPU, view_of
+from wsoft.raster.lightview import LightViewGPU, in_front_of_light, view_of
 from wsoft.scene.light_gpu import LightGPU
 from wsoft.techniques.base import Technique, check, param
 from wsoft.techniques.filtering import depth_at, map_coords, receiver_depth, tap_offset, taps_on, texel_center, texel_size, view_dir
@@ -105,7 +105,7 @@ def shade_pcf(
         return
     p = pos[i]
     pv = view_of(lv, p)
-    if lv.persp != 0 and pv[2] <= lv.near:
+    if not in_front_of_light(lv, pv):
         vis[i] = 1.0
         return
     b = bias

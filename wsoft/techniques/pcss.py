@@ -34,7 +34,7 @@ import numpy as np
 import warp as wp
 
 from wsoft.parallel import launch_chunked
-from wsoft.raster.lightview import DEPTH_CLEAR, LightViewGPU, view_of
+from wsoft.raster.lightview import DEPTH_CLEAR, LightViewGPU, in_front_of_light, view_of
 from wsoft.techniques.base import Technique, check, param
 from wsoft.techniques.filtering import (
     LightKernel,
@@ -106,7 +106,7 @@ def shade_pcss(
         vis[i] = 1.0
         return
     pv = view_of(lv, pos[i])
-    if lv.persp != 0 and pv[2] <= lv.near:
+    if not in_front_of_light(lv, pv):
         vis[i] = 1.0
         return
     nv = view_dir(lv, nrm[i])

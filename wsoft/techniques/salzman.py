@@ -43,7 +43,7 @@ import warp as wp
 from wsoft.accel.blur import blur_vec4_within
 from wsoft.accel.grid import build_grid
 from wsoft.parallel import launch_chunked
-from wsoft.raster.lightview import DEPTH_CLEAR, LightViewGPU, rasterize, view_of
+from wsoft.raster.lightview import DEPTH_CLEAR, LightViewGPU, in_front_of_light, rasterize, view_of
 from wsoft.techniques.base import Technique, check, param
 from wsoft.techniques.filtering import bilinear, map_coords
 
@@ -147,7 +147,7 @@ def shade_salzman(
     if prim[i] < 0:
         return
     pv = view_of(lv, pos[i])
-    if lv.persp != 0 and pv[2] <= lv.near:
+    if not in_front_of_light(lv, pv):
         return
     m = map_coords(lv, pv)
     fx = (m[0] - lv.window[0]) * lv.scale[0]
@@ -226,17 +226,9 @@ class Salzman(Technique):
                 squares = []
                 for prim_id in np.unique(scene.tri_prim[casters]) if len(casters) else []:
                     pts = scene.points[scene.triangles[casters[scene.tri_prim[casters] == prim_id]].ravel()]
-                    v = view.to_view(pts)
-                    if view.persp:
-                        v = v[v[:, 2] > view.near]
-                        if len(v) == 0:
-                            continue
-                        tx, ty = v[:, 0] / v[:, 2], v[:, 1] / v[:, 2]
-                    else:
-                        tx, ty = v[:, 0], v[:, 1]
-                    l, r, b, t = view.window
-                    xs = (tx - l) / (r - l) * view.width
-                    ys = (ty - b) / (t - b) * view.height
+                    xs, ys = view.texel_coords(pts)
+                    if len(xs) == 0:
+                        continue
                     g = p.radius + 1
                     squares.append((xs.min() - g, xs.max() + g, ys.min() - g, ys.max() + g))
                 grid = build_grid(squares, view.width, view.height, gsize)

@@ -27,7 +27,7 @@ import warp as wp
 
 from wsoft.accel.blur import blur_moments
 from wsoft.parallel import launch_chunked
-from wsoft.raster.lightview import LightViewGPU, view_of
+from wsoft.raster.lightview import LightViewGPU, in_front_of_light, view_of
 from wsoft.techniques.base import Technique, check, param
 from wsoft.techniques.filtering import bilinear, map_coords
 
@@ -80,7 +80,7 @@ def shade_vsm(
         vis[i] = 1.0
         return
     pv = view_of(lv, pos[i])
-    if lv.persp != 0 and pv[2] <= lv.near:
+    if not in_front_of_light(lv, pv):
         vis[i] = 1.0
         return
     m = map_coords(lv, pv)
