@@ -6,9 +6,12 @@ Usage::
     python usd_scenes/generate.py [--out DIR] [--only NAME ...]
 
 NAME is one of: box_plane, contact, multi_light, cutout, city, penumbra_ramp,
-lightmapped_bridge (a file name with extension is accepted too).  The default output folder is the folder
-holding this script.  Every run with the same arguments writes byte-identical
-files: all randomness uses fixed seeds and nothing time-dependent is written.
+lightmapped_bridge, ogre, plants, dinosaurs, fig1_plant, fig8_tree, palm_dino
+(a file name with extension is accepted too).  The last six (organic
+paper-analog scenes: creatures, plants, trees) are built by ``organic.py``.
+The default output folder is the folder holding this script.  Every run with
+the same arguments writes byte-identical files: all randomness uses fixed
+seeds and nothing time-dependent is written.
 
 Only pxr (usd-core), numpy and Pillow are used.
 """
@@ -1044,6 +1047,25 @@ SCENES: Dict[str, Callable[[str], Dict[str, object]]] = {
     "penumbra_ramp": scene_penumbra_ramp,
     "lightmapped_bridge": scene_lightmapped_bridge,
 }
+
+
+def _organic(name: str) -> Callable[[str], dict[str, object]]:
+    """Scene from organic.py, imported on first use (organic.py imports this module)."""
+
+    def run(out_dir: str) -> dict[str, object]:
+        here = os.path.dirname(os.path.abspath(__file__))
+        if here not in sys.path:
+            sys.path.insert(0, here)
+        import organic
+
+        return organic.ORGANIC_SCENES[name](out_dir)
+
+    run.__name__ = "scene_" + name
+    return run
+
+
+for _name in ("ogre", "plants", "dinosaurs", "fig1_plant", "fig8_tree", "palm_dino"):
+    SCENES[_name] = _organic(_name)
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
