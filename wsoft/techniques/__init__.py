@@ -5,6 +5,7 @@ from __future__ import annotations
 from wsoft.errors import ParameterError
 from wsoft.techniques.base import Technique
 from wsoft.techniques.esm import ESM
+from wsoft.techniques.essm import ESSM
 from wsoft.techniques.hard import Hard
 from wsoft.techniques.pcf import PCF
 from wsoft.techniques.pcss import PCSS
@@ -12,7 +13,7 @@ from wsoft.techniques.reference import Reference
 from wsoft.techniques.salzman import Salzman
 from wsoft.techniques.vsm import VSM
 
-TECHNIQUES: dict[str, type[Technique]] = {t.name: t for t in (Reference, Hard, PCF, PCSS, VSM, ESM, Salzman)}
+TECHNIQUES: dict[str, type[Technique]] = {t.name: t for t in (Reference, Hard, PCF, PCSS, VSM, ESM, Salzman, ESSM)}
 
 
 def get_technique(name: str) -> type[Technique]:

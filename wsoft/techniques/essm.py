@@ -1,0 +1,592 @@
+"""``essm``: exponential soft shadow mapping (Shen, Feng & Yang), all of it.
+
+Passes (each timed in the stats: Table 1's EB, STG and Shadow):
+
+1. ``essm_basis`` — the light-space *linear* depth map's min/max pyramid (a hierarchical
+   shadow map) gives the effective depth range [z_min, z_max] (``depth_range=pyramid``; or
+   the scene's bounds in light space, ``bounds``). Depth is normalised to z in [0, 1] and three
+   channels are written: ``esm = e^{cz}``, ``esm-z = z e^{cz}`` and ``z``. For integer storage
+   they are normalised to [0, 1] first (§6.2): ``(e^{cz} - 1)/(e^c - 1)`` and ``z e^{cz}/e^c``.
+   The mean pyramid of the channels follows (for the tile-size test).
+2. ``essm_sat`` — a summed-area table of the three channels (:mod:`wsoft.accel.sat`):
+   ``tiles`` (uint32 SAT tile grid, μ precision bits, tile size from the pyramid test, §6.1),
+   ``uint32`` (one integer SAT) or ``float32`` (one float SAT), built by recursive doubling
+   with ``reads`` texels per pass or by a direct row/column scan; the pass count is reported.
+3. ``essm_shadow`` — per eye sample:
+
+   * the search kernel: the light's spread from z_min to the receiver (a rectangle);
+   * ESM-Z (§4.2): Z_occ = (Z_avg − e^{−cd} [w * z e^{cz}]) / (1 − s_f), s_f = e^{−cd}[w * e^{cz}];
+   * the penumbra kernel from Z_occ as in PCSS, taken as a Gaussian with the variance of that
+     box; with ``anisotropic`` the pixel's footprint on the map (from the G-buffer's
+     neighbouring samples, a unit pixel box) is added to its covariance (§5.1); the ellipse
+     of the sum (Mahalanobis radius 2) is cut into N = ceil(Y/H) rectangles (Level0), or
+     with ``level`` = X ≥ 1 each inner row is split into its inscribed rectangle and two side
+     rectangles, which are cut into 2^(X−1) x 2^(X−1) cells: cells inside the ellipse weigh 1,
+     cells crossing it 0.5, cells outside 0 (runs of equal cells are one look-up);
+   * micro-subdivision (§5.2): a rectangle whose ESM value exceeds 1 + ε is non-planar and is
+     split into n x n sub-kernels; a non-planar sub-kernel falls back to 2x2 PCF on the depth
+     map; shadow and blocker depth are combined as in the paper. With ``subdivision=1`` the
+     value is only clamped to 1 (the artifact the paper fixes).
+
+Optimal exponent (§7): c = R / (z_max − z_min) in depth units, i.e. R on the normalised depth,
+where R is the largest exponent the storage holds: μ ln 2 for integer storage (the basis spans
+e^R = 2^μ, so e^{c z_min} is still one integer unit) and ln(FLT_MAX) − ln(N²) − ln 2 for a
+float32 SAT (its corner sum of e^{cz} cannot overflow). ``c`` overrides it.
+
+| parameter | type | default | meaning |
+|---|---|---|---|
+| shadow_map_size | int | 1024 | texels per side (power of two, 256..8192) |
+| sat | str | tiles | tiles, uint32 or float32 |
+| build | str | doubling | doubling (recursive doubling) or scan |
+| reads | int | 8 | texels read per recursive-doubling pass (X) |
+| mu | int | 20 | precision bits of the integer SATs (μ) |
+| tile | int | 0 | tile size in texels (0: from the pyramid test) |
+| c | float | 0 | exponent on the normalised depth (0: the optimal R) |
+| depth_range | str | pyramid | pyramid (min/max of the map) or bounds (scene bounds) |
+| H | float | 5 | rectangle height of the ellipse rasterization, texels |
+| level | int | 0 | rasterization level X (0: Level0) |
+| subdivision | int | 3 | micro-subdivision n (n x n; 1: off) |
+| epsilon | float | 0.02 | non-planarity threshold: ESM value > 1 + ε |
+| anisotropic | bool | true | add the pixel footprint to the kernel (§5.1) |
+| bias | float | 0.002 | depth bias on the normalised depth |
+| min_radius | float | 0.5 | smallest penumbra half-width, texels |
+| max_radius | float | 512 | largest search / penumbra half-width, texels |
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import warp as wp
+
+from wsoft.accel.sat import BUILDS, STORAGES, SAT, box_area, build_sat, mean_pyramid, minmax_range, sat_box
+from wsoft.parallel import launch_chunked
+from wsoft.raster.lightview import DEPTH_CLEAR, LightViewGPU, in_front_of_light, texel_of, view_of
+from wsoft.techniques.base import Technique, check, param
+from wsoft.techniques.filtering import LightKernel, light_kernel, map_coords, receiver_depth, spread, view_dir
+
+FLT_MAX_LOG = math.log(np.finfo(np.float32).max)
+
+
+@dataclass(frozen=True)
+class ESSMParams:
+    shadow_map_size: int = param(1024, "texels per side of the light depth map (a power of two, 256..8192)")
+    sat: str = param("tiles", "summed-area table: tiles (uint32 tile grid), uint32 (full) or float32 (full)")
+    build: str = param("doubling", "SAT build: doubling (recursive doubling, counted passes) or scan (row/column scans)")
+    reads: int = param(8, "texels read per recursive-doubling pass (X in the paper)")
+    mu: int = param(20, "precision bits of the integer SATs (mu)")
+    tile: int = param(0, "SAT tile size in texels, a power of two (0: from the mip-pyramid overflow test)")
+    c: float = param(0.0, "exponent on the normalised depth (0: the optimal R of the storage)")
+    depth_range: str = param("pyramid", "effective depth range: pyramid (min/max of the map) or bounds (scene bounds)")
+    H: float = param(5.0, "height of the rectangles the ellipse kernel is cut into, in texels")
+    level: int = param(0, "ellipse rasterization level X (0: Level0)")
+    subdivision: int = param(3, "micro-subdivision n x n of non-planar kernels (1: off, values clamped)")
+    epsilon: float = param(0.02, "non-planarity threshold: an ESM value above 1 + epsilon")
+    anisotropic: bool = param(True, "convolve the penumbra kernel with the pixel footprint on the map")
+    bias: float = param(0.002, "depth bias on the normalised depth [0, 1]")
+    min_radius: float = param(0.5, "smallest penumbra half-width in texels")
+    max_radius: float = param(512.0, "largest search and penumbra half-width in texels")
+
+    def __post_init__(self):
+        n = self.shadow_map_size
+        check(256 <= n <= 8192 and n & (n - 1) == 0, f"shadow_map_size {n} must be a power of two in [256, 8192]")
+        check(self.sat in STORAGES, f"sat {self.sat!r} is not one of {', '.join(STORAGES)}")
+        check(self.build in BUILDS, f"build {self.build!r} is not one of {', '.join(BUILDS)}")
+        check(2 <= self.reads <= 64, "reads must be in [2, 64]")
+        check(8 <= self.mu <= 31, "mu must be in [8, 31]")
+        check(self.tile == 0 or (1 <= self.tile <= n and self.tile & (self.tile - 1) == 0), f"tile {self.tile} must be 0 or a power of two <= shadow_map_size")
+        check(0.0 <= self.c <= 87.0, "c must be in [0, 87] (0: optimal)")
+        check(self.depth_range in ("pyramid", "bounds"), f"depth_range {self.depth_range!r} is not pyramid or bounds")
+        check(0.25 <= self.H <= 256.0, "H must be in [0.25, 256] texels")
+        check(0 <= self.level <= 5, "level must be in [0, 5]")
+        check(1 <= self.subdivision <= 8, "subdivision must be in [1, 8]")
+        check(0.0 <= self.epsilon <= 1.0, "epsilon must be in [0, 1]")
+        check(self.bias >= 0.0, "bias must be >= 0")
+        check(0.0 < self.min_radius <= self.max_radius, "need 0 < min_radius <= max_radius")
+
+
+def optimal_exponent(storage: str, mu: int, n: int) -> float:
+    """R (§7): the largest exponent the storage holds on the normalised depth [0, 1]."""
+    if storage == "float32":
+        return FLT_MAX_LOG - 2.0 * math.log(n) - math.log(2.0)
+    return mu * math.log(2.0)
+
+
+@wp.struct
+class ESSMConsts:
+    """What the shading kernel needs to turn SAT box sums into ESM values."""
+
+    n: int
+    tile: int
+    unit: wp.float64  # basis units per stored unit
+    c: wp.float64  # exponent on the normalised depth
+    a0: wp.float64  # e^{cz} = mean(ch0) * a0 + b0
+    b0: wp.float64
+    a1: wp.float64  # z e^{cz} = mean(ch1) * a1
+    zmin: float
+    zrange: float
+    bias: float
+    eps: float
+    nsub: int
+    h: float
+    level: int
+    aniso: int
+    min_r: float
+    max_r: float
+
+
+@wp.kernel
+def essm_basis_kernel(offset: int, depth: wp.array2d[float], n: int, zmin: float, zrange: float, c: float, normalise: int,
+                      out: wp.array3d[float]):
+    i = wp.tid() + offset
+    y = i / n
+    x = i - y * n
+    d = depth[y, x]
+    z = float(1.0)
+    if d < DEPTH_CLEAR:
+        z = wp.clamp((d - zmin) / zrange, 0.0, 1.0)
+    if normalise != 0:
+        # (e^{cz} - 1) / (e^c - 1) and z e^{cz} / e^c, evaluated without overflow
+        em = wp.exp(-c)
+        e = wp.exp(c * (z - 1.0))
+        out[0, y, x] = (e - em) / (1.0 - em)
+        out[1, y, x] = z * e
+    else:
+        e = wp.exp(c * z)
+        out[0, y, x] = e
+        out[1, y, x] = z * e
+    out[2, y, x] = z
+
+
+@wp.func
+def norm_depth(q: ESSMConsts, depth: wp.array2d[float], x: int, y: int) -> float:
+    n = q.n
+    if x < 0 or y < 0 or x >= n or y >= n:
+        return 1.0
+    d = depth[y, x]
+    if d >= DEPTH_CLEAR:
+        return 1.0
+    return wp.clamp((d - q.zmin) / q.zrange, 0.0, 1.0)
+
+
+@wp.func
+def plane_depth(q: ESSMConsts, plane: wp.vec3, tc: wp.vec2, x: float, y: float) -> float:
+    """Biased normalised depth of the receiver's tangent plane at texel coordinates (x, y)."""
+    return wp.clamp(plane[0] + plane[1] * (x - tc[0]) + plane[2] * (y - tc[1]), 0.0, 1.0) - q.bias
+
+
+@wp.func
+def pcf2x2(q: ESSMConsts, depth: wp.array2d[float], u0: float, u1: float, v0: float, v1: float, plane: wp.vec3, tc: wp.vec2) -> wp.vec3:
+    """2x2 PCF at the centres of the box's quadrants against the receiver plane:
+    (visibility, mean occluding depth x occluded fraction, 1)."""
+    lit = float(0.0)
+    occ = float(0.0)
+    for a in range(2):
+        for b in range(2):
+            x = u0 + (float(a) + 0.5) * 0.5 * (u1 - u0)
+            y = v0 + (float(b) + 0.5) * 0.5 * (v1 - v0)
+            z = norm_depth(q, depth, int(wp.floor(x)), int(wp.floor(y)))
+            if z < plane_depth(q, plane, tc, x, y):
+                occ += 0.25 * z
+            else:
+                lit += 0.25
+    return wp.vec3(lit, occ, 1.0)
+
+
+@wp.func
+def esm_box(q: ESSMConsts, data: wp.array3d(dtype=Any), u0: float, u1: float, v0: float, v1: float, dn: float, want_z: int) -> wp.vec3:
+    """ESM over a box: (s, Zavg - e^{-cd} [w * z e^{cz}] (the occluded fraction times its mean depth), non-planar flag).
+    Parts of the box outside the map count as lit, unoccluded texels at depth 1."""
+    full = (u1 - u0) * (v1 - v0)
+    a = box_area(q.n, u0, u1, v0, v1)
+    if full <= 0.0:
+        return wp.vec3(1.0, 0.0, 0.0)
+    if a <= 0.0:
+        return wp.vec3(1.0, 0.0, 0.0)
+    wa = wp.float64(a)
+    fa = wp.float64(full)
+    ecd = wp.exp(-q.c * wp.float64(dn))
+    e = (sat_box(data, 0, q.n, q.tile, u0, u1, v0, v1) * q.unit / wa) * q.a0 + q.b0
+    # outside the map: lit at depth 1 -> e^{c}; the ESM of that part is e^{c(1-d)} >= 1
+    s64 = (ecd * e * wa + (fa - wa) * wp.exp(q.c * (wp.float64(1.0) - wp.float64(dn)))) / fa
+    flag = 0.0
+    if s64 > wp.float64(1.0 + q.eps):
+        flag = 1.0
+    s = float(wp.min(s64, wp.float64(1.0)))
+    bw = float(0.0)
+    if want_z != 0:
+        ze = (sat_box(data, 1, q.n, q.tile, u0, u1, v0, v1) * q.unit / wa) * q.a1
+        zavg = sat_box(data, 2, q.n, q.tile, u0, u1, v0, v1) * q.unit / wa
+        occ = (zavg - ecd * ze) * wa / fa  # the outside part holds no occluders
+        bw = wp.clamp(float(occ), 0.0, (1.0 - s) * dn)
+    return wp.vec3(s, bw, flag)
+
+
+@wp.func
+def region(q: ESSMConsts, data: wp.array3d(dtype=Any), depth: wp.array2d[float], u0: float, u1: float, v0: float, v1: float,
+           plane: wp.vec3, tc: wp.vec2, want_z: int) -> wp.vec4:
+    """A kernel rectangle with micro-subdivision: (s, occluded-depth weight, look-ups, PCF fallbacks).
+    Each (sub-)kernel is tested against the receiver plane's depth at its centre."""
+    r = esm_box(q, data, u0, u1, v0, v1, plane_depth(q, plane, tc, 0.5 * (u0 + u1), 0.5 * (v0 + v1)), want_z)
+    looks = float(1.0)
+    if r[2] == 0.0 or q.nsub <= 1:
+        return wp.vec4(r[0], r[1], looks, 0.0)
+    m = q.nsub
+    du = (u1 - u0) / float(m)
+    dv = (v1 - v0) / float(m)
+    s = float(0.0)
+    bw = float(0.0)
+    fb = float(0.0)
+    for a in range(m):
+        for b in range(m):
+            x0 = u0 + float(a) * du
+            y0 = v0 + float(b) * dv
+            ri = esm_box(q, data, x0, x0 + du, y0, y0 + dv, plane_depth(q, plane, tc, x0 + 0.5 * du, y0 + 0.5 * dv), want_z)
+            looks += 1.0
+            if ri[2] != 0.0:
+                ri = pcf2x2(q, depth, x0, x0 + du, y0, y0 + dv, plane, tc)
+                fb += 1.0
+            s += ri[0]
+            bw += ri[1]
+    inv = 1.0 / float(m * m)
+    return wp.vec4(s * inv, bw * inv, looks, fb)
+
+
+@wp.func
+def inside_ellipse(ixx: float, ixy: float, iyy: float, x: float, y: float) -> bool:
+    return ixx * x * x + 2.0 * ixy * x * y + iyy * y * y <= 4.0
+
+
+@wp.func
+def ellipse_span(sxx: float, sxy: float, syy: float, det: float, y: float) -> wp.vec2:
+    """Horizontal chord of the ellipse x^T S^-1 x <= 4 at height y: (x_left, x_right)."""
+    xc = sxy / syy * y
+    t = 1.0 - y * y / (4.0 * syy)
+    hw = 2.0 * wp.sqrt(det / syy) * wp.sqrt(wp.max(t, 0.0))
+    return wp.vec2(xc - hw, xc + hw)
+
+
+@wp.func
+def footprint_axis(pos: wp.array[wp.vec3], nrm: wp.array[wp.vec3], prim: wp.array[wp.int32], i: int, fwd: int, bwd: int,
+                   ok_f: int, ok_b: int) -> wp.vec3:
+    """World-space step to the neighbouring pixel on the same surface plane (forward, else
+    backward, negated), or zero."""
+    p = pos[i]
+    nn = nrm[i]
+    if ok_f != 0:
+        if prim[fwd] >= 0:
+            dp = pos[fwd] - p
+            if wp.abs(wp.dot(dp, nn)) <= 0.05 * wp.length(dp):
+                return dp
+    if ok_b != 0:
+        if prim[bwd] >= 0:
+            dp = p - pos[bwd]
+            if wp.abs(wp.dot(dp, nn)) <= 0.05 * wp.length(dp):
+                return dp
+    return wp.vec3(0.0, 0.0, 0.0)
+
+
+@wp.kernel
+def essm_shade(
+    offset: int,
+    lv: LightViewGPU,
+    k: LightKernel,
+    q: ESSMConsts,
+    data: wp.array3d(dtype=Any),
+    depth: wp.array2d[float],
+    pos: wp.array[wp.vec3],
+    nrm: wp.array[wp.vec3],
+    prim: wp.array[wp.int32],
+    width: int,
+    height: int,
+    # outputs
+    vis: wp.array[float],
+    looks: wp.array[wp.int32],
+    fallbacks: wp.array[wp.int32],
+):
+    i = wp.tid() + offset
+    looks[i] = 0
+    fallbacks[i] = 0
+    vis[i] = 1.0
+    if prim[i] < 0:
+        return
+    pv = view_of(lv, pos[i])
+    if not in_front_of_light(lv, pv):
+        return
+    tc = texel_of(lv, pv)
+    nf = float(q.n)
+    if tc[0] < 0.0 or tc[1] < 0.0 or tc[0] >= nf or tc[1] >= nf:
+        return
+    d_lin = pv[2]
+    dn = wp.clamp((d_lin - q.zmin) / q.zrange, 0.0, 1.0) - q.bias
+    # the receiver's tangent plane in normalised depth per texel (receiver-plane depth)
+    nv = view_dir(lv, nrm[i])
+    m0 = map_coords(lv, pv)
+    tu = 1.0 / lv.scale[0]
+    tv = 1.0 / lv.scale[1]
+    gu = (receiver_depth(lv, pv, nv, wp.vec2(m0[0] + tu, m0[1])) - receiver_depth(lv, pv, nv, wp.vec2(m0[0] - tu, m0[1]))) * 0.5 / q.zrange
+    gv = (receiver_depth(lv, pv, nv, wp.vec2(m0[0], m0[1] + tv)) - receiver_depth(lv, pv, nv, wp.vec2(m0[0], m0[1] - tv))) * 0.5 / q.zrange
+    plane = wp.vec3(dn + q.bias, gu, gv)
+    # 1. blocker search over the light's spread from the nearest depth (ESM-Z, micro-subdivided)
+    zmin_lin = q.zmin
+    sh = spread(lv, k, zmin_lin, d_lin)
+    sx = wp.clamp(sh[0] * lv.scale[0], 0.5, q.max_r)
+    sy = wp.clamp(sh[1] * lv.scale[1], 0.5, q.max_r)
+    r = region(q, data, depth, tc[0] - sx, tc[0] + sx, tc[1] - sy, tc[1] + sy, plane, tc, 1)
+    nlook = r[2]
+    nfb = r[3]
+    occluded = 1.0 - r[0]
+    if occluded <= 1.0e-4:
+        looks[i] = int(nlook)
+        fallbacks[i] = int(nfb)
+        return
+    z_occ = wp.clamp(r[1] / occluded, 0.0, wp.max(dn, 0.0))
+    # 2. penumbra from the average blocker depth, as a Gaussian with the box's variance
+    pen = spread(lv, k, q.zmin + z_occ * q.zrange, d_lin)
+    px = wp.clamp(pen[0] * lv.scale[0], q.min_r, q.max_r)
+    py = wp.clamp(pen[1] * lv.scale[1], q.min_r, q.max_r)
+    sxx = px * px / 3.0
+    syy = py * py / 3.0
+    sxy = float(0.0)
+    if q.aniso != 0:
+        # the pixel's footprint on the map (a unit pixel box, variance 1/12 per screen axis)
+        npix = width * height
+        li = i - (i / npix) * npix
+        x = li - (li / width) * width
+        y = li / width
+        ex = footprint_axis(pos, nrm, prim, i, i + 1, i - 1, int(x + 1 < width), int(x > 0))
+        ey = footprint_axis(pos, nrm, prim, i, i + width, i - width, int(y + 1 < height), int(y > 0))
+        jx = texel_of(lv, view_of(lv, pos[i] + ex)) - tc
+        jy = texel_of(lv, view_of(lv, pos[i] + ey)) - tc
+        f = 1.0 / 12.0
+        sxx += f * (jx[0] * jx[0] + jy[0] * jy[0])
+        syy += f * (jx[1] * jx[1] + jy[1] * jy[1])
+        sxy += f * (jx[0] * jx[1] + jy[0] * jy[1])
+    det = sxx * syy - sxy * sxy
+    det = wp.max(det, 1.0e-6 * sxx * syy)
+    ixx = syy / det
+    iyy = sxx / det
+    ixy = -sxy / det
+    ymax = 2.0 * wp.sqrt(syy)
+    rows = wp.max(int(wp.ceil(2.0 * ymax / q.h)), 1)
+    rows = wp.min(rows, 4096)
+    hgt = 2.0 * ymax / float(rows)
+    total = float(0.0)
+    wsum = float(0.0)
+    for row in range(rows):
+        yl = -ymax + float(row) * hgt
+        yh = yl + hgt
+        if q.level == 0 or row == 0 or row == rows - 1:
+            sp = ellipse_span(sxx, sxy, syy, det, 0.5 * (yl + yh))
+            if sp[1] > sp[0]:
+                rr = region(q, data, depth, tc[0] + sp[0], tc[0] + sp[1], tc[1] + yl, tc[1] + yh, plane, tc, 0)
+                a = (sp[1] - sp[0]) * hgt
+                total += a * rr[0]
+                wsum += a
+                nlook += rr[2]
+                nfb += rr[3]
+        else:
+            lo = ellipse_span(sxx, sxy, syy, det, yl)
+            hi = ellipse_span(sxx, sxy, syy, det, yh)
+            ia = wp.max(lo[0], hi[0])
+            ib = wp.min(lo[1], hi[1])
+            if ib > ia:
+                rr = region(q, data, depth, tc[0] + ia, tc[0] + ib, tc[1] + yl, tc[1] + yh, plane, tc, 0)
+                a = (ib - ia) * hgt
+                total += a * rr[0]
+                wsum += a
+                nlook += rr[2]
+                nfb += rr[3]
+            # the two side rectangles, 3 corners in and 1 out
+            for side in range(2):
+                xa = wp.min(lo[0], hi[0])
+                xb = ia
+                if side == 1:
+                    xa = ib
+                    xb = wp.max(lo[1], hi[1])
+                if xb > xa:
+                    if q.level == 1:
+                        rr = region(q, data, depth, tc[0] + xa, tc[0] + xb, tc[1] + yl, tc[1] + yh, plane, tc, 0)
+                        a = 0.5 * (xb - xa) * hgt
+                        total += a * rr[0]
+                        wsum += a
+                        nlook += rr[2]
+                        nfb += rr[3]
+                    else:
+                        m = int(wp.pow(2.0, float(q.level - 1)) + 0.5)
+                        cw = (xb - xa) / float(m)
+                        ch = hgt / float(m)
+                        for cy in range(m):
+                            y0 = yl + float(cy) * ch
+                            run_start = xa
+                            run_w = float(-1.0)
+                            for cx in range(m + 1):
+                                w = float(-1.0)
+                                x0 = xa + float(cx) * cw
+                                if cx < m:
+                                    cnt = int(0)
+                                    if inside_ellipse(ixx, ixy, iyy, x0, y0):
+                                        cnt += 1
+                                    if inside_ellipse(ixx, ixy, iyy, x0 + cw, y0):
+                                        cnt += 1
+                                    if inside_ellipse(ixx, ixy, iyy, x0, y0 + ch):
+                                        cnt += 1
+                                    if inside_ellipse(ixx, ixy, iyy, x0 + cw, y0 + ch):
+                                        cnt += 1
+                                    w = 0.5
+                                    if cnt == 4:
+                                        w = 1.0
+                                    if cnt == 0:
+                                        w = 0.0
+                                if w != run_w:
+                                    # close the running run of equal cells
+                                    if run_w > 0.0 and x0 > run_start:
+                                        rr = region(q, data, depth, tc[0] + run_start, tc[0] + x0, tc[1] + y0, tc[1] + y0 + ch, plane, tc, 0)
+                                        a = run_w * (x0 - run_start) * ch
+                                        total += a * rr[0]
+                                        wsum += a
+                                        nlook += rr[2]
+                                        nfb += rr[3]
+                                    run_start = x0
+                                    run_w = w
+    v = float(1.0)
+    if wsum > 0.0:
+        v = wp.clamp(total / wsum, 0.0, 1.0)
+    vis[i] = v
+    looks[i] = int(nlook)
+    fallbacks[i] = int(nfb)
+
+
+for _t in (wp.uint32, wp.float32):
+    wp.overload(essm_shade, {"data": wp.array3d(dtype=_t)})
+
+
+@dataclass
+class Basis:
+    """The ESSM basis of one light: channels [esm, esm-z, z] over the map, the depth range and exponent."""
+
+    basis: wp.array
+    pyramid: list
+    zmin: float
+    zmax: float
+    c: float  # on the normalised depth
+    normalised: bool
+    empty: bool
+
+    def arrays(self) -> dict[str, wp.array]:
+        out = {"basis": self.basis}
+        for j, lv in enumerate(self.pyramid[1:], 1):
+            out[f"pyramid{j}"] = lv
+        return out
+
+
+def depth_range(dm, mode: str, scene, device: str) -> tuple[float, float, list]:
+    """[z_min, z_max] in light-space linear depth: from the map's min/max pyramid, or the scene bounds."""
+    zmin, zmax, levels = minmax_range(dm.depth, device)
+    if mode == "bounds":
+        lo, hi = scene.bounds
+        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])], np.float64)
+        zv = dm.view.to_view(corners)[:, 2]
+        near = dm.view.near if dm.view.persp else float(zv.min())
+        zmin, zmax = max(float(zv.min()), near), float(zv.max())
+    return zmin, zmax, levels
+
+
+def make_basis(dm, *, storage: str, mu: int, c: float, mode: str, scene, device: str, pyramid: bool) -> Basis:
+    n = dm.depth.shape[0]
+    zmin, zmax, levels = depth_range(dm, mode, scene, device)
+    empty = not math.isfinite(zmin)
+    if empty:
+        zmin, zmax = 0.0, 1.0
+    rng = max(zmax - zmin, 1e-6 * max(abs(zmax), 1.0))
+    cc = c if c > 0 else optimal_exponent(storage, mu, n)
+    normalise = storage != "float32"
+    basis = wp.empty((3, n, n), dtype=float, device=device)
+    launch_chunked(essm_basis_kernel, n * n, inputs=[dm.depth, n, zmin, rng, cc, int(normalise)], outputs=[basis], device=device, min_chunk=4096)
+    pyr = mean_pyramid(basis, device) if pyramid else [basis]
+    return Basis(basis, pyr, zmin, zmin + rng, cc, normalise, empty)
+
+
+def consts_for(b: Basis, sat: SAT, p) -> ESSMConsts:
+    q = ESSMConsts()
+    q.n = sat.n
+    q.tile = sat.tile
+    q.unit = wp.float64(sat.unit)
+    q.c = wp.float64(b.c)
+    if b.normalised:
+        q.a0 = wp.float64(math.expm1(b.c))
+        q.b0 = wp.float64(1.0)
+        q.a1 = wp.float64(math.exp(b.c))
+    else:
+        q.a0 = wp.float64(1.0)
+        q.b0 = wp.float64(0.0)
+        q.a1 = wp.float64(1.0)
+    q.zmin = b.zmin
+    q.zrange = b.zmax - b.zmin
+    q.bias = p.bias
+    q.eps = p.epsilon
+    q.nsub = p.subdivision
+    q.h = p.H
+    q.level = p.level
+    q.aniso = int(p.anisotropic)
+    q.min_r = p.min_radius
+    q.max_r = p.max_radius
+    return q
+
+
+class ESSM(Technique):
+    """Exponential soft shadow mapping: ESM-Z blockers, SAT tile grids, anisotropic ellipse kernels, micro-subdivision."""
+
+    name = "essm"
+    summary = "exponential soft shadow mapping: ESM-Z blocker depth, overflow-free SAT tile grids, anisotropic kernels, micro-subdivision"
+    Params = ESSMParams
+    reads = ("gbuffer", "light_depth", "scene_bounds")
+    writes = ("visibility", "essm_basis", "essm_sat")
+
+    def add_passes(self, ctx, light) -> str:
+        p = self.params
+        gbuf = ctx.gbuffer()
+        depth = ctx.light_depth(light, size=p.shadow_map_size, soft=True)
+        label = ctx.label(light)
+        out = ctx.visibility_key(light)
+        bkey, skey = f"essm_basis[{label}]@{p.shadow_map_size}", f"essm_sat[{label}]@{p.shadow_map_size}"
+        k = light_kernel(light)
+
+        def run_basis(res):
+            b = make_basis(res[depth], storage=p.sat, mu=p.mu, c=p.c, mode=p.depth_range, scene=ctx.scene, device=ctx.device,
+                           pyramid=p.sat == "tiles" and p.tile == 0)
+            ctx.counters[f"essm[{label}].z_range"] = [b.zmin, b.zmax]
+            ctx.counters[f"essm[{label}].c_normalised"] = b.c
+            ctx.counters[f"essm[{label}].c_per_depth_unit"] = b.c / (b.zmax - b.zmin)
+            return {bkey: b}
+
+        def run_sat(res):
+            b = res[bkey]
+            sat = build_sat(b.basis, storage=p.sat, mu=p.mu, build=p.build, reads=p.reads, tile=p.tile or None, device=ctx.device,
+                            pyramid=b.pyramid if len(b.pyramid) > 1 else None)
+            ctx.counters[f"essm[{label}].sat"] = {"storage": sat.storage, "tile": sat.tile, "tiles_per_side": sat.tiles_per_side,
+                                                  "build": sat.build, "passes": sat.passes, "bytes": sat.memory_bytes(), **sat.tile_test}
+            return {skey: sat}
+
+        def run_shadow(res):
+            gb, dm, b, sat = res[gbuf], res[depth], res[bkey], res[skey]
+            n = gb.count
+            vis = wp.empty(n, dtype=float, device=ctx.device)
+            looks = wp.empty(n, dtype=wp.int32, device=ctx.device)
+            fb = wp.empty(n, dtype=wp.int32, device=ctx.device)
+            launch_chunked(essm_shade, n,
+                           inputs=[dm.view.gpu(), k, consts_for(b, sat, p), sat.data, dm.depth, gb.pos, gb.nrm, gb.prim, gb.width, gb.height],
+                           outputs=[vis, looks, fb], device=ctx.device, min_chunk=64)
+            lk = looks.numpy()
+            hit = gb.prim.numpy() >= 0
+            ctx.counters[f"essm[{label}].lookups_per_sample"] = float(lk[hit].mean()) if hit.any() else 0.0
+            ctx.counters[f"essm[{label}].pcf_fallbacks"] = int(fb.numpy().sum())
+            return {out: ctx.visibility(vis)}
+
+        ctx.add_pass(bkey, inputs=(depth,), outputs=(bkey,), run=run_basis)
+        ctx.add_pass(skey, inputs=(bkey,), outputs=(skey,), run=run_sat)
+        ctx.add_pass(f"essm_shadow[{label}]", inputs=(gbuf, depth, bkey, skey), outputs=(out,), run=run_shadow)
+        return out
