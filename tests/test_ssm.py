@@ -1,0 +1,342 @@
+"""Backprojection soft shadow mapping (``ssm``): pruning structures and microrects against brute
+force, the exact parallel-rectangle case, bitmask against area, smooth LOQ, the MSAA resolve, bad
+input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import warp as wp
+from conftest import parallel_rect_exact, scene_path
+
+import wsoft
+from wsoft.accel.ssm_structures import build_microrects, build_structure, query
+from wsoft.techniques import TECHNIQUES
+from wsoft.techniques.ssm import SSM, msaa_resolve
+
+TECHNIQUES.setdefault("ssm", SSM)  # registered by wsoft.techniques; harmless when it is
+
+INF = float("inf")
+
+
+def _random_map(n: int, seed: int) -> np.ndarray:
+    """Blocks of random depth (casters), noise, and empty texels."""
+    rng = np.random.default_rng(seed)
+    d = np.kron(rng.random((n // 4, n // 4)), np.ones((4, 4))) + 0.05 * rng.random((n, n))
+    d[rng.random((n, n)) < 0.08] = 1e30
+    return d.astype(np.float32)
+
+
+def _random_rects(n: int, count: int, seed: int, max_side: int, aspect: float | None = None) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    out = []
+    while len(out) < count:
+        x0, y0 = rng.integers(0, n, 2)
+        w, h = rng.integers(1, max_side + 1, 2)
+        x1, y1 = min(x0 + w - 1, n - 1), min(y0 + h - 1, n - 1)
+        lx, ly = x1 - x0 + 1, y1 - y0 + 1
+        if aspect is None or max(lx, ly) <= aspect * min(lx, ly):
+            out.append((x0, y0, x1, y1))
+    return np.asarray(out, np.int32)
+
+
+@pytest.mark.parametrize("kind", ["hsm", "mssm", "ysm"])
+def test_depth_ranges_against_brute_force(device, kind):
+    n = 64
+    d = _random_map(n, 1)
+    s = build_structure(kind, wp.array(d, dtype=float, device=device), device, ysm_size=16)
+    rects = _random_rects(n, 600, 2, 40)
+    got = query(s, rects, device)
+    exact = np.array([[d[y0:y1 + 1, x0:x1 + 1].min(), d[y0:y1 + 1, x0:x1 + 1].max()] for x0, y0, x1, y1 in rects])
+    assert np.all(got[:, 0] <= exact[:, 0]) and np.all(got[:, 1] >= exact[:, 1])  # always conservative
+    if kind == "mssm":  # exact while the squares tile the rectangle (aspect <= 2)
+        sq = _random_rects(n, 400, 3, 40, aspect=2.0)
+        g2 = query(s, sq, device)
+        e2 = np.array([[d[y0:y1 + 1, x0:x1 + 1].min(), d[y0:y1 + 1, x0:x1 + 1].max()] for x0, y0, x1, y1 in sq])
+        assert np.array_equal(g2, e2)
+    # every structure is exact on blocks aligned to its grid (HSM: 2^k blocks; YSM: its 4-texel grid)
+    blocks = np.array([(x, y, x + 7, y + 7) for x in range(0, n, 8) for y in range(0, n, 8)], np.int32)
+    gb = query(s, blocks, device)
+    eb = np.array([[d[y0:y1 + 1, x0:x1 + 1].min(), d[y0:y1 + 1, x0:x1 + 1].max()] for x0, y0, x1, y1 in blocks])
+    assert np.array_equal(gb, eb)
+    # the HSM is looser than the MSSM on unaligned rectangles (the interesting case happens)
+    if kind == "hsm":
+        assert np.mean(got[:, 0] < exact[:, 0]) > 0.1
+
+
+def test_structure_memory_matches_the_papers_layout():
+    """Table 1's footprints follow from the layout: HSM 4/3 N^2, MSSM (log2 N + 1) N^2, YSM HSM + log2(256) 256^2, vec2 of float32."""
+    d = wp.zeros((1024, 1024), dtype=float, device="cpu")
+    mb = {k: build_structure(k, d, "cpu").memory_bytes() / 2**20 for k in ("hsm", "mssm", "ysm")}
+    assert abs(mb["hsm"] - 10.67) < 0.01 and abs(mb["mssm"] - 88.0) < 0.01 and abs(mb["ysm"] - 14.67) < 0.01
+
+
+def _microrects_reference(d: np.ndarray, levels: int):
+    """Pure-Python greedy two-pass merge, tracking each microrect's level-0 member texels."""
+    n = d.shape[0]
+    members = {(a, b): [(a, b)] for a in range(n) for b in range(n)}
+    dep = {(a, b): float(d[b, a]) for a in range(n) for b in range(n)}
+
+    def bbox(ms):
+        xs, ys = [m[0] for m in ms], [m[1] for m in ms]
+        return (min(xs), min(ys), max(xs), max(ys))
+
+    out = []
+    for _ in range(levels):
+        m = n
+        ext = {k: bbox(v) for k, v in members.items()}
+        take = {}  # level-i texel -> owner (a, b) at level i (even, even)
+
+        def closer(x, first, second, dep=dep):
+            return abs(dep[x] - dep[first]) <= abs(dep[x] - dep[second])
+
+        for a in range(0, m, 2):
+            for b in range(0, m, 2):
+                take[(a, b)] = (a, b)
+                e = ext[(a, b)]
+                if a + 1 < m and (a + 2 >= m or closer((a + 1, b), (a, b), (a + 2, b))):
+                    take[(a + 1, b)] = (a, b)
+                    e = (min(e[0], ext[(a + 1, b)][0]), min(e[1], ext[(a + 1, b)][1]), max(e[2], ext[(a + 1, b)][2]), max(e[3], ext[(a + 1, b)][3]))
+                if b + 1 < m and (b + 2 >= m or closer((a, b + 1), (a, b), (a, b + 2))):
+                    take[(a, b + 1)] = (a, b)
+                    e = (min(e[0], ext[(a, b + 1)][0]), min(e[1], ext[(a, b + 1)][1]), max(e[2], ext[(a, b + 1)][2]), max(e[3], ext[(a, b + 1)][3]))
+                if a + 1 < m and b + 1 < m:
+                    de = ext[(a + 1, b + 1)]
+                    if a + 2 >= m or b + 2 >= m or (e[0] <= de[0] and e[1] <= de[1] and e[2] >= de[2] and e[3] >= de[3]):
+                        take[(a + 1, b + 1)] = (a, b)
+        for a in range(0, m, 2):  # second pass: whatever is left goes to the owner in + direction
+            for b in range(0, m, 2):
+                for t in ((a - 1, b), (a, b - 1), (a - 1, b - 1)):
+                    if t[0] >= 0 and t[1] >= 0 and t not in take:
+                        take[t] = (a, b)
+        assert len(take) == m * m
+        new_members, new_dep = {}, {}
+        for t, o in take.items():
+            key = (o[0] // 2, o[1] // 2)
+            new_members.setdefault(key, []).extend(members[t])
+            new_dep[key] = min(new_dep.get(key, 1e38), dep[t])
+        members, dep, n = new_members, new_dep, m // 2
+        out.append(({k: bbox(v) for k, v in members.items()}, dict(dep), {k: list(v) for k, v in members.items()}))
+    return out
+
+
+def test_microrects_against_reference_and_invariants(device):
+    n = 32
+    d = _random_map(n, 5)
+    mr = build_microrects(wp.array(d, dtype=float, device=device), device)
+    ref = _microrects_reference(d, 5)
+    partial_cover = 0
+    for i in range(1, 6):
+        ext, dep = mr.level(i)
+        rext, rdep, rmem = ref[i - 1]
+        m = n >> i
+        seen = np.zeros((n, n), int)
+        for a in range(m):
+            for b in range(m):
+                x0, y0, x1, y1 = ext[b, a]
+                assert (x0, y0, x1, y1) == rext[(a, b)]
+                assert dep[b, a] == np.float32(rdep[(a, b)])
+                # the extent holds its reference point and no other level-i one
+                rx, ry = a << i, b << i
+                assert x0 <= rx <= x1 and y0 <= ry <= y1
+                xs = [x for x in range(x0, x1 + 1) if x % (1 << i) == 0]
+                ys = [y for y in range(y0, y1 + 1) if y % (1 << i) == 0]
+                assert xs == [rx] and ys == [ry]
+                # the depth is the minimum of what it covers (its members), never above a texel in its extent's members
+                mem = rmem[(a, b)]
+                assert dep[b, a] == min(d[y, x] for x, y in mem)
+                for x, y in mem:
+                    seen[y, x] += 1
+                partial_cover += (x1 - x0 + 1) * (y1 - y0 + 1) > len(mem)
+        assert np.all(seen == 1)  # the members partition the map: no occluder is lost
+    assert partial_cover > 0  # some extents are bounding boxes of non-rectangular merges
+
+
+def _ground_error(f):
+    g = (f["A"] > 0) & (np.abs(f["P.Z"]) < 1e-3)
+    exact = parallel_rect_exact(f["P.X"], f["P.Y"], 3.0, 1.0, 1.0, 0.5)
+    err = np.abs(f.V - exact)[g]
+    pen = ((exact > 0.01) & (exact < 0.99))[g]
+    assert pen.sum() > 100
+    return err.mean(), err[pen].mean(), err.max()
+
+
+@pytest.mark.parametrize("visibility", ["area", "bitmask"])
+def test_exact_on_parallel_rectangles_at_level_0(device, visibility):
+    """Level 0, b_mo = inf: the micropatches of one planar occluder parallel to the light abut
+    when backprojected; the only error is the texels' quantisation of the occluder's edge
+    (1024^2 map) and, for the bitmask, the 32 x 32 light samples."""
+    scene = wsoft.load_scene(scene_path("box_plane.usda"))
+    f = wsoft.render(scene, "ssm", width=128, height=96, device=device, budget=INF, visibility=visibility, bitmask_size=32, pattern="regular")
+    mae, mae_pen, mx = _ground_error(f)
+    assert mae < 0.001 and mae_pen < 0.012 and mx < 0.04
+    assert set(f.stats["counters"]["ssm[Light].levels_used"]) == {"0"}
+
+
+def test_bitmask_matches_area_without_overlaps(device):
+    """One planar occluder: projections do not overlap, so the bitmask's count equals the summed
+    area up to the sample spacing."""
+    scene = wsoft.load_scene(scene_path("box_plane.usda"))
+    kw = dict(width=96, height=72, device=device, budget=INF)
+    area = wsoft.render(scene, "ssm", visibility="area", **kw)
+    bits = wsoft.render(scene, "ssm", visibility="bitmask", bitmask_size=32, pattern="regular", **kw)
+    pen = (area.V > 0.02) & (area.V < 0.98)
+    assert pen.sum() > 50
+    assert np.abs(area.V - bits.V).max() < 2.5 / 32
+
+
+def test_bitmask_avoids_over_occlusion_of_overlaps(device):
+    """Many overlapping layers (a plant): area accumulation over-occludes, the bitmask does not."""
+    from bench.harness import reference
+
+    ref = reference("penumbra_ramp", width=64, height=48, light=None, samples=64, device=device)
+    scene = wsoft.load_scene(scene_path("penumbra_ramp.usda"))
+    kw = dict(width=64, height=48, device=device, budget=INF, shadow_map_size=512)
+    a = wsoft.render(scene, "ssm", visibility="area", **kw)
+    b = wsoft.render(scene, "ssm", visibility="bitmask", **kw)
+    cov = ref["A"] > 0
+    assert np.mean(np.abs(b.V - ref["V"])[cov]) <= np.mean(np.abs(a.V - ref["V"])[cov]) + 1e-4
+
+
+def _tilted_plank():
+    """A plank rising from 0.2 to 2.2 over a ground plane under a rect light: its penumbra widens
+    along it, so the level a budget asks for changes inside one penumbra."""
+    from conftest import add_camera, add_quad, add_rect_light, make_stage
+    from pxr import UsdGeom
+
+    st = make_stage()
+    add_quad(st, "/World/G", (0, 0, 0), 6)
+    m = UsdGeom.Mesh.Define(st, "/World/Plank")
+    m.CreatePointsAttr([(-2.5, -0.6, 0.2), (2.5, -0.6, 2.2), (2.5, 0.6, 2.2), (-2.5, 0.6, 0.2)])
+    m.CreateFaceVertexCountsAttr([4])
+    m.CreateFaceVertexIndicesAttr([0, 1, 2, 3])
+    m.CreateDoubleSidedAttr(True)
+    add_rect_light(st, "/World/Light", (0, 0, 4), 1.5, 1.5)
+    add_camera(st, "/World/Cam", (0, -0.01, 9), (0, 0, 0), focal=14)
+    return wsoft.load_scene(st)
+
+
+def test_blending_makes_visibility_continuous_across_levels(device):
+    """Neighbouring ground pixels whose budget level ceil(l) differs: without blending V jumps
+    there (the transition artifact of Fig. 1a); the smoothed LOQ and blending bound the jump."""
+    from wsoft.render import build_graph
+    from wsoft.techniques import create
+
+    scene = _tilted_plank()
+    w, h = 160, 120
+    jumps = {}
+    for blend in (False, True):
+        ctx, req, _ = build_graph(scene, create("ssm", {"budget": 3, "blend": blend}), width=w, height=h, device=device)
+        res, _ = ctx.graph.execute(req + ["ssm_search[Light]"], device)
+        s, ch = res["ssm_search[Light]"], res["channels"]
+        level = np.ceil(s.loq_raw.numpy().reshape(h, w) - 1e-6)
+        g = (ch["A"] > 0) & (np.abs(ch["P.Z"]) < 1e-3) & (s.status.numpy().reshape(h, w) == 2)
+        change = g[:, 1:] & g[:, :-1] & (level[:, 1:] != level[:, :-1])
+        assert change.sum() >= 20  # the interesting case happens
+        jumps[blend] = np.abs(np.diff(ch["V"], axis=1))[change]
+    assert np.median(jumps[False]) > 3 * np.median(jumps[True])
+    assert np.quantile(jumps[True], 0.99) < 0.25 and np.median(jumps[True]) < 0.06
+
+
+def test_msaa_resolve_hand_built_3x3():
+    """3 x 3 pixels, 2 samples each. The centre pixel's second sample lies on another surface
+    (camera depth 5 instead of 2): it takes the visibility of the 4-neighbour whose first sample's
+    depth is closest (the right one, depth 5.1), not the pixel's own."""
+    w = h = 3
+    vis_pix = np.array([0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9], np.float32)
+    rep = np.array([2.0, 2.0, 2.0, 2.0, 2.0, 5.1, 2.0, 7.0, 2.0], np.float32)
+    s0 = rep.copy()
+    s1 = rep.copy()
+    s1[4] = 5.0  # centre: a second surface
+    s1[0] = 2.01  # corner: same surface within tau
+    s1[8] = 0.0  # background sample
+    dist = np.concatenate([s0, s1])
+    prim = np.ones(18, np.int32)
+    prim[9 + 8] = -1
+    dev = "cpu"
+    args = (wp.array(vis_pix, dtype=float, device=dev), rep, np.ones(9, np.int32), wp.array(dist, dtype=float, device=dev), wp.array(prim, dtype=wp.int32, device=dev), w, h, 0.01)
+    out = msaa_resolve(*args, True, dev).numpy()
+    assert np.allclose(out[:9], vis_pix)  # first samples: their pixel's
+    assert out[9 + 4] == pytest.approx(0.6)  # the right neighbour (5.1) is closest to 5.0; below (7.0) is not
+    assert out[9 + 0] == pytest.approx(0.1)  # within tau: its own pixel
+    assert out[9 + 8] == 1.0  # background
+    single = msaa_resolve(*args, False, dev).numpy()
+    assert single[9 + 4] == pytest.approx(0.5)  # without interpolation: the pixel's
+
+
+def test_msaa_interpolation_close_to_per_sample(device):
+    scene = wsoft.load_scene(scene_path("contact.usda"))
+    kw = dict(width=64, height=48, device=device, pixel_samples=4, budget=8)
+    brute = wsoft.render(scene, "ssm", msaa="per_sample", **kw)
+    interp = wsoft.render(scene, "ssm", msaa="interpolate", **kw)
+    cov = brute["A"] > 0
+    assert np.mean(np.abs(interp.V - brute.V)[cov]) < 0.02
+    assert brute.stats["counters"]["ssm[Light].receivers"] > 3 * interp.stats["counters"]["ssm[Light].receivers"]
+
+
+@pytest.mark.parametrize("params", [
+    {"occluder": "microquad", "visibility": "area", "structure": "hsm"},
+    {"occluder": "microrect", "pattern": "random", "bitmask_size": 8, "structure": "mssm"},
+    {"occluder": "micropatch", "budget_map": "radial", "budget": 12, "blend": False},
+])
+@pytest.mark.parametrize("file", ["contact.usda", "multi_light.usda"])
+def test_finite_and_in_range(device, params, file):
+    """Contact shadows, and rect / disk / sphere / distant lights (multi_light)."""
+    scene = wsoft.load_scene(scene_path(file))
+    f = wsoft.render(scene, "ssm", width=48, height=36, device=device, shadow_map_size=512, **params)
+    for name in [k for k in f.channels if k.startswith("V")] + ["R", "G", "B"]:
+        assert np.all(np.isfinite(f[name]))
+    assert f.V.min() >= 0.0 and f.V.max() <= 1.0
+    assert f.V[f["A"] > 0].min() < 0.5  # there is shadow
+    c = f.stats["counters"]
+    assert any(k.endswith("backprojecting_fraction") and v > 0 for k, v in c.items())
+
+
+def test_budget_map_from_exr(tmp_path):
+    from wsoft.io import write_exr
+
+    scene = wsoft.load_scene(scene_path("box_plane.usda"))
+    b = np.full((12, 16), 4.0, np.float32)
+    b[:, 8:] = 64.0
+    path = str(tmp_path / "budget.exr")
+    write_exr(path, {"budget": b})
+    f = wsoft.render(scene, "ssm", width=64, height=48, device="cpu", budget=64, budget_map=path, blend=False)
+    uniform = wsoft.render(scene, "ssm", width=64, height=48, device="cpu", budget=64, blend=False)
+    left = np.s_[:, :28]
+    assert not np.allclose(f.V[left], uniform.V[left])  # the left half used a coarser level
+    assert np.allclose(f.V[:, 36:], uniform.V[:, 36:], atol=1e-6)  # the right half did not
+
+
+def test_bad_inputs(tmp_path):
+    scene = wsoft.load_scene(scene_path("box_plane.usda"))
+    kw = dict(width=8, height=8, device="cpu")
+    with pytest.raises(wsoft.ParameterError, match="occluder 'microtri' is not one of"):
+        wsoft.render(scene, "ssm", occluder="microtri", **kw)
+    with pytest.raises(wsoft.ParameterError, match="power of two"):
+        wsoft.render(scene, "ssm", shadow_map_size=1000, **kw)
+    with pytest.raises(wsoft.ParameterError, match="pattern 'hex'"):
+        wsoft.render(scene, "ssm", pattern="hex", **kw)
+    missing = str(tmp_path / "nope.exr")
+    with pytest.raises(wsoft.ParameterError, match="nope.exr"):
+        wsoft.render(scene, "ssm", budget_map=missing, **kw)
+    bad = tmp_path / "bad.exr"
+    bad.write_text("not an exr")
+    with pytest.raises(wsoft.ParameterError, match="bad.exr"):
+        wsoft.render(scene, "ssm", budget_map=str(bad), **kw)
+    with pytest.raises(wsoft.ParameterError, match="no parameter"):
+        wsoft.render(scene, "ssm", budgett=3, **kw)
+
+
+def test_point_light_is_rejected():
+    from conftest import add_camera, add_quad, make_stage
+    from pxr import Gf, UsdGeom, UsdLux
+
+    st = make_stage()
+    add_quad(st, "/World/G", (0, 0, 0), 5)
+    add_quad(st, "/World/O", (0, 0, 1), 0.5)
+    light = UsdLux.SphereLight.Define(st, "/World/Point")
+    light.CreateRadiusAttr(0.0)
+    UsdGeom.XformCommonAPI(light).SetTranslate(Gf.Vec3d(0, 0, 3))
+    add_camera(st, "/World/Cam", (0, -4, 4), (0, 0, 0))
+    with pytest.raises(wsoft.ParameterError, match="/World/Point"):
+        wsoft.render(wsoft.load_scene(st), "ssm", width=8, height=8, device="cpu")

@@ -1,0 +1,693 @@
+"""Backprojection soft shadow mapping: the per-receiver kernels of the ``ssm`` technique.
+
+Coordinates. Level-0 texel coordinates ``(tx, ty)`` of the square ``N``-texel map (texel ``(x, y)``
+covers ``[x, x + 1) x [y, y + 1)``; window coordinates ``l + tx * tw``). The light is the
+square ``[-1, 1]^2`` of *light coordinates*: for a local light the plane ``z = 0`` of the light
+view, scaled by the light's half extents (a rect light exactly; disk and sphere lights by their
+bounding square, their bitmask samples restricted to the disk); for a distant light the
+tangents of directions around the view axis, scaled by ``tan`` of the sun's half angle.
+
+A micro-occluder at depth ``d`` covering window ``[u0, u1] x [v0, v1]`` backprojects from the
+receiver ``p`` (view space) onto the rectangle of light coordinates
+``(p_x + (u d - p_x) p_z / (p_z - d)) / w`` (perspective) or ``((u - p_x) / (p_z - d)) / tan a``
+(orthographic), increasing in ``u`` so a rectangle stays a rectangle.
+
+Kernels, in frame order (Schwarz & Stamminger 2008, Fig. 3):
+
+1. :func:`search_areas` — per receiver: the search area from the light's pyramid through the
+   receiver, refined with the pruning structure's depth range (``z_min``), the umbra / fully-lit
+   classification (no backprojection), the fractional level ``l = log2(size / b_mo)`` (LOQ map),
+   with the query grown to the support of the level's micro-occluders (§6, over-precision).
+2. :func:`smooth_loq` — the separable bilateral smoothing of the LOQ map (one axis a launch),
+   stopping at depth discontinuities and at receivers that need no backprojection.
+3. :func:`backproject` — visibility from the micro-occluders of level ``floor(l)`` and
+   ``ceil(l)``, blended by the fraction (or ``ceil(l)`` alone without blending): area
+   accumulation (clamped sum) or an occlusion bitmask over light samples.
+4. :func:`resolve_samples` — visibility of every G-buffer sample from the per-pixel visibility
+   (§7: same depth within tau, else the 4-neighbour whose depth is closest).
+"""
+
+from __future__ import annotations
+
+import warp as wp
+
+from wsoft.accel.ssm_structures import DepthRanges, depth_range, pyr_at
+from wsoft.raster.lightview import (
+    DEPTH_CLEAR,
+    LightViewGPU,
+    in_front_of_light,
+    texel_of,
+    view_of,
+)
+from wsoft.techniques.filtering import LightKernel, spread, view_dir
+
+STATUS_LIT = 0
+STATUS_UMBRA = 1
+STATUS_PENUMBRA = 2  # needs backprojection
+STATUS_BACKGROUND = 3
+
+OCC_MICROPATCH = 0
+OCC_MICROQUAD = 1
+OCC_MICRORECT = 2
+
+PATTERN_REGULAR = 0
+PATTERN_JITTERED = 1
+PATTERN_ANY = 2  # random, or any pattern mapped into a disk: every sample is tested
+
+MASK_WORDS = 32  # room for 32 x 32 light samples
+mask_t = wp.types.vector(length=MASK_WORDS, dtype=wp.uint32)
+poly_t = wp.types.vector(length=8, dtype=float)
+BIG = wp.constant(3.0e38)
+
+
+@wp.struct
+class SSMSetup:
+    """What every SSM kernel needs besides the maps: light view, light, settings."""
+
+    lv: LightViewGPU
+    k: LightKernel
+    occluder: int  # OCC_*
+    bitmask: int  # 0: area accumulation, 1: occlusion bitmask
+    n: int  # bitmask samples per side
+    pattern: int  # PATTERN_*
+    gap_fill: int
+    overprecision: int
+    refine: int  # search-area refinement iterations
+    bias: float  # world units
+    blend: int
+
+
+@wp.func
+def budget_level(size: float, b: float) -> float:
+    """Fractional level at which a search area of ``size`` level-0 texels spans ``b`` texels."""
+    if b >= 1.0e30 or size <= b:
+        return 0.0
+    return wp.log2(size / b)
+
+
+@wp.func
+def grown_bounds(x0: float, x1: float, cell: int, extra: int) -> wp.vec2i:
+    """Inclusive level-0 texel range covering [x0, x1], snapped out to cells of ``cell`` texels
+    (the support of the level's micro-occluders), plus ``extra`` cells each side."""
+    a = int(wp.floor(x0 / float(cell))) - extra
+    b = int(wp.floor(x1 / float(cell))) + extra
+    return wp.vec2i(a * cell, (b + 1) * cell - 1)
+
+
+@wp.kernel
+def search_areas(
+    offset: int,
+    st: SSMSetup,
+    acc: DepthRanges,
+    pos: wp.array[wp.vec3],
+    prim: wp.array[wp.int32],
+    dist: wp.array[float],
+    rid: wp.array[wp.int32],
+    budget: wp.array[float],
+    z_first: float,
+    # outputs
+    area: wp.array[wp.vec4],
+    status: wp.array[wp.int32],
+    loq: wp.array[float],
+    cam: wp.array[float],
+):
+    """Search area (level-0 texel coordinates x0, y0, x1, y1), status and LOQ of each receiver."""
+    i = wp.tid() + offset
+    s = rid[i]
+    area[i] = wp.vec4(0.0)
+    loq[i] = 0.0
+    cam[i] = dist[s]
+    if prim[s] < 0:
+        status[i] = STATUS_BACKGROUND
+        return
+    lv = st.lv
+    pv = view_of(lv, pos[s])
+    if not in_front_of_light(lv, pv):
+        status[i] = STATUS_LIT
+        return
+    zr = pv[2]
+    tc = texel_of(lv, pv)
+    n = lv.width
+    b = budget[i]
+    z = z_first
+    if z >= zr - st.bias:
+        status[i] = STATUS_LIT
+        return
+    extra = int(0)
+    if st.occluder == OCC_MICRORECT or st.occluder == OCC_MICROQUAD:
+        extra = 1
+    hx = float(0.0)
+    hy = float(0.0)
+    for it in range(st.refine + 1):
+        h = spread(lv, st.k, z, zr)
+        hx = h[0] * lv.scale[0]
+        hy = h[1] * lv.scale[1]
+        cell = int(1)
+        ex = int(0)
+        if st.overprecision != 0:
+            lev = budget_level(2.0 * wp.max(hx, hy), b)
+            cell = 1 << int(wp.ceil(lev))
+            if cell > 1:
+                ex = extra
+        gx = grown_bounds(tc[0] - hx, tc[0] + hx, cell, ex)
+        gy = grown_bounds(tc[1] - hy, tc[1] + hy, cell, ex)
+        r = depth_range(acc, gx[0], gy[0], gx[1], gy[1])
+        if r[0] >= zr - st.bias:
+            status[i] = STATUS_LIT
+            return
+        inside = gx[0] >= 0 and gy[0] >= 0 and gx[1] < n and gy[1] < n
+        if inside and r[1] < zr - st.bias:
+            status[i] = STATUS_UMBRA
+            return
+        if r[0] <= z:
+            break
+        z = r[0]
+        if it == st.refine:
+            h = spread(lv, st.k, z, zr)
+            hx = h[0] * lv.scale[0]
+            hy = h[1] * lv.scale[1]
+    status[i] = STATUS_PENUMBRA
+    area[i] = wp.vec4(tc[0] - hx, tc[1] - hy, tc[0] + hx, tc[1] + hy)
+    loq[i] = budget_level(2.0 * wp.max(hx, hy), b)
+
+
+@wp.kernel
+def smooth_loq(
+    offset: int,
+    src: wp.array[float],
+    status: wp.array[wp.int32],
+    cam: wp.array[float],
+    width: int,
+    height: int,
+    radius: int,
+    axis: int,
+    threshold: float,
+    # outputs
+    dst: wp.array[float],
+):
+    """One axis of the LOQ smoothing: the mean over the run of backprojecting receivers within
+    ``radius`` that is not cut by a camera-depth jump larger than ``threshold`` (relative)."""
+    i = wp.tid() + offset
+    v = src[i]
+    dst[i] = v
+    if status[i] != STATUS_PENUMBRA or radius <= 0:
+        return
+    plane = width * height
+    layer = i // plane
+    p = i - layer * plane
+    y = p // width
+    x = p - y * width
+    total = v
+    count = float(1.0)
+    for side in range(2):
+        step = 1 - 2 * side
+        prev = cam[i]
+        for k in range(1, radius + 1):
+            xx = x
+            yy = y
+            if axis == 0:
+                xx = x + step * k
+            else:
+                yy = y + step * k
+            if xx < 0 or yy < 0 or xx >= width or yy >= height:
+                break
+            q = layer * plane + yy * width + xx
+            if status[q] != STATUS_PENUMBRA:
+                break
+            if wp.abs(cam[q] - prev) > threshold * wp.max(prev, 1.0e-20):
+                break
+            total += src[q]
+            count += 1.0
+            prev = cam[q]
+    dst[i] = total / count
+
+
+# -- light coordinates -----------------------------------------------------------------------
+
+
+@wp.func
+def light_x(lv: LightViewGPU, k: LightKernel, pv: wp.vec3, u: float, d: float, axis: int) -> float:
+    """Light coordinate (along ``axis``) of the ray from the receiver through window coordinate
+    ``u`` at depth ``d``."""
+    pa = pv[axis]
+    if lv.persp != 0:
+        return (pa + (u * d - pa) * pv[2] / (pv[2] - d)) / k.half[axis]
+    return (u - pa) / (pv[2] - d) / k.half[axis]
+
+
+@wp.func
+def light_facing(lv: LightViewGPU, pv: wp.vec3, nv: wp.vec3) -> wp.vec3:
+    """The receiver's normal (view space) turned toward the light's centre."""
+    to_light = wp.vec3(0.0, 0.0, -1.0)
+    if lv.persp != 0:
+        to_light = -pv
+    if wp.dot(nv, to_light) < 0.0:
+        return -nv
+    return nv
+
+
+@wp.func
+def front_distance(lv: LightViewGPU, pv: wp.vec3, nl: wp.vec3, d: float, cu: float, cv: float, hu: float, hv: float) -> float:
+    """Smallest signed distance, over the window rectangle centred at (cu, cv) with half sizes
+    (hu, hv) placed at depth ``d``, in front of the receiver's tangent plane (normal ``nl``
+    toward the light). Only what lies in front of that plane can be between the receiver and
+    the light."""
+    if lv.persp != 0:
+        return d * (nl[0] * cu + nl[1] * cv + nl[2] - wp.abs(nl[0]) * hu - wp.abs(nl[1]) * hv) - wp.dot(nl, pv)
+    return nl[0] * cu + nl[1] * cv + nl[2] * d - wp.abs(nl[0]) * hu - wp.abs(nl[1]) * hv - wp.dot(nl, pv)
+
+
+# -- occlusion bitmask -----------------------------------------------------------------------
+
+
+@wp.func
+def popcount(v: wp.uint32) -> int:
+    x = v - ((v >> wp.uint32(1)) & wp.uint32(0x55555555))
+    x = (x & wp.uint32(0x33333333)) + ((x >> wp.uint32(2)) & wp.uint32(0x33333333))
+    x = (x + (x >> wp.uint32(4))) & wp.uint32(0x0F0F0F0F)
+    return int((x * wp.uint32(0x01010101)) >> wp.uint32(24))
+
+
+@wp.func
+def set_bit(m: mask_t, b: int) -> mask_t:
+    w = b >> 5
+    m[w] = m[w] | (wp.uint32(1) << wp.uint32(b & 31))
+    return m
+
+
+@wp.func
+def set_run(m: mask_t, n: int, row: int, c0: int, c1: int) -> mask_t:
+    """Set the bits of columns c0..c1 (inclusive) of a row (rows never straddle words: n | 32)."""
+    if c0 > c1:
+        return m
+    b = row * n + c0
+    w = b >> 5
+    run = wp.uint32((wp.uint64(1) << wp.uint64(c1 - c0 + 1)) - wp.uint64(1))
+    bits = run << wp.uint32(b & 31)
+    m[w] = m[w] | bits
+    return m
+
+
+@wp.func
+def mask_rect(m: mask_t, st: SSMSetup, samples: wp.array[wp.vec2], lo: wp.vec2, hi: wp.vec2) -> mask_t:
+    """Mark the light samples inside the light-coordinate rectangle [lo, hi]."""
+    n = st.n
+    fn = float(n)
+    if st.pattern == PATTERN_REGULAR:
+        c0 = wp.max(int(wp.ceil((lo[0] + 1.0) * 0.5 * fn - 0.5)), 0)
+        c1 = wp.min(int(wp.ceil((hi[0] + 1.0) * 0.5 * fn - 0.5)) - 1, n - 1)
+        r0 = wp.max(int(wp.ceil((lo[1] + 1.0) * 0.5 * fn - 0.5)), 0)
+        r1 = wp.min(int(wp.ceil((hi[1] + 1.0) * 0.5 * fn - 0.5)) - 1, n - 1)
+        for r in range(r0, r1 + 1):
+            m = set_run(m, n, r, c0, c1)
+        return m
+    if st.pattern == PATTERN_JITTERED:
+        c0 = wp.max(int(wp.floor((lo[0] + 1.0) * 0.5 * fn)), 0)
+        c1 = wp.min(int(wp.floor((hi[0] + 1.0) * 0.5 * fn)), n - 1)
+        r0 = wp.max(int(wp.floor((lo[1] + 1.0) * 0.5 * fn)), 0)
+        r1 = wp.min(int(wp.floor((hi[1] + 1.0) * 0.5 * fn)), n - 1)
+        for r in range(r0, r1 + 1):
+            if r > r0 and r < r1:
+                m = set_run(m, n, r, c0 + 1, c1 - 1)  # cells wholly inside
+                for c in range(c0, c1 + 1, wp.max(c1 - c0, 1)):
+                    q = samples[r * n + c]
+                    if q[0] >= lo[0] and q[0] < hi[0]:
+                        m = set_bit(m, r * n + c)
+            else:
+                for c in range(c0, c1 + 1):
+                    q = samples[r * n + c]
+                    if q[0] >= lo[0] and q[0] < hi[0] and q[1] >= lo[1] and q[1] < hi[1]:
+                        m = set_bit(m, r * n + c)
+        return m
+    for b in range(n * n):
+        q = samples[b]
+        if q[0] >= lo[0] and q[0] < hi[0] and q[1] >= lo[1] and q[1] < hi[1]:
+            m = set_bit(m, b)
+    return m
+
+
+@wp.func
+def edge_side(a: wp.vec2, b: wp.vec2, p: wp.vec2) -> float:
+    return (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0])
+
+
+@wp.func
+def in_triangle(a: wp.vec2, b: wp.vec2, c: wp.vec2, p: wp.vec2) -> bool:
+    e0 = edge_side(a, b, p)
+    e1 = edge_side(b, c, p)
+    e2 = edge_side(c, a, p)
+    return (e0 >= 0.0 and e1 >= 0.0 and e2 >= 0.0) or (e0 <= 0.0 and e1 <= 0.0 and e2 <= 0.0)
+
+
+@wp.func
+def mask_quad(m: mask_t, st: SSMSetup, samples: wp.array[wp.vec2], a: wp.vec2, b: wp.vec2, c: wp.vec2, d: wp.vec2) -> mask_t:
+    """Mark the light samples inside the quadrilateral a b c d (two triangles a b c, a c d)."""
+    n = st.n
+    fn = float(n)
+    lo = wp.min(wp.min(a, b), wp.min(c, d))
+    hi = wp.max(wp.max(a, b), wp.max(c, d))
+    c0 = int(0)
+    c1 = n - 1
+    r0 = int(0)
+    r1 = n - 1
+    if st.pattern != PATTERN_ANY:
+        c0 = wp.max(int(wp.floor((lo[0] + 1.0) * 0.5 * fn)), 0)
+        c1 = wp.min(int(wp.floor((hi[0] + 1.0) * 0.5 * fn)), n - 1)
+        r0 = wp.max(int(wp.floor((lo[1] + 1.0) * 0.5 * fn)), 0)
+        r1 = wp.min(int(wp.floor((hi[1] + 1.0) * 0.5 * fn)), n - 1)
+    for r in range(r0, r1 + 1):
+        for cc in range(c0, c1 + 1):
+            q = samples[r * n + cc]
+            if in_triangle(a, b, c, q) or in_triangle(a, c, d, q):
+                m = set_bit(m, r * n + cc)
+    return m
+
+
+@wp.func
+def mask_visibility(m: mask_t, n: int) -> float:
+    words = (n * n + 31) // 32
+    hits = int(0)
+    for w in range(words):
+        hits += popcount(m[w])
+    return 1.0 - float(hits) / float(n * n)
+
+
+# -- area accumulation -----------------------------------------------------------------------
+
+
+@wp.func
+def rect_area(lo: wp.vec2, hi: wp.vec2) -> float:
+    """Share of the light square [-1, 1]^2 covered by the rectangle [lo, hi]."""
+    w = wp.min(hi[0], 1.0) - wp.max(lo[0], -1.0)
+    h = wp.min(hi[1], 1.0) - wp.max(lo[1], -1.0)
+    if w <= 0.0 or h <= 0.0:
+        return 0.0
+    return 0.25 * w * h
+
+
+@wp.func
+def clip_polygon(xs: poly_t, ys: poly_t, n: int, axis: int, sign: float):
+    """Clip a polygon (n <= 7 corners) to sign * coordinate[axis] <= 1 (Sutherland-Hodgman)."""
+    ox = poly_t()
+    oy = poly_t()
+    m = int(0)
+    for i in range(n):
+        j = (i + n - 1) % n
+        ci = xs[i]
+        cj = xs[j]
+        if axis == 1:
+            ci = ys[i]
+            cj = ys[j]
+        fi = sign * ci - 1.0
+        fj = sign * cj - 1.0
+        if (fi <= 0.0) != (fj <= 0.0) and m < 8:
+            t = fj / (fj - fi)
+            ox[m] = xs[j] + (xs[i] - xs[j]) * t
+            oy[m] = ys[j] + (ys[i] - ys[j]) * t
+            m += 1
+        if fi <= 0.0 and m < 8:
+            ox[m] = xs[i]
+            oy[m] = ys[i]
+            m += 1
+    return ox, oy, m
+
+
+@wp.func
+def quad_area(a: wp.vec2, b: wp.vec2, c: wp.vec2, d: wp.vec2) -> float:
+    """Share of the light square covered by the quadrilateral a b c d (clipped, shoelace)."""
+    xs = poly_t()
+    ys = poly_t()
+    xs[0] = a[0]
+    ys[0] = a[1]
+    xs[1] = b[0]
+    ys[1] = b[1]
+    xs[2] = c[0]
+    ys[2] = c[1]
+    xs[3] = d[0]
+    ys[3] = d[1]
+    n = int(4)
+    xs, ys, n = clip_polygon(xs, ys, n, 0, 1.0)
+    xs, ys, n = clip_polygon(xs, ys, n, 0, -1.0)
+    xs, ys, n = clip_polygon(xs, ys, n, 1, 1.0)
+    xs, ys, n = clip_polygon(xs, ys, n, 1, -1.0)
+    s = float(0.0)
+    for i in range(n):
+        j = (i + 1) % n
+        s += xs[i] * ys[j] - xs[j] * ys[i]
+    return 0.125 * wp.abs(s)
+
+
+# -- backprojection --------------------------------------------------------------------------
+
+
+@wp.func
+def cell_depth(st: SSMSetup, occ: DepthRanges, mr_dep: wp.array[float], j: int, x: int, y: int) -> float:
+    n = occ.size >> j
+    if x < 0 or y < 0 or x >= n or y >= n:
+        return DEPTH_CLEAR
+    if st.occluder == OCC_MICRORECT:
+        return mr_dep[occ.pyr_off[j] + y * n + x]
+    return pyr_at(occ, j, x, y)[0]
+
+
+@wp.func
+def occludes(st: SSMSetup, pv: wp.vec3, nl: wp.vec3, d: float, t0: wp.vec2, t1: wp.vec2) -> bool:
+    """Is a micro-occluder of depth ``d`` over level-0 texels [t0, t1] nearer to the light than
+    the receiver and wholly in front of its tangent plane (by the bias)?"""
+    if d >= pv[2] - st.bias:
+        return False
+    lv = st.lv
+    u0 = lv.window[0] + t0[0] / lv.scale[0]
+    u1 = lv.window[0] + t1[0] / lv.scale[0]
+    v0 = lv.window[2] + t0[1] / lv.scale[1]
+    v1 = lv.window[2] + t1[1] / lv.scale[1]
+    return front_distance(lv, pv, nl, d, 0.5 * (u0 + u1), 0.5 * (v0 + v1), 0.5 * (u1 - u0), 0.5 * (v1 - v0)) > st.bias
+
+
+@wp.func
+def level_visibility(
+    st: SSMSetup,
+    occ: DepthRanges,
+    mr_ext: wp.array[wp.vec4i],
+    mr_dep: wp.array[float],
+    samples: wp.array[wp.vec2],
+    pv: wp.vec3,
+    nv: wp.vec3,
+    a: wp.vec4,
+    j: int,
+) -> wp.vec2:
+    """(visibility, micro-occluders processed) from the level-``j`` micro-occluders of the
+    search area ``a`` (level-0 texel coordinates)."""
+    lv = st.lv
+    k = st.k
+    cell = 1 << j
+    fc = float(cell)
+    n = occ.size >> j
+    cx0 = int(wp.floor(a[0] / fc))
+    cx1 = int(wp.floor(a[2] / fc))
+    cy0 = int(wp.floor(a[1] / fc))
+    cy1 = int(wp.floor(a[3] / fc))
+    if st.occluder != OCC_MICROPATCH:
+        cx0 -= 1
+        cy0 -= 1
+    if st.occluder == OCC_MICRORECT:
+        cx1 += 1
+        cy1 += 1
+    cx0 = wp.max(cx0, 0)
+    cy0 = wp.max(cy0, 0)
+    cx1 = wp.min(cx1, n - 1)
+    cy1 = wp.min(cy1, n - 1)
+    m = mask_t()
+    covered = float(0.0)
+    count = int(0)
+    tw = 1.0 / lv.scale[0]
+    th = 1.0 / lv.scale[1]
+    for cy in range(cy0, cy1 + 1):
+        for cx in range(cx0, cx1 + 1):
+            if st.occluder == OCC_MICROQUAD:
+                if cx + 1 >= n or cy + 1 >= n:
+                    continue
+                count += 1
+                d00 = cell_depth(st, occ, mr_dep, j, cx, cy)
+                d10 = cell_depth(st, occ, mr_dep, j, cx + 1, cy)
+                d01 = cell_depth(st, occ, mr_dep, j, cx, cy + 1)
+                d11 = cell_depth(st, occ, mr_dep, j, cx + 1, cy + 1)
+                t0 = wp.vec2((float(cx) + 0.5) * fc, (float(cy) + 0.5) * fc)
+                t1 = wp.vec2((float(cx) + 1.5) * fc, (float(cy) + 1.5) * fc)
+                dmax = wp.max(wp.max(d00, d10), wp.max(d01, d11))
+                if not occludes(st, pv, nv, dmax, t0, t1):
+                    continue
+                u0 = lv.window[0] + t0[0] * tw
+                u1 = lv.window[0] + t1[0] * tw
+                v0 = lv.window[2] + t0[1] * th
+                v1 = lv.window[2] + t1[1] * th
+                qa = wp.vec2(light_x(lv, k, pv, u0, d00, 0), light_x(lv, k, pv, v0, d00, 1))
+                qb = wp.vec2(light_x(lv, k, pv, u1, d10, 0), light_x(lv, k, pv, v0, d10, 1))
+                qc = wp.vec2(light_x(lv, k, pv, u1, d11, 0), light_x(lv, k, pv, v1, d11, 1))
+                qd = wp.vec2(light_x(lv, k, pv, u0, d01, 0), light_x(lv, k, pv, v1, d01, 1))
+                lo = wp.min(wp.min(qa, qb), wp.min(qc, qd))
+                hi = wp.max(wp.max(qa, qb), wp.max(qc, qd))
+                if hi[0] <= -1.0 or hi[1] <= -1.0 or lo[0] >= 1.0 or lo[1] >= 1.0:
+                    continue
+                if st.bitmask != 0:
+                    m = mask_quad(m, st, samples, qa, qb, qc, qd)
+                else:
+                    covered += quad_area(qa, qb, qc, qd)
+                continue
+            # micropatches and microrects: rectangles
+            t0 = wp.vec2(float(cx * cell), float(cy * cell))
+            t1 = wp.vec2(float((cx + 1) * cell), float((cy + 1) * cell))
+            d = float(0.0)
+            if st.occluder == OCC_MICRORECT:
+                e = mr_ext[occ.pyr_off[j] + cy * n + cx]
+                if float(e[0]) > a[2] or float(e[2] + 1) < a[0] or float(e[1]) > a[3] or float(e[3] + 1) < a[1]:
+                    continue
+                t0 = wp.vec2(float(e[0]), float(e[1]))
+                t1 = wp.vec2(float(e[2] + 1), float(e[3] + 1))
+                d = mr_dep[occ.pyr_off[j] + cy * n + cx]
+            else:
+                d = pyr_at(occ, j, cx, cy)[0]
+            count += 1
+            if not occludes(st, pv, nv, d, t0, t1):
+                continue
+            u0 = lv.window[0] + t0[0] * tw
+            u1 = lv.window[0] + t1[0] * tw
+            v0 = lv.window[2] + t0[1] * th
+            v1 = lv.window[2] + t1[1] * th
+            lo = wp.vec2(light_x(lv, k, pv, u0, d, 0), light_x(lv, k, pv, v0, d, 1))
+            hi = wp.vec2(light_x(lv, k, pv, u1, d, 0), light_x(lv, k, pv, v1, d, 1))
+            if st.occluder == OCC_MICROPATCH and st.gap_fill != 0:
+                # extend toward the left and bottom neighbours: covers the gap their projections leave
+                if cx > 0:
+                    dl = pyr_at(occ, j, cx - 1, cy)[0]
+                    if occludes(st, pv, nv, dl, wp.vec2(t0[0] - fc, t0[1]), wp.vec2(t0[0], t1[1])):
+                        lo = wp.vec2(wp.min(lo[0], light_x(lv, k, pv, u0, dl, 0)), lo[1])
+                if cy > 0:
+                    db = pyr_at(occ, j, cx, cy - 1)[0]
+                    if occludes(st, pv, nv, db, wp.vec2(t0[0], t0[1] - fc), wp.vec2(t1[0], t0[1])):
+                        lo = wp.vec2(lo[0], wp.min(lo[1], light_x(lv, k, pv, v0, db, 1)))
+            if hi[0] <= -1.0 or hi[1] <= -1.0 or lo[0] >= 1.0 or lo[1] >= 1.0:
+                continue
+            if st.bitmask != 0:
+                m = mask_rect(m, st, samples, lo, hi)
+            else:
+                covered += rect_area(lo, hi)
+    vis = float(0.0)
+    if st.bitmask != 0:
+        vis = mask_visibility(m, st.n)
+    else:
+        vis = 1.0 - wp.min(covered, 1.0)
+    return wp.vec2(vis, float(count))
+
+
+@wp.kernel
+def backproject(
+    offset: int,
+    st: SSMSetup,
+    occ: DepthRanges,
+    mr_ext: wp.array[wp.vec4i],
+    mr_dep: wp.array[float],
+    samples: wp.array[wp.vec2],
+    pos: wp.array[wp.vec3],
+    nrm: wp.array[wp.vec3],
+    rid: wp.array[wp.int32],
+    area: wp.array[wp.vec4],
+    status: wp.array[wp.int32],
+    loq_raw: wp.array[float],
+    loq: wp.array[float],
+    # outputs
+    vis: wp.array[float],
+    processed: wp.array[wp.int32],
+):
+    """Visibility of each receiver: 1 lit, 0 umbra, else backprojected at level ceil(loq) or
+    blended between floor(loq) and ceil(loq)."""
+    i = wp.tid() + offset
+    processed[i] = 0
+    stt = status[i]
+    if stt == STATUS_UMBRA:
+        vis[i] = 0.0
+        return
+    if stt != STATUS_PENUMBRA:
+        vis[i] = 1.0
+        return
+    s = rid[i]
+    pv = view_of(st.lv, pos[s])
+    nv = light_facing(st.lv, pv, view_dir(st.lv, nrm[s]))
+    a = area[i]
+    top = occ.top
+    if st.blend == 0:
+        j = wp.min(int(wp.ceil(loq_raw[i] - 1.0e-6)), top)
+        r = level_visibility(st, occ, mr_ext, mr_dep, samples, pv, nv, a, j)
+        vis[i] = r[0]
+        processed[i] = int(r[1])
+        return
+    lev = wp.min(loq[i], float(top))
+    j0 = int(wp.floor(lev))
+    alpha = lev - float(j0)
+    r0 = level_visibility(st, occ, mr_ext, mr_dep, samples, pv, nv, a, j0)
+    v = r0[0]
+    cnt = int(r0[1])
+    if alpha > 1.0e-4 and j0 < top:
+        r1 = level_visibility(st, occ, mr_ext, mr_dep, samples, pv, nv, a, j0 + 1)
+        v = (1.0 - alpha) * v + alpha * r1[0]
+        cnt += int(r1[1])
+    vis[i] = v
+    processed[i] = cnt
+
+
+@wp.kernel
+def resolve_samples(
+    offset: int,
+    vis_pix: wp.array[float],
+    rep_dist: wp.array[float],
+    rep_hit: wp.array[wp.int32],
+    dist: wp.array[float],
+    prim: wp.array[wp.int32],
+    width: int,
+    height: int,
+    tau: float,
+    interpolate: int,
+    # outputs
+    vis: wp.array[float],
+):
+    """Visibility of G-buffer sample ``i`` (sample-major) from the per-pixel visibility (§7):
+    the pixel's own where the sample's camera depth is within ``tau`` (relative) of the pixel's
+    representative sample, else (with ``interpolate``) that of the pixel or 4-neighbour whose
+    representative depth is closest to the sample's."""
+    i = wp.tid() + offset
+    npix = width * height
+    p = i % npix
+    if prim[i] < 0:
+        vis[i] = 1.0
+        return
+    v = vis_pix[p]
+    z = dist[i]
+    if interpolate == 0 or rep_hit[p] == 0 or wp.abs(z - rep_dist[p]) <= tau * rep_dist[p]:
+        vis[i] = v
+        return
+    y = p // width
+    x = p - y * width
+    best = wp.abs(z - rep_dist[p])
+    if rep_hit[p] == 0:
+        best = BIG
+    for k in range(4):
+        xx = x
+        yy = y
+        if k == 0:
+            xx = x - 1
+        elif k == 1:
+            xx = x + 1
+        elif k == 2:
+            yy = y - 1
+        else:
+            yy = y + 1
+        if xx < 0 or yy < 0 or xx >= width or yy >= height:
+            continue
+        q = yy * width + xx
+        if rep_hit[q] == 0:
+            continue
+        e = wp.abs(z - rep_dist[q])
+        if e < best:
+            best = e
+            v = vis_pix[q]
+    vis[i] = v

@@ -1,0 +1,436 @@
+"""``ssm``: backprojection soft shadow mapping with quality scalability (Schwarz & Stamminger 2008).
+
+The shadow map's texels are micro-occluders. For every receiver, the *search area* (where a
+caster could hide part of the light) is found and refined with a pruning structure's depth
+range; receivers in umbra or fully lit stop there. The others backproject the micro-occluders
+of the area from the receiver onto the light and clip them to it; visibility is 1 minus the
+covered share (a clamped sum of areas, or an occlusion bitmask over light samples).
+
+* Occluders (``occluder``): ``micropatch`` (a texel at its depth, extended toward its left and
+  bottom neighbours so their projections leave no gap), ``microquad`` (texel centres as the
+  corners of a quad mesh, all four nearer than the receiver) and ``microrect`` (§5: extents and
+  depths derived level by level by the greedy two-pass merge; two extra textures with full mip
+  chains, :mod:`wsoft.accel.ssm_structures`).
+* Pruning (``structure``): ``hsm`` (min/max pyramid), ``mssm`` (ranges of every power-of-two
+  neighbourhood of every texel) or ``ysm`` (the HSM plus an MSSM over HSM level ``n - 1`` of
+  ``ysm_size`` texels per side), with ``refine`` iterations of search-area refinement.
+* Budget (``budget`` = b_mo): at most ``b_mo`` micro-occluders per axis; the level is
+  ``l = log2(search size / b_mo)`` (a *LOQ map*), level 0 with ``inf``. ``budget_map`` gives b_mo
+  per pixel: an EXR (channel ``budget``, ``Y``, ``R`` or its only channel, resampled to the
+  image) or ``radial`` (from ``budget`` at the centre to ``budget_min`` at the left and right
+  borders, as the paper's Fig. 1d).
+* Smooth LOQ (§4.2): the LOQ map is smoothed by a separable 11 x 11 (``smooth_radius = 5``)
+  filter that stops at camera-depth jumps and at receivers that need no backprojection; the
+  visibilities of levels ``floor(l)`` and ``ceil(l)`` are blended by the fraction. ``blend =
+  false`` takes ``ceil(l)`` alone (the transition artifacts of Fig. 1a). Without a finite
+  budget nothing is smoothed or blended (Table 2's note).
+* Over-precision (§6): the queried region grows to the support of the level's micro-occluders.
+* Multisampling (§7, with ``pixel_samples`` > 1): ``msaa = interpolate`` computes visibility
+  once per pixel, on its first covered sample, and resolves each sample whose camera depth is
+  not within ``tau`` of it from the 4-neighbour whose depth is closest; ``single`` gives every
+  sample the pixel's visibility; ``per_sample`` is the brute-force version.
+
+Lights: rect lights exactly (the paper's case); disk and sphere lights by their bounding square
+(the bitmask samples are mapped into the disk; area accumulation measures the square); distant
+lights through the sun's cone in an orthographic map. Point lights (and suns of angle 0) cast
+no soft shadow and are rejected.
+
+Counters (``stats["counters"]``, prefix ``ssm[light].``): ``backprojecting_fraction`` (of covered
+receivers), ``umbra_fraction``, ``lit_fraction``, ``occluders_mean`` and ``occluders_stdev``
+(micro-occluders processed per backprojecting receiver, both levels when blending),
+``levels_used`` (histogram: receivers per level, a blended receiver counts at both),
+``structure_build_ms``, ``microrect_build_ms`` and ``memory_bytes`` per structure.
+
+| parameter | type | default | meaning |
+|---|---|---|---|
+| shadow_map_size | int | 1024 | texels per side (a power of two, 256..8192) |
+| occluder | str | micropatch | micropatch, microquad or microrect |
+| visibility | str | bitmask | bitmask (occlusion bitmask over light samples) or area (clamped sum) |
+| bitmask_size | int | 16 | light samples per side of the bitmask (8, 16 or 32) |
+| pattern | str | jittered | bitmask samples: regular, jittered or random |
+| structure | str | ysm | hsm, mssm or ysm |
+| ysm_size | int | 256 | texels per side of the YSM's MSSM part |
+| budget | float | 16 | b_mo, micro-occluders per axis (``inf``: level 0) |
+| budget_map | str | "" | "" (uniform), ``radial``, or an EXR of per-pixel b_mo |
+| budget_min | float | 5 | b_mo at the left/right borders with ``radial`` |
+| blend | bool | true | smooth LOQ and blend levels (false: ceil(l) alone) |
+| smooth_radius | int | 5 | half-width of the LOQ smoothing (5: 11 x 11; 0: off) |
+| depth_threshold | float | 0.05 | camera-depth jump (relative) that stops the smoothing |
+| refine | int | 4 | search-area refinement iterations |
+| overprecision | bool | true | grow the query region to the level's micro-occluder support |
+| gap_fill | bool | true | micropatches extended toward their left/bottom neighbours |
+| msaa | str | interpolate | interpolate, single or per_sample (with pixel_samples > 1) |
+| tau | float | 0.01 | camera-depth difference (relative) below which samples share the pixel's visibility |
+| bias | float | 2e-4 | depth bias against the receiver's tangent plane, fraction of the scene diagonal |
+| seed | int | 7 | seed of the jittered / random bitmask samples |
+
+Example::
+
+    frame = wsoft.render(scene, "ssm", width=640, height=480, occluder="microrect",
+                         visibility="bitmask", budget=10, budget_map="radial")
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+
+from wsoft.accel.ssm_kernels import (
+    OCC_MICROPATCH,
+    OCC_MICROQUAD,
+    OCC_MICRORECT,
+    PATTERN_ANY,
+    PATTERN_JITTERED,
+    PATTERN_REGULAR,
+    STATUS_BACKGROUND,
+    STATUS_LIT,
+    STATUS_PENUMBRA,
+    STATUS_UMBRA,
+    SSMSetup,
+    backproject,
+    resolve_samples,
+    search_areas,
+    smooth_loq,
+)
+from wsoft.accel.ssm_structures import (
+    MicroRects,
+    PruningStructure,
+    build_microrects,
+    build_pyramid,
+    build_structure,
+)
+from wsoft.errors import ParameterError
+from wsoft.parallel import launch_chunked
+from wsoft.scene.types import LIGHT_DISTANT, LIGHT_POINT, LIGHT_RECT
+from wsoft.techniques.base import Technique, check, param
+from wsoft.techniques.filtering import light_kernel
+
+OCCLUDERS = {"micropatch": OCC_MICROPATCH, "microquad": OCC_MICROQUAD, "microrect": OCC_MICRORECT}
+PATTERNS = ("regular", "jittered", "random")
+MSAA_MODES = ("interpolate", "single", "per_sample")
+
+
+@dataclass(frozen=True)
+class SSMParams:
+    shadow_map_size: int = param(1024, "texels per side of the light depth map (a power of two, 256..8192)")
+    occluder: str = param("micropatch", "micro-occluders: micropatch, microquad or microrect")
+    visibility: str = param("bitmask", "light visibility: area (clamped sum of covered areas) or bitmask")
+    bitmask_size: int = param(16, "light samples per side of the occlusion bitmask: 8, 16 or 32")
+    pattern: str = param("jittered", "bitmask sample pattern: regular, jittered or random")
+    structure: str = param("ysm", "search-area pruning: hsm, mssm or ysm")
+    ysm_size: int = param(256, "texels per side of the YSM's MSSM part (a power of two)")
+    budget: float = param(16.0, "b_mo: micro-occluders per axis (inf: always level 0)")
+    budget_map: str = param("", "per-pixel b_mo: '' (uniform), radial, or an EXR file")
+    budget_min: float = param(5.0, "b_mo at the left and right borders with budget_map=radial")
+    blend: bool = param(True, "smooth the LOQ map and blend levels floor(l) and ceil(l) (false: ceil(l) alone)")
+    smooth_radius: int = param(5, "half-width of the LOQ smoothing in pixels (5: 11 x 11; 0: none)")
+    depth_threshold: float = param(0.05, "relative camera-depth jump at which the LOQ smoothing stops")
+    refine: int = param(4, "search-area refinement iterations")
+    overprecision: bool = param(True, "grow the queried region to the support of the level's micro-occluders")
+    gap_fill: bool = param(True, "extend micropatches toward their left and bottom neighbours")
+    msaa: str = param("interpolate", "with pixel_samples > 1: interpolate, single or per_sample")
+    tau: float = param(0.01, "relative camera-depth difference below which a sample takes its pixel's visibility")
+    bias: float = param(2e-4, "depth bias against the receiver's tangent plane, fraction of the scene diagonal")
+    seed: int = param(7, "seed of the jittered and random bitmask samples")
+
+    def __post_init__(self):
+        n = self.shadow_map_size
+        check(256 <= n <= 8192 and n & (n - 1) == 0, f"shadow_map_size {n} must be a power of two in [256, 8192]")
+        check(self.occluder in OCCLUDERS, f"occluder {self.occluder!r} is not one of {', '.join(OCCLUDERS)}")
+        check(self.visibility in ("area", "bitmask"), f"visibility {self.visibility!r} is not area or bitmask")
+        check(self.bitmask_size in (8, 16, 32), f"bitmask_size {self.bitmask_size} is not 8, 16 or 32")
+        check(self.pattern in PATTERNS, f"pattern {self.pattern!r} is not one of {', '.join(PATTERNS)}")
+        check(self.structure in ("hsm", "mssm", "ysm"), f"structure {self.structure!r} is not hsm, mssm or ysm")
+        m = self.ysm_size
+        check(16 <= m <= 8192 and m & (m - 1) == 0, f"ysm_size {m} must be a power of two >= 16")
+        check(self.budget >= 1.0, f"budget {self.budget} must be >= 1 (or inf)")
+        if self.budget_map == "radial":
+            check(1.0 <= self.budget_min <= self.budget, f"budget_min {self.budget_min} must be in [1, budget]")
+        if self.budget_map not in ("", "radial"):
+            check(os.path.isfile(self.budget_map), f"budget_map file {self.budget_map!r} not found")
+        check(0 <= self.smooth_radius <= 32, "smooth_radius must be in [0, 32]")
+        check(self.depth_threshold > 0.0, "depth_threshold must be > 0")
+        check(0 <= self.refine <= 16, "refine must be in [0, 16]")
+        check(self.msaa in MSAA_MODES, f"msaa {self.msaa!r} is not one of {', '.join(MSAA_MODES)}")
+        check(self.tau >= 0.0, "tau must be >= 0")
+        check(self.bias >= 0.0, "bias must be >= 0")
+
+
+def light_samples(pattern: str, n: int, disk: bool, seed: int) -> tuple[np.ndarray, int]:
+    """``n * n`` light samples in [-1, 1]^2, row-major (sample r * n + c in cell (c, r) for the
+    regular and jittered patterns), and the kernel's pattern code. On a disk light the samples
+    are mapped into the unit disk (concentric map) and every one is tested."""
+    rng = np.random.default_rng(seed)
+    c, r = np.meshgrid(np.arange(n), np.arange(n))
+    if pattern == "regular":
+        u, v = (c + 0.5) / n, (r + 0.5) / n
+        code = PATTERN_REGULAR
+    elif pattern == "jittered":
+        u, v = (c + rng.random((n, n))) / n, (r + rng.random((n, n))) / n
+        code = PATTERN_JITTERED
+    else:
+        u, v = rng.random((n, n)), rng.random((n, n))
+        code = PATTERN_ANY
+    u, v = u.ravel(), v.ravel()
+    if disk:
+        a, b = 2 * u - 1, 2 * v - 1
+        big = np.abs(a) > np.abs(b)
+        rad = np.where(big, a, b)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            phi = np.where(big, np.pi / 4 * b / np.where(a == 0, 1, a), np.pi / 2 - np.pi / 4 * a / np.where(b == 0, 1, b))
+        x, y = rad * np.cos(phi), rad * np.sin(phi)
+        return np.stack([x, y], -1).astype(np.float32), PATTERN_ANY
+    return np.stack([2 * u - 1, 2 * v - 1], -1).astype(np.float32), code
+
+
+def budget_image(p: SSMParams, width: int, height: int) -> np.ndarray:
+    """Per-pixel b_mo, ``[H, W]`` float32 (``inf`` where unbounded)."""
+    if p.budget_map == "":
+        return np.full((height, width), p.budget, np.float32)
+    if p.budget_map == "radial":
+        x = (np.arange(width) + 0.5) / width * 2 - 1
+        row = p.budget - (p.budget - p.budget_min) * np.abs(x) if math.isfinite(p.budget) else np.where(np.abs(x) < 1, p.budget, p.budget_min)
+        return np.broadcast_to(row.astype(np.float32), (height, width)).copy()
+    from wsoft.io import read_exr
+
+    try:
+        ch = read_exr(p.budget_map)
+    except (OSError, RuntimeError, ValueError) as exc:  # a broken or foreign file
+        raise ParameterError(f"ssm: budget_map {p.budget_map!r} cannot be read as EXR ({exc})", file=p.budget_map) from None
+    names = [k for k in ("budget", "Y", "R", "V") if k in ch] or sorted(ch)
+    if not names:
+        raise ParameterError("ssm: budget_map has no channel", file=p.budget_map)
+    img = np.asarray(ch[names[0]], np.float32)
+    if img.ndim == 3:
+        img = img[..., 0]
+    ys = (np.arange(height) * img.shape[0] // height).clip(0, img.shape[0] - 1)
+    xs = (np.arange(width) * img.shape[1] // width).clip(0, img.shape[1] - 1)
+    out = img[ys][:, xs]
+    if not np.all(np.isfinite(out) | (out == np.inf)) or (out < 1).any():
+        raise ParameterError("ssm: budget_map values must be >= 1 (or inf)", file=p.budget_map)
+    return np.ascontiguousarray(out)
+
+
+@dataclass
+class SSMMaps:
+    """What the structure pass builds from the depth map: the pruning structure, the pyramid the
+    micro-occluders are read from (the HSM; a separate one with the MSSM), the microrects."""
+
+    structure: PruningStructure
+    occluders: PruningStructure
+    microrects: MicroRects | None
+
+    def arrays(self) -> dict[str, wp.array]:
+        out = {f"{self.structure.kind}.{k}": v for k, v in self.structure.arrays().items()}
+        if self.occluders is not self.structure:
+            out["occluder_pyramid"] = self.occluders.pyr
+        if self.microrects is not None:
+            out.update(self.microrects.arrays())
+        return out
+
+
+@dataclass
+class SSMSearch:
+    """Per receiver (``layers * H * W``): search area, status, raw and smoothed LOQ, camera depth,
+    receiver -> G-buffer sample, visibility and micro-occluders processed."""
+
+    layers: int
+    rid: wp.array
+    area: wp.array
+    status: wp.array
+    loq_raw: wp.array
+    loq: wp.array
+    cam: wp.array
+    vis: wp.array | None = None
+    processed: wp.array | None = None
+
+    def arrays(self) -> dict[str, wp.array]:
+        out = {"area": self.area, "status": self.status, "loq_raw": self.loq_raw, "loq": self.loq, "cam": self.cam, "rid": self.rid}
+        if self.vis is not None:
+            out |= {"vis": self.vis, "processed": self.processed}
+        return out
+
+
+def build_maps(depth: wp.array, p: SSMParams, device: str) -> SSMMaps:
+    st = build_structure(p.structure, depth, device, ysm_size=p.ysm_size)
+    occ = st
+    if p.structure == "mssm":
+        pyr = build_pyramid(depth, device)
+        occ = build_structure("hsm", depth, device, pyramid=pyr)
+    mr = build_microrects(depth, device) if p.occluder == "microrect" else None
+    return SSMMaps(st, occ, mr)
+
+
+def receivers(gb, msaa: str) -> tuple[np.ndarray, int]:
+    """Receiver -> G-buffer sample index (int32) and the number of layers: one receiver per pixel
+    on its first covered sample, or every sample (``per_sample``)."""
+    npix = gb.width * gb.height
+    if gb.spp == 1 or msaa == "per_sample":
+        return np.arange(gb.count, dtype=np.int32), gb.spp
+    hit = gb.host("prim") >= 0
+    first = np.argmax(hit, axis=0).ravel()
+    return (first * npix + np.arange(npix)).astype(np.int32), 1
+
+
+def msaa_resolve(vis_pix: wp.array, rep_dist: np.ndarray, rep_hit: np.ndarray, dist: wp.array, prim: wp.array, width: int, height: int,
+                 tau: float, interpolate: bool, device: str) -> wp.array:
+    """Per-sample visibility (flat, sample-major) from per-pixel visibility (§7's custom resolve)."""
+    n = dist.shape[0]
+    out = wp.empty(n, dtype=float, device=device)
+    launch_chunked(
+        resolve_samples, n,
+        inputs=[vis_pix, wp.array(np.asarray(rep_dist, np.float32).ravel(), dtype=float, device=device),
+                wp.array(np.asarray(rep_hit, np.int32).ravel(), dtype=wp.int32, device=device), dist, prim, width, height, float(tau), int(interpolate)],
+        outputs=[out], device=device,
+    )
+    return out
+
+
+def run_search(setup: SSMSetup, maps: SSMMaps, gb, p: SSMParams, budget: np.ndarray, device: str) -> SSMSearch:
+    """Kernels 1 and 2: search areas, classification, LOQ map and its smoothing."""
+    rid_np, layers = receivers(gb, p.msaa)
+    n = rid_np.shape[0]
+    rid = wp.array(rid_np, dtype=wp.int32, device=device)
+    b = np.broadcast_to(budget, (layers,) + budget.shape).ravel().astype(np.float32)
+    s = SSMSearch(
+        layers, rid, area=wp.empty(n, dtype=wp.vec4, device=device), status=wp.empty(n, dtype=wp.int32, device=device),
+        loq_raw=wp.empty(n, dtype=float, device=device), loq=wp.empty(n, dtype=float, device=device), cam=wp.empty(n, dtype=float, device=device),
+    )
+    g = maps.structure.gpu
+    z_first = float(maps.occluders.pyr.numpy()[-1][0])  # the nearest depth of the whole map
+    launch_chunked(search_areas, n, inputs=[setup, g, gb.pos, gb.prim, gb.dist, rid, wp.array(b, dtype=float, device=device), z_first],
+                   outputs=[s.area, s.status, s.loq_raw, s.cam], device=device, min_chunk=256)
+    finite = np.isfinite(budget).any()
+    if p.blend and finite and p.smooth_radius > 0:
+        tmp = wp.empty(n, dtype=float, device=device)
+        for axis, src, dst in ((0, s.loq_raw, tmp), (1, tmp, s.loq)):
+            launch_chunked(smooth_loq, n, inputs=[src, s.status, s.cam, gb.width, gb.height, p.smooth_radius, axis, p.depth_threshold],
+                           outputs=[dst], device=device)
+    else:
+        wp.copy(s.loq, s.loq_raw)
+    return s
+
+
+def run_visibility(setup: SSMSetup, maps: SSMMaps, gb, s: SSMSearch, samples: wp.array, device: str) -> None:
+    """Kernel 3: backprojection (fills ``s.vis`` and ``s.processed``)."""
+    n = s.rid.shape[0]
+    s.vis = wp.empty(n, dtype=float, device=device)
+    s.processed = wp.empty(n, dtype=wp.int32, device=device)
+    mr = maps.microrects
+    mr_ext = mr.ext if mr is not None else wp.empty(1, dtype=wp.vec4i, device=device)
+    mr_dep = mr.dep if mr is not None else wp.empty(1, dtype=float, device=device)
+    launch_chunked(
+        backproject, n,
+        inputs=[setup, maps.occluders.gpu, mr_ext, mr_dep, samples, gb.pos, gb.nrm, s.rid, s.area, s.status, s.loq_raw, s.loq],
+        outputs=[s.vis, s.processed], device=device, min_chunk=64,
+    )
+
+
+def search_counters(s: SSMSearch, prefix: str) -> dict:
+    status = s.status.numpy()
+    covered = status != STATUS_BACKGROUND
+    nc = max(int(covered.sum()), 1)
+    pen = status == STATUS_PENUMBRA
+    out = {
+        f"{prefix}.receivers": int(covered.sum()),
+        f"{prefix}.backprojecting_fraction": float(pen.sum() / nc),
+        f"{prefix}.umbra_fraction": float((status == STATUS_UMBRA).sum() / nc),
+        f"{prefix}.lit_fraction": float((status == STATUS_LIT).sum() / nc),
+    }
+    if s.processed is not None:
+        cnt = s.processed.numpy()[pen].astype(np.float64)
+        out[f"{prefix}.occluders_mean"] = float(cnt.mean()) if cnt.size else 0.0
+        out[f"{prefix}.occluders_stdev"] = float(cnt.std()) if cnt.size else 0.0
+        out[f"{prefix}.occluders_total"] = int(cnt.sum())
+    return out
+
+
+class SSM(Technique):
+    """Backprojection soft shadow mapping: micro-occluders, bitmasks, HSM/MSSM/YSM, budgets, smooth LOQ, MSAA."""
+
+    name = "ssm"
+    summary = "backprojection soft shadow mapping (micropatches/microquads/microrects, area or bitmask, HSM/MSSM/YSM, budget, smooth LOQ, MSAA resolve)"
+    Params = SSMParams
+    reads = ("gbuffer", "light_depth")
+    writes = ("visibility",)
+
+    def add_passes(self, ctx, light) -> str:
+        p = self.params
+        label = ctx.label(light)
+        if light.kind == LIGHT_POINT or (light.kind == LIGHT_DISTANT and light.angle_deg <= 0.0) or light.extent() <= 0.0:
+            raise ParameterError(f"ssm: light {light.path} has no area (point light or a sun of angle 0): no soft shadow to backproject")
+        gbuf = ctx.gbuffer()
+        depth = ctx.light_depth(light, size=p.shadow_map_size, soft=True)
+        k = light_kernel(light)
+        prefix = f"ssm[{label}]"
+        maps_key = f"ssm_maps[{label}]"
+        search_key = f"ssm_search[{label}]"
+        out = ctx.visibility_key(light)
+        bias = p.bias * ctx.scene.diagonal
+        dev = ctx.device
+        disk = light.kind != LIGHT_RECT
+        budget = budget_image(p, ctx.width, ctx.height)
+        pts, code = light_samples(p.pattern, p.bitmask_size, disk, p.seed)
+
+        def setup_of(dm) -> SSMSetup:
+            st = SSMSetup()
+            st.lv = dm.view.gpu()
+            st.k = k
+            st.occluder = OCCLUDERS[p.occluder]
+            st.bitmask = int(p.visibility == "bitmask")
+            st.n = p.bitmask_size
+            st.pattern = code
+            st.gap_fill = int(p.gap_fill)
+            st.overprecision = int(p.overprecision)
+            st.refine = p.refine
+            st.bias = bias
+            st.blend = int(p.blend and bool(np.isfinite(budget).any()))
+            return st
+
+        def build(res):
+            maps = build_maps(res[depth].depth, p, dev)
+            ctx.counters[f"{prefix}.structure_build_ms"] = round(maps.structure.build_ms, 3)
+            if maps.microrects is not None:
+                ctx.counters[f"{prefix}.microrect_build_ms"] = round(maps.microrects.build_ms, 3)
+            ctx.counters[f"{prefix}.memory_bytes"] = {k2: int(a.size * wp.types.type_size_in_bytes(a.dtype)) for k2, a in maps.arrays().items()}
+            return {maps_key: maps}
+
+        def search(res):
+            gb, dm = res[gbuf], res[depth]
+            s = run_search(setup_of(dm), res[maps_key], gb, p, budget, dev)
+            return {search_key: s}
+
+        def visibility(res):
+            gb, dm, s = res[gbuf], res[depth], res[search_key]
+            run_visibility(setup_of(dm), res[maps_key], gb, s, wp.array(pts, dtype=wp.vec2, device=dev), dev)
+            ctx.counters.update(search_counters(s, prefix))
+            status = s.status.numpy()
+            pen = status == STATUS_PENUMBRA
+            loq = np.minimum(s.loq.numpy(), np.log2(p.shadow_map_size))
+            if setup_of(dm).blend:
+                lo, frac = np.floor(loq[pen]).astype(int), loq[pen] - np.floor(loq[pen])
+                used = np.concatenate([lo, (lo + 1)[frac > 1e-4]])
+            else:
+                used = np.ceil(s.loq_raw.numpy()[pen] - 1e-6).astype(int)
+            hist = np.bincount(np.clip(used, 0, None), minlength=1) if used.size else np.zeros(1, int)
+            ctx.counters[f"{prefix}.levels_used"] = {str(i): int(c) for i, c in enumerate(hist) if c}
+            if s.layers == gb.spp:  # one receiver per sample
+                vis = s.vis
+            else:
+                rid = s.rid.numpy()
+                rep_dist = gb.dist.numpy()[rid]
+                rep_hit = gb.prim.numpy()[rid] >= 0
+                vis = msaa_resolve(s.vis, rep_dist, rep_hit, gb.dist, gb.prim, gb.width, gb.height, p.tau, p.msaa == "interpolate", dev)
+            return {out: ctx.visibility(vis)}
+
+        ctx.add_pass(f"ssm_structure[{label}]", inputs=(depth,), outputs=(maps_key,), run=build)
+        ctx.add_pass(f"ssm_search[{label}]", inputs=(gbuf, depth, maps_key), outputs=(search_key,), run=search)
+        ctx.add_pass(f"ssm[{label}]", inputs=(gbuf, depth, maps_key, search_key), outputs=(out,), run=visibility)
+        return out
+
+
+__all__ = ["SSM", "SSMParams"]
