@@ -12,8 +12,9 @@ from wsoft.techniques.pcss import PCSS
 from wsoft.techniques.reference import Reference
 from wsoft.techniques.salzman import Salzman
 from wsoft.techniques.vsm import VSM
+from wsoft.techniques.vssm import VSSM
 
-TECHNIQUES: dict[str, type[Technique]] = {t.name: t for t in (Reference, Hard, PCF, PCSS, VSM, ESM, Salzman, ESSM)}
+TECHNIQUES: dict[str, type[Technique]] = {t.name: t for t in (Reference, Hard, PCF, PCSS, VSM, ESM, Salzman, ESSM, VSSM)}
 
 
 def get_technique(name: str) -> type[Technique]:

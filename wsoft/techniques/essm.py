@@ -62,11 +62,33 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from wsoft.accel.sat import BUILDS, STORAGES, SAT, box_area, build_sat, mean_pyramid, minmax_range, sat_box
+from wsoft.accel.sat import (
+    BUILDS,
+    SAT,
+    STORAGES,
+    box_area,
+    build_sat,
+    mean_pyramid,
+    minmax_range,
+    sat_box,
+)
 from wsoft.parallel import launch_chunked
-from wsoft.raster.lightview import DEPTH_CLEAR, LightViewGPU, in_front_of_light, texel_of, view_of
+from wsoft.raster.lightview import (
+    DEPTH_CLEAR,
+    LightViewGPU,
+    in_front_of_light,
+    texel_of,
+    view_of,
+)
 from wsoft.techniques.base import Technique, check, param
-from wsoft.techniques.filtering import LightKernel, light_kernel, map_coords, receiver_depth, spread, view_dir
+from wsoft.techniques.filtering import (
+    LightKernel,
+    light_kernel,
+    map_coords,
+    receiver_depth,
+    spread,
+    view_dir,
+)
 
 FLT_MAX_LOG = math.log(np.finfo(np.float32).max)
 
@@ -497,7 +519,7 @@ def depth_range(dm, mode: str, scene, device: str) -> tuple[float, float, list]:
 
 def make_basis(dm, *, storage: str, mu: int, c: float, mode: str, scene, device: str, pyramid: bool) -> Basis:
     n = dm.depth.shape[0]
-    zmin, zmax, levels = depth_range(dm, mode, scene, device)
+    zmin, zmax, _levels = depth_range(dm, mode, scene, device)
     empty = not math.isfinite(zmin)
     if empty:
         zmin, zmax = 0.0, 1.0

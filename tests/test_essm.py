@@ -1,0 +1,162 @@
+"""ESSM (Shen, Feng & Yang) and VSSM: exactness, stability and the hard cases of the issue."""
+
+import math
+
+import numpy as np
+import pytest
+from conftest import parallel_rect_exact, scene_path
+
+import wsoft
+from bench.essm_cases import essm_contact_box, essm_nonplanar
+from wsoft.errors import ParameterError
+from wsoft.render import build_graph
+from wsoft.techniques import create
+from wsoft.techniques.essm import optimal_exponent
+
+
+def _ground_error(f):
+    g = (f["A"] > 0) & (np.abs(f["P.Z"]) < 1e-3)
+    exact = parallel_rect_exact(f["P.X"], f["P.Y"], 3.0, 1.0, 1.0, 0.5)
+    err = np.abs(f.V - exact)[g]
+    pen = ((exact > 0.01) & (exact < 0.99))[g]
+    assert pen.sum() > 200
+    return err.mean(), err[pen].mean(), err.max()
+
+
+@pytest.mark.parametrize("params", [{}, {"sat": "uint32"}, {"level": 2, "build": "scan"}])
+def test_essm_parallel_rectangles_exact(device, params):
+    """A square occluder parallel to a square light and the ground: against the exact visible
+    fraction. The penumbra kernel is an ellipse (the paper's Gaussian), not the light's square,
+    so the penumbra carries a shape error: MAE < 0.002, penumbra MAE < 0.03, max < 0.1."""
+    scene = wsoft.load_scene(scene_path("box_plane.usda"))
+    f = wsoft.render(scene, "essm", width=128, height=96, device=device, **params)
+    mae, mae_pen, mx = _ground_error(f)
+    assert mae < 0.002 and mae_pen < 0.03 and mx < 0.1
+
+
+def test_vssm_parallel_rectangles_exact(device):
+    """VSSM's ideal case (one planar occluder): penumbra MAE < 0.015."""
+    scene = wsoft.load_scene(scene_path("box_plane.usda"))
+    for sat in ("float32", "tiles"):
+        f = wsoft.render(scene, "vssm", width=128, height=96, device=device, sat=sat)
+        mae, mae_pen, mx = _ground_error(f)
+        assert mae < 0.001 and mae_pen < 0.015 and mx < 0.05
+
+
+def test_no_inf_or_nan_at_optimal_c_4096_contact():
+    """At the optimal exponent with a 4096² map on the contact scene, for every SAT storage:
+    the bases, the SATs and the output are finite (the float32 SAT's corner holds N² e^R)."""
+    scene = wsoft.load_scene(scene_path("contact.usda"))
+    for storage in ("tiles", "uint32", "float32"):
+        tech = create("essm", {"shadow_map_size": 4096, "sat": storage, "build": "scan"})
+        ctx, requested, _ = build_graph(scene, tech, width=48, height=36, device="cpu")
+        res, _ = ctx.graph.execute(requested, "cpu")
+        basis = next(v for k, v in res.items() if k.startswith("essm_basis"))
+        sat = next(v for k, v in res.items() if k.startswith("essm_sat"))
+        assert basis.c == pytest.approx(optimal_exponent(storage, 20, 4096))
+        assert np.isfinite(basis.basis.numpy()).all()
+        data = sat.data.numpy()
+        assert np.isfinite(data.astype(np.float64)).all()
+        if storage == "float32":
+            assert data.max() < np.finfo(np.float32).max
+        v = res["channels"]["V"]
+        assert np.isfinite(v).all() and v.min() >= 0.0 and v.max() <= 1.0
+        assert ctx.counters[next(k for k in ctx.counters if k.endswith(".c_normalised"))] == basis.c
+
+
+def test_optimal_exponent():
+    assert optimal_exponent("tiles", 20, 1024) == pytest.approx(20 * math.log(2))
+    r = optimal_exponent("float32", 20, 4096)
+    fmax = float(np.finfo(np.float32).max)
+    assert 4096.0**2 * math.exp(r) < fmax < 4096.0**2 * math.exp(r + 1.0)
+
+
+def test_contact_umbra_stays_dark(device):
+    """A cube standing on the ground: over the reference's umbra (V < 0.02) ESSM's mean V is
+    below 0.02 and its 95th percentile below 0.06; the only pixels above 0.2 lie on the contact
+    line itself (within 0.02 of the cube's base)."""
+    sc = wsoft.load_scene(essm_contact_box())
+    ref = wsoft.render(sc, "reference", width=160, height=160, samples=256, device=device)
+    f = wsoft.render(sc, "essm", width=160, height=160, device=device)
+    umbra = (ref["A"] > 0) & (np.abs(ref["P.Z"]) < 1e-3) & (ref.V < 0.02)
+    assert umbra.sum() > 150
+    v = f.V[umbra]
+    assert v.mean() < 0.02 and np.percentile(v, 95) < 0.06
+    dist = np.maximum(np.maximum(np.abs(f["P.X"][umbra]), np.abs(f["P.Y"][umbra])) - 0.5, 0.0)
+    assert np.all(dist[v > 0.2] < 0.02)
+
+
+def test_nonplanar_kernel_micro_subdivision(device):
+    """A receiver plate between an occluder above and the ground below: with 3x3
+    micro-subdivision no plate pixel is lit beyond the reference by more than 0.1; without it
+    (subdivision = 1, values clamped) the incorrectly-lit penumbra appears (> 0.4, on over 10%
+    of the plate)."""
+    sc = wsoft.load_scene(essm_nonplanar())
+    ref = wsoft.render(sc, "reference", width=128, height=128, samples=256, device=device)
+    plate = (ref["A"] > 0) & (np.abs(ref["P.Z"] - 1.0) < 1e-3)
+    assert plate.sum() > 4000
+    on = wsoft.render(sc, "essm", width=128, height=128, device=device)
+    off = wsoft.render(sc, "essm", width=128, height=128, device=device, subdivision=1)
+    d_on = (on.V - ref.V)[plate]
+    d_off = (off.V - ref.V)[plate]
+    assert d_on.max() < 0.1
+    assert d_off.max() > 0.4 and (d_off > 0.1).mean() > 0.1
+    assert on.stats["counters"][next(k for k in on.stats["counters"] if k.endswith("pcf_fallbacks"))] > 0
+
+
+def test_sat_tile_grid_stats_and_passes():
+    """The stats report the tile grid chosen by the pyramid test and the pass count; the depth range
+    comes from the min/max pyramid or the scene bounds."""
+    scene = wsoft.load_scene(scene_path("box_plane.usda"))
+    f = wsoft.render(scene, "essm", width=64, height=48, shadow_map_size=512)
+    c = f.stats["counters"]
+    sat = c[next(k for k in c if k.endswith(".sat"))]
+    assert sat["storage"] == "tiles" and sat["tile"] * sat["tiles_per_side"] == 512
+    assert sat["passes"] == 2 * math.ceil(math.log(sat["tile"], 8) - 1e-9)
+    assert any(t["passes"] for t in sat["levels_tested"])
+    zr = c[next(k for k in c if k.endswith(".z_range"))]
+    fb = wsoft.render(scene, "essm", width=64, height=48, shadow_map_size=512, depth_range="bounds")
+    zb = fb.stats["counters"][next(k for k in c if k.endswith(".z_range"))]
+    assert zb[0] <= zr[0] + 1e-5 and zb[1] >= zr[1] - 1e-5
+    assert any(p.startswith("essm_sat") for p in f.stats["passes"])
+
+
+def test_anisotropic_levels_and_c_override_run():
+    scene = wsoft.load_scene(scene_path("contact.usda"))
+    for kw in ({"level": 1}, {"level": 3, "H": 2.0}, {"anisotropic": False}, {"c": 8.0}, {"mu": 24, "tile": 16}):
+        f = wsoft.render(scene, "essm", width=64, height=48, shadow_map_size=512, **kw)
+        assert np.isfinite(f.V).all() and 0.0 <= f.V.min() and f.V.max() <= 1.0
+
+
+@pytest.mark.parametrize(
+    "bad, match",
+    [
+        ({"shadow_map_size": 1000}, "power of two"),
+        ({"sat": "float16"}, "sat"),
+        ({"build": "magic"}, "build"),
+        ({"mu": 40}, "mu"),
+        ({"tile": 48}, "tile"),
+        ({"c": 200.0}, "c must"),
+        ({"level": -1}, "level"),
+        ({"subdivision": 0}, "subdivision"),
+        ({"depth_range": "guess"}, "depth_range"),
+        ({"colour": 1}, "no parameter"),
+    ],
+)
+def test_essm_bad_parameters(bad, match):
+    with pytest.raises(ParameterError, match=match):
+        create("essm", bad)
+
+
+def test_vssm_bad_parameters():
+    with pytest.raises(ParameterError, match="bleed"):
+        create("vssm", {"bleed": 1.0})
+    with pytest.raises(ParameterError, match="power of two"):
+        create("vssm", {"shadow_map_size": 300})
+
+
+def test_cli_essm_bad_value(tmp_path):
+    from wsoft.cli import main
+
+    rc = main(["render", scene_path("box_plane.usda"), "-t", "essm", "--set", "sat=half", "--out", str(tmp_path / "x.exr")])
+    assert rc == 2
