@@ -26,7 +26,7 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 SCENES = REPO / "usd_scenes"
-SWEEPS = {"foundation": "bench.foundation", "filtered": "bench.filtered"}
+SWEEPS = {"foundation": "bench.foundation", "filtered": "bench.filtered", "essm": "bench.essm", "essm-table1": "bench.essm_table1", "essm-table2": "bench.essm_table2"}
 REFERENCE_VERSION = 1  # bump when the reference's sampling changes
 
 
