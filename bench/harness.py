@@ -26,7 +26,8 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 SCENES = REPO / "usd_scenes"
-SWEEPS = {"foundation": "bench.foundation", "filtered": "bench.filtered", "essm": "bench.essm", "essm-table1": "bench.essm_table1", "essm-table2": "bench.essm_table2"}
+SWEEPS = {"foundation": "bench.foundation", "filtered": "bench.filtered", "essm": "bench.essm", "essm-table1": "bench.essm_table1", "essm-table2": "bench.essm_table2",
+          "ssm": "bench.ssm", "ssm-table1": "bench.ssm_table1", "ssm-table2": "bench.ssm_table2"}
 REFERENCE_VERSION = 1  # bump when the reference's sampling changes
 
 

@@ -11,10 +11,7 @@ from conftest import parallel_rect_exact, scene_path
 
 import wsoft
 from wsoft.accel.ssm_structures import build_microrects, build_structure, query
-from wsoft.techniques import TECHNIQUES
-from wsoft.techniques.ssm import SSM, msaa_resolve
-
-TECHNIQUES.setdefault("ssm", SSM)  # registered by wsoft.techniques; harmless when it is
+from wsoft.techniques.ssm import msaa_resolve
 
 INF = float("inf")
 

@@ -11,10 +11,11 @@ from wsoft.techniques.pcf import PCF
 from wsoft.techniques.pcss import PCSS
 from wsoft.techniques.reference import Reference
 from wsoft.techniques.salzman import Salzman
+from wsoft.techniques.ssm import SSM
 from wsoft.techniques.vsm import VSM
 from wsoft.techniques.vssm import VSSM
 
-TECHNIQUES: dict[str, type[Technique]] = {t.name: t for t in (Reference, Hard, PCF, PCSS, VSM, ESM, Salzman, ESSM, VSSM)}
+TECHNIQUES: dict[str, type[Technique]] = {t.name: t for t in (Reference, Hard, PCF, PCSS, VSM, ESM, Salzman, ESSM, VSSM, SSM)}
 
 
 def get_technique(name: str) -> type[Technique]:
