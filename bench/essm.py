@@ -20,6 +20,7 @@ VARIATIONS = {
     "n": [{"subdivision": 1}, {"subdivision": 5}],
     "mu": [{"mu": 16}, {"mu": 24}],
     "sat": [{"sat": "uint32"}, {"sat": "float32"}],
+    "c": [{"c": 8.0}, {"c": 20.0}, {"c": 27.7}],  # around the optimal R = 13.9 of the μ = 20 tile grid
 }
 
 
@@ -86,7 +87,7 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
     renders = [r for r in rows if r["case"]["kind"] == "render"]
     L = report_header("essm", rows, md, ctx)
     L.append("ESSM (paper defaults: μ = 20 tile grid, 3x3 micro-subdivision, H = 5, Level0, optimal c) at map sizes 512-2048, and")
-    L.append("one parameter at a time at 1024² (H 2/10, level X 1/2, subdivision n 1/5, μ 16/24, full uint32 / float32 SAT);")
+    L.append("one parameter at a time at 1024² (H 2/10, level X 1/2, subdivision n 1/5, μ 16/24, full uint32 / float32 SAT, c 8/20/27.7);")
     L.append("VSSM (float32 SAT, 5x5 subdivision) and brute-force PCSS (16 blocker + 36 filter taps) over map size; the reference")
     L.append("ray tracer at 4/16/64 samples for scale.")
     L.append("")
@@ -102,7 +103,7 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
         L.append(f"| {scene} | {tech} | {p} | {r['timings_ms']['total']:.1f} | {r['error']['mae']:.4f} | {r['error']['mae_penumbra']:.4f} |")
     # one line per (technique, swept parameter) in the plot
     plot_rows = [r | {"technique": r.get("group", r["technique"])} for r in renders]
-    L += error_vs_time(plot_rows, md, ctx, "essm over map size / H / X / n / mu / SAT storage; vssm, pcss over map size; reference over samples")
+    L += error_vs_time(plot_rows, md, ctx, "essm over map size / H / X / n / mu / SAT storage / c; vssm, pcss over map size; reference over samples")
     L += image_list(renders, "ESSM, VSSM and PCSS at map 1024, reference, |difference| x4")
     if hard:
         L += ["", "## Hard cases (pinned by tests/test_essm.py)", ""]

@@ -351,6 +351,14 @@ def essm_shade(
     tv = 1.0 / lv.scale[1]
     gu = (receiver_depth(lv, pv, nv, wp.vec2(m0[0] + tu, m0[1])) - receiver_depth(lv, pv, nv, wp.vec2(m0[0] - tu, m0[1]))) * 0.5 / q.zrange
     gv = (receiver_depth(lv, pv, nv, wp.vec2(m0[0], m0[1] + tv)) - receiver_depth(lv, pv, nv, wp.vec2(m0[0], m0[1] - tv))) * 0.5 / q.zrange
+    # only a receiver that faces the light's centre is in the map around its texel: for one that
+    # faces away the plane says nothing about the stored depths (and is not used)
+    towards = -pv
+    if lv.persp == 0:
+        towards = wp.vec3(0.0, 0.0, -1.0)
+    if wp.dot(nv, towards) <= 0.0:
+        gu = 0.0
+        gv = 0.0
     plane = wp.vec3(dn + q.bias, gu, gv)
     # 1. blocker search over the light's spread from the nearest depth (ESM-Z, micro-subdivided)
     zmin_lin = q.zmin
