@@ -10,8 +10,9 @@ import numpy as np
 from bench.harness import measure_render, reference
 
 
-def render_row(case: dict, ctx: dict) -> dict:
-    """Render ``case`` (median of 3 after a warm-up) and measure its error against the cached reference."""
+def render_row(case: dict, ctx: dict, extra=None) -> dict:
+    """Render ``case`` (median of 3 after a warm-up) and measure its error against the cached reference.
+    ``extra(frame, reference) -> dict`` adds a sweep's own measurements to the row."""
     from wsoft.metrics import visibility_error
 
     ref = reference(case["scene"], width=case["width"], height=case["height"], light=case["light"], samples=case["ref_samples"], device=case["device"],
@@ -26,6 +27,8 @@ def render_row(case: dict, ctx: dict) -> dict:
         "memory_bytes": st["memory_bytes"], "counters": st["counters"], "passes": st["passes"], "error": err,
         "reference_ms": float(ref["ms"]), "ref_casters": case.get("ref_casters", "all"),
     }
+    if extra is not None:
+        row.update(extra(fr, ref))
     if case.get("image"):
         label = f"{case['technique']} " + " ".join(f"{k}={v}" for k, v in case["params"].items())
         row["image"] = side_by_side(case, label, fr.V, ref["V"], ref["A"], ctx)
