@@ -251,7 +251,8 @@ def test_msaa_resolve_hand_built_3x3():
     prim = np.ones(18, np.int32)
     prim[9 + 8] = -1
     dev = "cpu"
-    args = (wp.array(vis_pix, dtype=float, device=dev), rep, np.ones(9, np.int32), wp.array(dist, dtype=float, device=dev), wp.array(prim, dtype=wp.int32, device=dev), w, h, 0.01)
+    rid = wp.array(np.arange(9, dtype=np.int32), dtype=wp.int32, device=dev)  # every pixel's visibility is on its first sample
+    args = (wp.array(vis_pix, dtype=float, device=dev), rid, wp.array(dist, dtype=float, device=dev), wp.array(prim, dtype=wp.int32, device=dev), w, h, 0.01)
     out = msaa_resolve(*args, True, dev).numpy()
     assert np.allclose(out[:9], vis_pix)  # first samples: their pixel's
     assert out[9 + 4] == pytest.approx(0.6)  # the right neighbour (5.1) is closest to 5.0; below (7.0) is not

@@ -636,11 +636,28 @@ def backproject(
 
 
 @wp.kernel
+def pick_receivers(
+    offset: int,
+    prim: wp.array[wp.int32],
+    npix: int,
+    spp: int,
+    # outputs
+    rid: wp.array[wp.int32],
+):
+    """One receiver per pixel: its first covered G-buffer sample (sample-major), else sample 0."""
+    p = wp.tid() + offset
+    rid[p] = p
+    for s in range(spp):
+        if prim[s * npix + p] >= 0:
+            rid[p] = s * npix + p
+            return
+
+
+@wp.kernel
 def resolve_samples(
     offset: int,
     vis_pix: wp.array[float],
-    rep_dist: wp.array[float],
-    rep_hit: wp.array[wp.int32],
+    rid: wp.array[wp.int32],
     dist: wp.array[float],
     prim: wp.array[wp.int32],
     width: int,
@@ -652,8 +669,8 @@ def resolve_samples(
 ):
     """Visibility of G-buffer sample ``i`` (sample-major) from the per-pixel visibility (§7):
     the pixel's own where the sample's camera depth is within ``tau`` (relative) of the pixel's
-    representative sample, else (with ``interpolate``) that of the pixel or 4-neighbour whose
-    representative depth is closest to the sample's."""
+    representative sample ``rid[p]``, else (with ``interpolate``) that of the pixel or
+    4-neighbour whose representative depth is closest to the sample's."""
     i = wp.tid() + offset
     npix = width * height
     p = i % npix
@@ -662,14 +679,13 @@ def resolve_samples(
         return
     v = vis_pix[p]
     z = dist[i]
-    if interpolate == 0 or rep_hit[p] == 0 or wp.abs(z - rep_dist[p]) <= tau * rep_dist[p]:
+    zp = dist[rid[p]]
+    if interpolate == 0 or wp.abs(z - zp) <= tau * zp:
         vis[i] = v
         return
     y = p // width
     x = p - y * width
-    best = wp.abs(z - rep_dist[p])
-    if rep_hit[p] == 0:
-        best = BIG
+    best = wp.abs(z - zp)
     for k in range(4):
         xx = x
         yy = y
@@ -683,11 +699,11 @@ def resolve_samples(
             yy = y + 1
         if xx < 0 or yy < 0 or xx >= width or yy >= height:
             continue
-        q = yy * width + xx
-        if rep_hit[q] == 0:
+        q = rid[yy * width + xx]
+        if prim[q] < 0:
             continue
-        e = wp.abs(z - rep_dist[q])
+        e = wp.abs(z - dist[q])
         if e < best:
             best = e
-            v = vis_pix[q]
+            v = vis_pix[yy * width + xx]
     vis[i] = v

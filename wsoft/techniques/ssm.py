@@ -28,7 +28,9 @@ covered share (a clamped sum of areas, or an occlusion bitmask over light sample
 * Multisampling (§7, with ``pixel_samples`` > 1): ``msaa = interpolate`` computes visibility
   once per pixel, on its first covered sample, and resolves each sample whose camera depth is
   not within ``tau`` of it from the 4-neighbour whose depth is closest; ``single`` gives every
-  sample the pixel's visibility; ``per_sample`` is the brute-force version.
+  sample the pixel's visibility; ``per_sample`` is the brute-force version. The G-buffer's
+  4-sample pattern (:mod:`wsoft.raster.gbuffer`) puts each sample in its own row and column of
+  the pixel (an n-rooks pattern, the property the rotated grid is chosen for).
 
 Lights: rect lights exactly (the paper's case); disk and sphere lights by their bounding square
 (the bitmask samples are mapped into the disk; area accumulation measures the square); distant
@@ -92,6 +94,7 @@ from wsoft.accel.ssm_kernels import (
     STATUS_UMBRA,
     SSMSetup,
     backproject,
+    pick_receivers,
     resolve_samples,
     search_areas,
     smooth_loq,
@@ -265,36 +268,31 @@ def build_maps(depth: wp.array, p: SSMParams, device: str) -> SSMMaps:
     return SSMMaps(st, occ, mr)
 
 
-def receivers(gb, msaa: str) -> tuple[np.ndarray, int]:
+def receivers(gb, msaa: str, device: str) -> tuple[wp.array, int]:
     """Receiver -> G-buffer sample index (int32) and the number of layers: one receiver per pixel
     on its first covered sample, or every sample (``per_sample``)."""
     npix = gb.width * gb.height
     if gb.spp == 1 or msaa == "per_sample":
-        return np.arange(gb.count, dtype=np.int32), gb.spp
-    hit = gb.host("prim") >= 0
-    first = np.argmax(hit, axis=0).ravel()
-    return (first * npix + np.arange(npix)).astype(np.int32), 1
+        return wp.array(np.arange(gb.count, dtype=np.int32), dtype=wp.int32, device=device), gb.spp
+    rid = wp.empty(npix, dtype=wp.int32, device=device)
+    launch_chunked(pick_receivers, npix, inputs=[gb.prim, npix, gb.spp], outputs=[rid], device=device)
+    return rid, 1
 
 
-def msaa_resolve(vis_pix: wp.array, rep_dist: np.ndarray, rep_hit: np.ndarray, dist: wp.array, prim: wp.array, width: int, height: int,
+def msaa_resolve(vis_pix: wp.array, rid: wp.array, dist: wp.array, prim: wp.array, width: int, height: int,
                  tau: float, interpolate: bool, device: str) -> wp.array:
-    """Per-sample visibility (flat, sample-major) from per-pixel visibility (§7's custom resolve)."""
+    """Per-sample visibility (flat, sample-major) from per-pixel visibility (§7's custom resolve);
+    ``rid[p]``: the G-buffer sample pixel ``p``'s visibility was computed on."""
     n = dist.shape[0]
     out = wp.empty(n, dtype=float, device=device)
-    launch_chunked(
-        resolve_samples, n,
-        inputs=[vis_pix, wp.array(np.asarray(rep_dist, np.float32).ravel(), dtype=float, device=device),
-                wp.array(np.asarray(rep_hit, np.int32).ravel(), dtype=wp.int32, device=device), dist, prim, width, height, float(tau), int(interpolate)],
-        outputs=[out], device=device,
-    )
+    launch_chunked(resolve_samples, n, inputs=[vis_pix, rid, dist, prim, width, height, float(tau), int(interpolate)], outputs=[out], device=device)
     return out
 
 
 def run_search(setup: SSMSetup, maps: SSMMaps, gb, p: SSMParams, budget: np.ndarray, device: str) -> SSMSearch:
     """Kernels 1 and 2: search areas, classification, LOQ map and its smoothing."""
-    rid_np, layers = receivers(gb, p.msaa)
-    n = rid_np.shape[0]
-    rid = wp.array(rid_np, dtype=wp.int32, device=device)
+    rid, layers = receivers(gb, p.msaa, device)
+    n = rid.shape[0]
     b = np.broadcast_to(budget, (layers,) + budget.shape).ravel().astype(np.float32)
     s = SSMSearch(
         layers, rid, area=wp.empty(n, dtype=wp.vec4, device=device), status=wp.empty(n, dtype=wp.int32, device=device),
@@ -421,10 +419,7 @@ class SSM(Technique):
             if s.layers == gb.spp:  # one receiver per sample
                 vis = s.vis
             else:
-                rid = s.rid.numpy()
-                rep_dist = gb.dist.numpy()[rid]
-                rep_hit = gb.prim.numpy()[rid] >= 0
-                vis = msaa_resolve(s.vis, rep_dist, rep_hit, gb.dist, gb.prim, gb.width, gb.height, p.tau, p.msaa == "interpolate", dev)
+                vis = msaa_resolve(s.vis, s.rid, gb.dist, gb.prim, gb.width, gb.height, p.tau, p.msaa == "interpolate", dev)
             return {out: ctx.visibility(vis)}
 
         ctx.add_pass(f"ssm_structure[{label}]", inputs=(depth,), outputs=(maps_key,), run=build)
