@@ -290,7 +290,7 @@ def msaa_resolve(vis_pix: wp.array, rid: wp.array, dist: wp.array, prim: wp.arra
 
 
 def run_search(setup: SSMSetup, maps: SSMMaps, gb, p: SSMParams, budget: np.ndarray, device: str) -> SSMSearch:
-    """Kernels 1 and 2: search areas, classification, LOQ map and its smoothing."""
+    """Kernel 1: search areas, classification and the raw LOQ map."""
     rid, layers = receivers(gb, p.msaa, device)
     n = rid.shape[0]
     b = np.broadcast_to(budget, (layers,) + budget.shape).ravel().astype(np.float32)
@@ -302,15 +302,20 @@ def run_search(setup: SSMSetup, maps: SSMMaps, gb, p: SSMParams, budget: np.ndar
     z_first = float(maps.occluders.pyr.numpy()[-1][0])  # the nearest depth of the whole map
     launch_chunked(search_areas, n, inputs=[setup, g, gb.pos, gb.prim, gb.dist, rid, wp.array(b, dtype=float, device=device), z_first],
                    outputs=[s.area, s.status, s.loq_raw, s.cam], device=device, min_chunk=256)
-    finite = np.isfinite(budget).any()
-    if p.blend and finite and p.smooth_radius > 0:
+    return s
+
+
+def run_smoothing(s: SSMSearch, gb, p: SSMParams, smooth: bool, device: str) -> wp.array:
+    """Kernel 2: the separable LOQ smoothing (into ``s.loq``; a copy of the raw LOQ without it)."""
+    n = s.rid.shape[0]
+    if smooth and p.smooth_radius > 0:
         tmp = wp.empty(n, dtype=float, device=device)
         for axis, src, dst in ((0, s.loq_raw, tmp), (1, tmp, s.loq)):
             launch_chunked(smooth_loq, n, inputs=[src, s.status, s.cam, gb.width, gb.height, p.smooth_radius, axis, p.depth_threshold],
                            outputs=[dst], device=device)
     else:
         wp.copy(s.loq, s.loq_raw)
-    return s
+    return s.loq
 
 
 def run_visibility(setup: SSMSetup, maps: SSMMaps, gb, s: SSMSearch, samples: wp.array, device: str) -> None:
@@ -367,6 +372,7 @@ class SSM(Technique):
         prefix = f"ssm[{label}]"
         maps_key = f"ssm_maps[{label}]"
         search_key = f"ssm_search[{label}]"
+        loq_key = f"ssm_loq[{label}]"
         out = ctx.visibility_key(light)
         bias = p.bias * ctx.scene.diagonal
         dev = ctx.device
@@ -402,6 +408,10 @@ class SSM(Technique):
             s = run_search(setup_of(dm), res[maps_key], gb, p, budget, dev)
             return {search_key: s}
 
+        def smooth(res):
+            st = setup_of(res[depth])
+            return {loq_key: run_smoothing(res[search_key], res[gbuf], p, bool(st.blend), dev)}
+
         def visibility(res):
             gb, dm, s = res[gbuf], res[depth], res[search_key]
             run_visibility(setup_of(dm), res[maps_key], gb, s, wp.array(pts, dtype=wp.vec2, device=dev), dev)
@@ -424,7 +434,8 @@ class SSM(Technique):
 
         ctx.add_pass(f"ssm_structure[{label}]", inputs=(depth,), outputs=(maps_key,), run=build)
         ctx.add_pass(f"ssm_search[{label}]", inputs=(gbuf, depth, maps_key), outputs=(search_key,), run=search)
-        ctx.add_pass(f"ssm[{label}]", inputs=(gbuf, depth, maps_key, search_key), outputs=(out,), run=visibility)
+        ctx.add_pass(f"ssm_smooth[{label}]", inputs=(gbuf, depth, search_key), outputs=(loq_key,), run=smooth)
+        ctx.add_pass(f"ssm[{label}]", inputs=(gbuf, depth, maps_key, search_key, loq_key), outputs=(out,), run=visibility)
         return out
 
 
