@@ -94,12 +94,47 @@ def grown_bounds(x0: float, x1: float, cell: int, extra: int) -> wp.vec2i:
     return wp.vec2i(a * cell, (b + 1) * cell - 1)
 
 
+@wp.func
+def plane_depth(lv: LightViewGPU, pv: wp.vec3, nv: wp.vec3, u: float, v: float) -> float:
+    """Depth of the receiver's tangent plane along window coordinates (u, v); -BIG where the
+    ray misses it (the plane seen edge-on or behind the light)."""
+    if lv.persp != 0:
+        den = nv[0] * u + nv[1] * v + nv[2]
+        if wp.abs(den) < 1.0e-12:
+            return -BIG
+        z = wp.dot(nv, pv) / den
+        if z <= 0.0:
+            return -BIG
+        return z
+    if wp.abs(nv[2]) < 1.0e-6:
+        return -BIG
+    return pv[2] - (nv[0] * (u - pv[0]) + nv[1] * (v - pv[1])) / nv[2]
+
+
+@wp.func
+def plane_min_over(lv: LightViewGPU, pv: wp.vec3, nv: wp.vec3, x0: int, y0: int, x1: int, y1: int) -> float:
+    """Nearest depth of the receiver's tangent plane over level-0 texels [x0, x1] x [y0, y1] (its
+    corners: the depth is monotonic along lines of the window while the plane stays in front)."""
+    u0 = lv.window[0] + float(x0) / lv.scale[0]
+    u1 = lv.window[0] + float(x1 + 1) / lv.scale[0]
+    v0 = lv.window[2] + float(y0) / lv.scale[1]
+    v1 = lv.window[2] + float(y1 + 1) / lv.scale[1]
+    a = plane_depth(lv, pv, nv, u0, v0)
+    b = plane_depth(lv, pv, nv, u1, v0)
+    c = plane_depth(lv, pv, nv, u0, v1)
+    d = plane_depth(lv, pv, nv, u1, v1)
+    if a <= -BIG or b <= -BIG or c <= -BIG or d <= -BIG:
+        return -BIG
+    return wp.min(wp.min(a, b), wp.min(c, d))
+
+
 @wp.kernel
 def search_areas(
     offset: int,
     st: SSMSetup,
     acc: DepthRanges,
     pos: wp.array[wp.vec3],
+    nrm: wp.array[wp.vec3],
     prim: wp.array[wp.int32],
     dist: wp.array[float],
     rid: wp.array[wp.int32],
@@ -126,6 +161,7 @@ def search_areas(
         status[i] = STATUS_LIT
         return
     zr = pv[2]
+    nv = view_dir(lv, nrm[s])
     tc = texel_of(lv, pv)
     n = lv.width
     b = budget[i]
@@ -155,10 +191,13 @@ def search_areas(
         if r[0] >= zr - st.bias:
             status[i] = STATUS_LIT
             return
+        # umbra: every texel of the area is nearer than the receiver's tangent plane anywhere in
+        # it (so none of them is the receiver's own surface) and the area lies inside the map
         inside = gx[0] >= 0 and gy[0] >= 0 and gx[1] < n and gy[1] < n
         if inside and r[1] < zr - st.bias:
-            status[i] = STATUS_UMBRA
-            return
+            if r[1] < plane_min_over(lv, pv, nv, gx[0], gy[0], gx[1], gy[1]) - st.bias:
+                status[i] = STATUS_UMBRA
+                return
         if r[0] <= z:
             break
         z = r[0]

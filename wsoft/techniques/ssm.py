@@ -300,7 +300,7 @@ def run_search(setup: SSMSetup, maps: SSMMaps, gb, p: SSMParams, budget: np.ndar
     )
     g = maps.structure.gpu
     z_first = float(maps.occluders.pyr.numpy()[-1][0])  # the nearest depth of the whole map
-    launch_chunked(search_areas, n, inputs=[setup, g, gb.pos, gb.prim, gb.dist, rid, wp.array(b, dtype=float, device=device), z_first],
+    launch_chunked(search_areas, n, inputs=[setup, g, gb.pos, gb.nrm, gb.prim, gb.dist, rid, wp.array(b, dtype=float, device=device), z_first],
                    outputs=[s.area, s.status, s.loq_raw, s.cam], device=device, min_chunk=256)
     return s
 
