@@ -174,7 +174,7 @@ def test_bitmask_matches_area_without_overlaps(device):
     """One planar occluder: projections do not overlap, so the bitmask's count equals the summed
     area up to the sample spacing."""
     scene = wsoft.load_scene(scene_path("box_plane.usda"))
-    kw = dict(width=96, height=72, device=device, budget=INF)
+    kw = {"width": 96, "height": 72, "device": device, "budget": INF}
     area = wsoft.render(scene, "ssm", visibility="area", **kw)
     bits = wsoft.render(scene, "ssm", visibility="bitmask", bitmask_size=32, pattern="regular", **kw)
     pen = (area.V > 0.02) & (area.V < 0.98)
@@ -188,7 +188,7 @@ def test_bitmask_avoids_over_occlusion_of_overlaps(device):
 
     ref = reference("penumbra_ramp", width=64, height=48, light=None, samples=64, device=device)
     scene = wsoft.load_scene(scene_path("penumbra_ramp.usda"))
-    kw = dict(width=64, height=48, device=device, budget=INF, shadow_map_size=512)
+    kw = {"width": 64, "height": 48, "device": device, "budget": INF, "shadow_map_size": 512}
     a = wsoft.render(scene, "ssm", visibility="area", **kw)
     b = wsoft.render(scene, "ssm", visibility="bitmask", **kw)
     cov = ref["A"] > 0
@@ -264,7 +264,7 @@ def test_msaa_resolve_hand_built_3x3():
 
 def test_msaa_interpolation_close_to_per_sample(device):
     scene = wsoft.load_scene(scene_path("contact.usda"))
-    kw = dict(width=64, height=48, device=device, pixel_samples=4, budget=8)
+    kw = {"width": 64, "height": 48, "device": device, "pixel_samples": 4, "budget": 8}
     brute = wsoft.render(scene, "ssm", msaa="per_sample", **kw)
     interp = wsoft.render(scene, "ssm", msaa="interpolate", **kw)
     cov = brute["A"] > 0
@@ -296,7 +296,7 @@ def test_each_light_kind_against_reference(device, light):
     in the light's view see their own surface in the map; they must not be taken for umbra (the
     umbra test compares with the nearest depth of the receiver's tangent plane over the area)."""
     scene = wsoft.load_scene(scene_path("multi_light.usda"))
-    kw = dict(width=96, height=72, device=device, light=light)
+    kw = {"width": 96, "height": 72, "device": device, "light": light}
     ref = wsoft.render(scene, "reference", samples=64, **kw)
     f = wsoft.render(scene, "ssm", budget=INF, **kw)
     cov = ref["A"] > 0
@@ -322,7 +322,7 @@ def test_budget_map_from_exr(tmp_path):
 
 def test_bad_inputs(tmp_path):
     scene = wsoft.load_scene(scene_path("box_plane.usda"))
-    kw = dict(width=8, height=8, device="cpu")
+    kw = {"width": 8, "height": 8, "device": "cpu"}
     with pytest.raises(wsoft.ParameterError, match="occluder 'microtri' is not one of"):
         wsoft.render(scene, "ssm", occluder="microtri", **kw)
     with pytest.raises(wsoft.ParameterError, match="power of two"):
