@@ -368,3 +368,20 @@ def test_cli_missing_budget_map_is_one_line(tmp_path):
     assert p.returncode == 2 and "Traceback" not in p.stderr
     lines = [ln for ln in p.stderr.splitlines() if ln.startswith("wsoft: error")]
     assert len(lines) == 1 and missing in lines[0] and "not found" in lines[0]
+
+
+def test_table1_rows_and_report(tmp_path):
+    """``wsoft bench ssm-table1``'s rows carry structure, size, build_ms and memory_mb; the report puts the paper beside them."""
+    from bench import ssm_table1
+
+    rows = []
+    for structure in ("mssm", "ysm"):
+        case = {"kind": "build", "scene": "box_plane", "structure": structure, "size": 256, "ysm_size": 64, "device": "cpu"}
+        row = ssm_table1.run_case(case, {})
+        assert {"structure", "size", "build_ms", "memory_mb"} <= set(row) and row["build_ms"] > 0
+        rows.append(row | {"case": case, "machine": {}})
+    assert rows[0]["memory_mb"] > 4 * rows[1]["memory_mb"]  # MSSM (9 scales of 256^2) against HSM + 6 scales of 64^2
+    md = tmp_path / "t1.md"
+    ssm_table1.report(rows, md, {"quick": True, "command": "wsoft bench ssm-table1 --quick"})
+    text = md.read_text()
+    assert "wsoft bench ssm-table1 --quick" in text and "YSM at least 4×" in text
