@@ -34,6 +34,13 @@ PRIVATE_MAP_BUDGET = 1 << 30  # CPU: bytes allowed for per-worker private depth 
 MAX_TAN = math.tan(math.radians(80.0))  # widest half-angle a perspective light view may open
 
 
+def to_frame(p: np.ndarray, origin: np.ndarray, axes: np.ndarray) -> np.ndarray:
+    """``(p - origin) @ axes`` for an (N, 3) array, without BLAS: a BLAS matrix product leaves
+    OpenBLAS's threads spinning, taking the cores from the Warp launches that follow."""
+    d = p - origin
+    return d[:, 0:1] * axes[0] + d[:, 1:2] * axes[1] + d[:, 2:3] * axes[2]
+
+
 @wp.struct
 class LightViewGPU:
     origin: wp.vec3
@@ -81,7 +88,7 @@ class LightView:
         return g
 
     def to_view(self, p: np.ndarray) -> np.ndarray:
-        return (np.asarray(p, np.float64) - self.origin) @ self.axes
+        return to_frame(np.asarray(p, np.float64), self.origin, self.axes)
 
     def texel_coords(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Continuous texel coordinates (x, y) of the world points ``p`` in front of the view
@@ -138,8 +145,8 @@ def fit_light_view(
         axes = np.stack([light.frame[:, 0], light.frame[:, 1], -light.frame[:, 2]], axis=1)  # view along emission
         corners = np.array([[x, y, z] for x in (scene_lo[0], scene_hi[0]) for y in (scene_lo[1], scene_hi[1]) for z in (scene_lo[2], scene_hi[2])])
         origin = center - axes[:, 2] * diag
-        vr = (rec - origin) @ axes
-        vc = (corners - origin) @ axes
+        vr = to_frame(rec, origin, axes)
+        vc = to_frame(corners, origin, axes)
         pad = margin + 1e-4 * diag
         if casters is not None and light.angle_deg > 0:
             pad += math.tan(math.radians(0.5 * light.angle_deg)) * max(float(vr[:, 2].max() - vc[:, 2].min()), 0.0)
@@ -155,7 +162,7 @@ def fit_light_view(
             axes = _basis_from_axis(d if np.linalg.norm(d) > 1e-9 else -light.frame[:, 2])
         else:
             axes = np.stack([light.frame[:, 0], -light.frame[:, 1], -light.frame[:, 2]], axis=1)  # right-handed, view along −Z
-        vr = (rec - origin) @ axes
+        vr = to_frame(rec, origin, axes)
         zmin_ok = 1e-6 * diag
         ok = vr[:, 2] > zmin_ok
         tx = vr[ok, 0] / vr[ok, 2]
@@ -173,7 +180,7 @@ def fit_light_view(
         w = light.extent()
         if casters is not None and w > 0 and len(zr):
             zr_max = float(zr.max())
-            vc = (np.asarray(casters, np.float64).reshape(-1, 3) - origin) @ axes
+            vc = to_frame(np.asarray(casters, np.float64).reshape(-1, 3), origin, axes)
             vc = vc[(vc[:, 2] > 1e-3 * diag) & (vc[:, 2] < zr_max)]
             if len(vc):
                 grow = w * (1.0 / vc[:, 2] - 1.0 / zr_max)
