@@ -158,6 +158,20 @@ def _ground_error(f):
     return err.mean(), err[pen].mean(), err.max()
 
 
+def test_microrects_fit_a_planar_occluder_better_at_coarse_levels(device):
+    """§5's point on the simplest occluder: at a coarse level (b_mo = 3, level 4 here) a
+    micropatch covers its whole aligned block at the block's minimum depth, so the square
+    occluder's shadow grows to the block boundaries; the microrects merge only the occluder's
+    texels and keep its edges. Measured: MAE 0.0073 (micropatch) vs 0.0020 (microrect)."""
+    scene = wsoft.load_scene(scene_path("box_plane.usda"))
+    kw = {"width": 160, "height": 120, "device": device, "budget": 3.0, "blend": False}
+    patch = wsoft.render(scene, "ssm", occluder="micropatch", **kw)
+    rect = wsoft.render(scene, "ssm", occluder="microrect", **kw)
+    assert set(rect.stats["counters"]["ssm[Light].levels_used"]) == {"4"}
+    e_patch, e_rect = _ground_error(patch)[0], _ground_error(rect)[0]
+    assert e_rect < 0.5 * e_patch and e_rect < 0.004
+
+
 @pytest.mark.parametrize("visibility", ["area", "bitmask"])
 def test_exact_on_parallel_rectangles_at_level_0(device, visibility):
     """Level 0, b_mo = inf: the micropatches of one planar occluder parallel to the light abut
