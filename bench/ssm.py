@@ -434,8 +434,9 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
         L += ["", "## Fig. 9: multisampling (4 samples a pixel, `pixel_samples=4`)", ""]
         L.append("`ssm ms` = the technique's passes (structures, search, backprojection, the custom resolve); the G-buffer's own cost")
         L.append("grows with the samples (multisampling itself), which the paper's overhead figure excludes as well.")
-        L.append("`1 BLAS thread`: the same setups in a child process with `OPENBLAS_NUM_THREADS=1` (see `bench/ssm_msaa.py`: NumPy's")
-        L.append("OpenBLAS threads spin after the light view's fit over 4× the receivers and take the 2 cores from the Warp launches).")
+        L.append("`1 BLAS thread`: the same setups in a child process with `OPENBLAS_NUM_THREADS=1` (see `bench/ssm_msaa.py`), a control:")
+        L.append("NumPy's OpenBLAS threads spin after a large matrix product and take the 2 cores from the Warp launches that follow;")
+        L.append("the light view's fit now projects without BLAS (`lightview.to_frame`), so the two columns differ by the machine's noise.")
         L += ["", "| setup | frame ms | G-buffer ms | ssm ms | ssm ms, 1 BLAS thread | MAE | MAE partly covered pixels | MAE depth-edge pixels |",
               "|---|---|---|---|---|---|---|---|"]
         for label, r in res.items():
