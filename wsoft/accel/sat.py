@@ -33,6 +33,7 @@ import numpy as np
 import warp as wp
 
 from wsoft.parallel import launch_chunked
+from wsoft.raster.lightview import in_front_of_light, texel_of, view_of
 
 STORAGES = ("tiles", "uint32", "float32")
 BUILDS = ("doubling", "scan")
@@ -265,6 +266,34 @@ for _t in (wp.uint32, wp.float32):
     wp.overload(doubling_cols, {"src": _a, "dst": _a})
     wp.overload(scan_rows, {"src": _a, "dst": _a})
     wp.overload(scan_cols, {"dst": _a})
+
+
+@wp.func
+def receiver_texel(lv: Any, p: wp.vec3, n: int) -> wp.vec4:
+    """(tx, ty, view depth, 1) of a world point seen by the light inside its ``n x n`` map, else w = 0
+    (behind a perspective light's near plane or outside the window: nothing mapped can shadow it)."""
+    pv = view_of(lv, p)
+    if not in_front_of_light(lv, pv):
+        return wp.vec4(0.0, 0.0, pv[2], 0.0)
+    tc = texel_of(lv, pv)
+    nf = float(n)
+    if tc[0] < 0.0 or tc[1] < 0.0 or tc[0] >= nf or tc[1] >= nf:
+        return wp.vec4(tc[0], tc[1], pv[2], 0.0)
+    return wp.vec4(tc[0], tc[1], pv[2], 1.0)
+
+
+def check_sat_params(p) -> None:
+    """The parameters every SAT-filtered technique (essm, vssm) shares; raises ValueError."""
+    from wsoft.techniques.base import check
+
+    n = p.shadow_map_size
+    check(256 <= n <= 8192 and n & (n - 1) == 0, f"shadow_map_size {n} must be a power of two in [256, 8192]")
+    check(p.sat in STORAGES, f"sat {p.sat!r} is not one of {', '.join(STORAGES)}")
+    check(p.build in BUILDS, f"build {p.build!r} is not one of {', '.join(BUILDS)}")
+    check(8 <= p.mu <= 31, "mu must be in [8, 31]")
+    check(1 <= p.subdivision <= 8, "subdivision must be in [1, 8]")
+    check(p.bias >= 0.0, "bias must be >= 0")
+    check(0.0 < p.min_radius <= p.max_radius, "need 0 < min_radius <= max_radius")
 
 
 # --------------------------------------------------------------------------- host side

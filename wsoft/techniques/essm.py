@@ -63,30 +63,24 @@ import numpy as np
 import warp as wp
 
 from wsoft.accel.sat import (
-    BUILDS,
     SAT,
-    STORAGES,
     box_area,
     build_sat,
+    check_sat_params,
     mean_pyramid,
     minmax_range,
+    receiver_texel,
     sat_box,
 )
 from wsoft.parallel import launch_chunked
-from wsoft.raster.lightview import (
-    DEPTH_CLEAR,
-    LightViewGPU,
-    in_front_of_light,
-    texel_of,
-    view_of,
-)
+from wsoft.raster.lightview import DEPTH_CLEAR, LightViewGPU, texel_of, view_of
 from wsoft.techniques.base import Technique, check, param
 from wsoft.techniques.filtering import (
     LightKernel,
     light_kernel,
     map_coords,
     receiver_depth,
-    spread,
+    spread_texels,
     view_dir,
 )
 
@@ -113,21 +107,15 @@ class ESSMParams:
     max_radius: float = param(512.0, "largest search and penumbra half-width in texels")
 
     def __post_init__(self):
+        check_sat_params(self)
         n = self.shadow_map_size
-        check(256 <= n <= 8192 and n & (n - 1) == 0, f"shadow_map_size {n} must be a power of two in [256, 8192]")
-        check(self.sat in STORAGES, f"sat {self.sat!r} is not one of {', '.join(STORAGES)}")
-        check(self.build in BUILDS, f"build {self.build!r} is not one of {', '.join(BUILDS)}")
         check(2 <= self.reads <= 64, "reads must be in [2, 64]")
-        check(8 <= self.mu <= 31, "mu must be in [8, 31]")
         check(self.tile == 0 or (1 <= self.tile <= n and self.tile & (self.tile - 1) == 0), f"tile {self.tile} must be 0 or a power of two <= shadow_map_size")
         check(0.0 <= self.c <= 87.0, "c must be in [0, 87] (0: optimal)")
         check(self.depth_range in ("pyramid", "bounds"), f"depth_range {self.depth_range!r} is not pyramid or bounds")
         check(0.25 <= self.H <= 256.0, "H must be in [0.25, 256] texels")
         check(0 <= self.level <= 5, "level must be in [0, 5]")
-        check(1 <= self.subdivision <= 8, "subdivision must be in [1, 8]")
         check(0.0 <= self.epsilon <= 1.0, "epsilon must be in [0, 1]")
-        check(self.bias >= 0.0, "bias must be >= 0")
-        check(0.0 < self.min_radius <= self.max_radius, "need 0 < min_radius <= max_radius")
 
 
 def optimal_exponent(storage: str, mu: int, n: int) -> float:
@@ -335,14 +323,12 @@ def essm_shade(
     vis[i] = 1.0
     if prim[i] < 0:
         return
+    rt = receiver_texel(lv, pos[i], q.n)
+    if rt[3] == 0.0:
+        return
+    tc = wp.vec2(rt[0], rt[1])
     pv = view_of(lv, pos[i])
-    if not in_front_of_light(lv, pv):
-        return
-    tc = texel_of(lv, pv)
-    nf = float(q.n)
-    if tc[0] < 0.0 or tc[1] < 0.0 or tc[0] >= nf or tc[1] >= nf:
-        return
-    d_lin = pv[2]
+    d_lin = rt[2]
     dn = wp.clamp((d_lin - q.zmin) / q.zrange, 0.0, 1.0) - q.bias
     # the receiver's tangent plane in normalised depth per texel (receiver-plane depth)
     nv = view_dir(lv, nrm[i])
@@ -361,11 +347,8 @@ def essm_shade(
         gv = 0.0
     plane = wp.vec3(dn + q.bias, gu, gv)
     # 1. blocker search over the light's spread from the nearest depth (ESM-Z, micro-subdivided)
-    zmin_lin = q.zmin
-    sh = spread(lv, k, zmin_lin, d_lin)
-    sx = wp.clamp(sh[0] * lv.scale[0], 0.5, q.max_r)
-    sy = wp.clamp(sh[1] * lv.scale[1], 0.5, q.max_r)
-    r = region(q, data, depth, tc[0] - sx, tc[0] + sx, tc[1] - sy, tc[1] + sy, plane, tc, 1)
+    sh = spread_texels(lv, k, q.zmin, d_lin, 0.5, q.max_r)
+    r = region(q, data, depth, tc[0] - sh[0], tc[0] + sh[0], tc[1] - sh[1], tc[1] + sh[1], plane, tc, 1)
     nlook = r[2]
     nfb = r[3]
     occluded = 1.0 - r[0]
@@ -375,11 +358,9 @@ def essm_shade(
         return
     z_occ = wp.clamp(r[1] / occluded, 0.0, wp.max(dn, 0.0))
     # 2. penumbra from the average blocker depth, as a Gaussian with the box's variance
-    pen = spread(lv, k, q.zmin + z_occ * q.zrange, d_lin)
-    px = wp.clamp(pen[0] * lv.scale[0], q.min_r, q.max_r)
-    py = wp.clamp(pen[1] * lv.scale[1], q.min_r, q.max_r)
-    sxx = px * px / 3.0
-    syy = py * py / 3.0
+    pen = spread_texels(lv, k, q.zmin + z_occ * q.zrange, d_lin, q.min_r, q.max_r)
+    sxx = pen[0] * pen[0] / 3.0
+    syy = pen[1] * pen[1] / 3.0
     sxy = float(0.0)
     if q.aniso != 0:
         # the pixel's footprint on the map (a unit pixel box, variance 1/12 per screen axis)

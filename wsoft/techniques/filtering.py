@@ -145,6 +145,13 @@ def spread(lv: LightViewGPU, k: LightKernel, zb: float, zr: float) -> wp.vec2:
 
 
 @wp.func
+def spread_texels(lv: LightViewGPU, k: LightKernel, zb: float, zr: float, lo: float, hi: float) -> wp.vec2:
+    """:func:`spread` in texels along x and y, clamped to [lo, hi]."""
+    h = spread(lv, k, zb, zr)
+    return wp.vec2(wp.clamp(h[0] * lv.scale[0], lo, hi), wp.clamp(h[1] * lv.scale[1], lo, hi))
+
+
+@wp.func
 def tap_offset(disk: int, u: wp.vec2) -> wp.vec2:
     """A tap in [-1, 1]^2 placed in the kernel's shape (the unit disk via the concentric map)."""
     if disk != 0:

@@ -38,18 +38,19 @@ from typing import Any
 
 import warp as wp
 
-from wsoft.accel.sat import BUILDS, STORAGES, box_area, build_sat, mean_pyramid, sat_box
-from wsoft.parallel import launch_chunked
-from wsoft.raster.lightview import (
-    DEPTH_CLEAR,
-    LightViewGPU,
-    in_front_of_light,
-    texel_of,
-    view_of,
+from wsoft.accel.sat import (
+    box_area,
+    build_sat,
+    check_sat_params,
+    mean_pyramid,
+    receiver_texel,
+    sat_box,
 )
+from wsoft.parallel import launch_chunked
+from wsoft.raster.lightview import DEPTH_CLEAR, LightViewGPU
 from wsoft.techniques.base import Technique, check, param
 from wsoft.techniques.essm import depth_range
-from wsoft.techniques.filtering import LightKernel, light_kernel, spread
+from wsoft.techniques.filtering import LightKernel, light_kernel, spread_texels
 
 
 @dataclass(frozen=True)
@@ -66,16 +67,9 @@ class VSSMParams:
     max_radius: float = param(512.0, "largest search and penumbra half-width in texels")
 
     def __post_init__(self):
-        n = self.shadow_map_size
-        check(256 <= n <= 8192 and n & (n - 1) == 0, f"shadow_map_size {n} must be a power of two in [256, 8192]")
-        check(self.sat in STORAGES, f"sat {self.sat!r} is not one of {', '.join(STORAGES)}")
-        check(self.build in BUILDS, f"build {self.build!r} is not one of {', '.join(BUILDS)}")
-        check(8 <= self.mu <= 31, "mu must be in [8, 31]")
-        check(1 <= self.subdivision <= 8, "subdivision must be in [1, 8]")
+        check_sat_params(self)
         check(self.min_variance >= 0.0, "min_variance must be >= 0")
         check(0.0 <= self.bleed < 1.0, "bleed must be in [0, 1)")
-        check(self.bias >= 0.0, "bias must be >= 0")
-        check(0.0 < self.min_radius <= self.max_radius, "need 0 < min_radius <= max_radius")
 
 
 @wp.struct
@@ -160,29 +154,22 @@ def vssm_shade(offset: int, lv: LightViewGPU, k: LightKernel, q: VSSMConsts, dat
     looks[i] = 0
     if prim[i] < 0:
         return
-    pv = view_of(lv, pos[i])
-    if not in_front_of_light(lv, pv):
+    rt = receiver_texel(lv, pos[i], q.n)
+    if rt[3] == 0.0:
         return
-    tc = texel_of(lv, pv)
-    nf = float(q.n)
-    if tc[0] < 0.0 or tc[1] < 0.0 or tc[0] >= nf or tc[1] >= nf:
-        return
-    d_lin = pv[2]
+    tc = wp.vec2(rt[0], rt[1])
+    d_lin = rt[2]
     d = wp.clamp((d_lin - q.zmin) / q.zrange, 0.0, 1.0) - q.bias
-    sh = spread(lv, k, q.zmin, d_lin)
-    sx = wp.clamp(sh[0] * lv.scale[0], 0.5, q.max_r)
-    sy = wp.clamp(sh[1] * lv.scale[1], 0.5, q.max_r)
-    r = vregion(q, data, tc[0] - sx, tc[0] + sx, tc[1] - sy, tc[1] + sy, d)
+    sh = spread_texels(lv, k, q.zmin, d_lin, 0.5, q.max_r)
+    r = vregion(q, data, tc[0] - sh[0], tc[0] + sh[0], tc[1] - sh[1], tc[1] + sh[1], d)
     nl = r[2]
     occ = 1.0 - r[0]
     if occ <= 1.0e-4:
         looks[i] = int(nl)
         return
     z_occ = wp.clamp(r[1] / occ, 0.0, wp.max(d, 0.0))
-    pen = spread(lv, k, q.zmin + z_occ * q.zrange, d_lin)
-    px = wp.clamp(pen[0] * lv.scale[0], q.min_r, q.max_r)
-    py = wp.clamp(pen[1] * lv.scale[1], q.min_r, q.max_r)
-    s = vregion(q, data, tc[0] - px, tc[0] + px, tc[1] - py, tc[1] + py, d)
+    pen = spread_texels(lv, k, q.zmin + z_occ * q.zrange, d_lin, q.min_r, q.max_r)
+    s = vregion(q, data, tc[0] - pen[0], tc[0] + pen[0], tc[1] - pen[1], tc[1] + pen[1], d)
     vis[i] = wp.clamp(s[0], 0.0, 1.0)
     looks[i] = int(nl + s[2])
 
