@@ -109,3 +109,15 @@ def parallel_rect_exact(px, py, light_z, occ_z, occ_half, light_half):
         return np.clip(b - a, 0, None) / (2 * light_half)
 
     return 1.0 - overlap(np.asarray(px)) * overlap(np.asarray(py))
+
+
+def box_plane_ground_error(f, min_penumbra: int = 100):
+    """Error of a render of ``box_plane.usda`` on its ground against :func:`parallel_rect_exact`:
+    (MAE, MAE in the exact penumbra, max). Asserts the view holds at least ``min_penumbra``
+    penumbra pixels, so a test cannot pass on an empty penumbra."""
+    g = (f["A"] > 0) & (np.abs(f["P.Z"]) < 1e-3)
+    exact = parallel_rect_exact(f["P.X"], f["P.Y"], 3.0, 1.0, 1.0, 0.5)
+    err = np.abs(f.V - exact)[g]
+    pen = ((exact > 0.01) & (exact < 0.99))[g]
+    assert pen.sum() > min_penumbra
+    return err.mean(), err[pen].mean(), err.max()

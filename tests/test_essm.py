@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import parallel_rect_exact, scene_path
+from conftest import box_plane_ground_error, scene_path
 
 import wsoft
 from bench.essm_cases import essm_contact_box, essm_nonplanar
@@ -15,12 +15,7 @@ from wsoft.techniques.essm import optimal_exponent
 
 
 def _ground_error(f):
-    g = (f["A"] > 0) & (np.abs(f["P.Z"]) < 1e-3)
-    exact = parallel_rect_exact(f["P.X"], f["P.Y"], 3.0, 1.0, 1.0, 0.5)
-    err = np.abs(f.V - exact)[g]
-    pen = ((exact > 0.01) & (exact < 0.99))[g]
-    assert pen.sum() > 200
-    return err.mean(), err[pen].mean(), err.max()
+    return box_plane_ground_error(f, min_penumbra=200)
 
 
 @pytest.mark.parametrize("params", [{}, {"sat": "uint32"}, {"level": 2, "build": "scan"}])

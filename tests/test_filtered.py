@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import add_camera, add_quad, make_stage, parallel_rect_exact, scene_path
+from conftest import add_camera, add_quad, box_plane_ground_error, make_stage, scene_path
 
 import wsoft
 from wsoft.raster.lightview import fit_light_view
@@ -13,12 +13,7 @@ SCENES = ["box_plane.usda", "contact.usda", "multi_light.usda", "cutout.usda"]
 
 
 def _ground_error(f):
-    g = (f["A"] > 0) & (np.abs(f["P.Z"]) < 1e-3)
-    exact = parallel_rect_exact(f["P.X"], f["P.Y"], 3.0, 1.0, 1.0, 0.5)
-    err = np.abs(f.V - exact)[g]
-    pen = ((exact > 0.01) & (exact < 0.99))[g]
-    assert pen.sum() > 100
-    return err.mean(), err[pen].mean()
+    return box_plane_ground_error(f)[:2]
 
 
 def test_pcss_exact_on_parallel_rectangles(device):

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import warp as wp
-from conftest import parallel_rect_exact, scene_path
+from conftest import box_plane_ground_error, parallel_rect_exact, scene_path
 
 import wsoft
 from wsoft.accel.ssm_structures import build_microrects, build_structure, query
@@ -149,13 +149,7 @@ def test_microrects_against_reference_and_invariants(device):
     assert partial_cover > 0  # some extents are bounding boxes of non-rectangular merges
 
 
-def _ground_error(f):
-    g = (f["A"] > 0) & (np.abs(f["P.Z"]) < 1e-3)
-    exact = parallel_rect_exact(f["P.X"], f["P.Y"], 3.0, 1.0, 1.0, 0.5)
-    err = np.abs(f.V - exact)[g]
-    pen = ((exact > 0.01) & (exact < 0.99))[g]
-    assert pen.sum() > 100
-    return err.mean(), err[pen].mean(), err.max()
+_ground_error = box_plane_ground_error
 
 
 def test_microrects_fit_a_planar_occluder_better_at_coarse_levels(device):
