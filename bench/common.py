@@ -88,6 +88,16 @@ def accuracy_table(renders: list[dict]) -> list[str]:
     return L
 
 
+def lowest_mae(renders: list[dict]) -> dict[tuple[str, str], dict]:
+    """The row with the lowest MAE of each (scene, technique)."""
+    best: dict[tuple[str, str], dict] = {}
+    for r in renders:
+        key = (r["scene"], r["technique"])
+        if key not in best or r["error"]["mae"] < best[key]["error"]["mae"]:
+            best[key] = r
+    return best
+
+
 def error_vs_time(renders: list[dict], md: Path, ctx: dict, title: str) -> list[str]:
     """One panel per scene: MAE against frame time, a line per (light, technique) over its sweep."""
     if not renders:

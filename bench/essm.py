@@ -9,14 +9,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from bench.common import (
-    accuracy_table,
-    error_vs_time,
-    image_list,
-    render_row,
-    report_header,
-    side_by_side,
-)
+from bench.common import accuracy_table, error_vs_time, image_list, lowest_mae, render_row, report_header, side_by_side
 
 FULL_VIEWS = [("ogre", None), ("plants", None), ("dinosaurs", None), ("city", "Rect")]
 QUICK_VIEWS = [("box_plane", None)]
@@ -120,11 +113,7 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
     L.append("ray tracer at 4/16/64 samples for scale.")
     L.append("")
     L += accuracy_table(renders)
-    best = {}
-    for r in renders:
-        key = (r["scene"], r["technique"])
-        if key not in best or r["error"]["mae"] < best[key]["error"]["mae"]:
-            best[key] = r
+    best = lowest_mae(renders)
     L += ["", "## Lowest MAE per scene and technique", "",
           "`MAE facing`: over the receivers whose normal faces the light's centre only (the rest are turned away from the light,",
           "where the answer is 0 and ESM/VSM's leak shows; a depth test, as in PCSS, gets them right).", "",

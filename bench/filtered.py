@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from bench.common import accuracy_table, error_vs_time, image_list, render_row, report_header
+from bench.common import accuracy_table, error_vs_time, image_list, lowest_mae, render_row, report_header
 
 # technique -> (main quality parameter, its values, fixed parameters)
 QUALITY = {
@@ -133,11 +133,7 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
     L.append("as occluded) — the point is the lighting: the torch under the bridge is no longer masked (image below).")
     L.append("")
     L += accuracy_table(rows)
-    best = {}
-    for r in rows:
-        key = (r["scene"], r["technique"])
-        if key not in best or r["error"]["mae"] < best[key]["error"]["mae"]:
-            best[key] = r
+    best = lowest_mae(rows)
     L += ["", "## Lowest MAE per scene and technique", "", "| scene | technique | params | frame ms | MAE | MAE penumbra |", "|---|---|---|---|---|---|"]
     for (scene, tech), r in sorted(best.items()):
         p = ", ".join(f"{k}={v}" for k, v in r["case"]["params"].items())
