@@ -494,25 +494,27 @@ class Basis:
         return out
 
 
-def depth_range(dm, mode: str, scene, device: str) -> tuple[float, float, list]:
-    """[z_min, z_max] in light-space linear depth: from the map's min/max pyramid, or the scene bounds."""
-    zmin, zmax, levels = minmax_range(dm.depth, device)
+def depth_range(dm, mode: str, scene, device: str) -> tuple[float, float, bool]:
+    """The effective depth range that normalises light-space linear depth: (z_min, z_max - z_min, empty).
+    ``pyramid``: from the map's min/max pyramid; ``bounds``: the scene bounds in light space. An empty
+    map gives (0, 1, True); the range is never narrower than 1e-6 of the depth."""
     if mode == "bounds":
         lo, hi = scene.bounds
         corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])], np.float64)
         zv = dm.view.to_view(corners)[:, 2]
         near = dm.view.near if dm.view.persp else float(zv.min())
         zmin, zmax = max(float(zv.min()), near), float(zv.max())
-    return zmin, zmax, levels
+    else:
+        zmin, zmax, _ = minmax_range(dm.depth, device)
+    empty = not math.isfinite(zmin)
+    if empty:
+        zmin, zmax = 0.0, 1.0
+    return zmin, max(zmax - zmin, 1e-6 * max(abs(zmax), 1.0)), empty
 
 
 def make_basis(dm, *, storage: str, mu: int, c: float, mode: str, scene, device: str, pyramid: bool) -> Basis:
     n = dm.depth.shape[0]
-    zmin, zmax, _levels = depth_range(dm, mode, scene, device)
-    empty = not math.isfinite(zmin)
-    if empty:
-        zmin, zmax = 0.0, 1.0
-    rng = max(zmax - zmin, 1e-6 * max(abs(zmax), 1.0))
+    zmin, rng, empty = depth_range(dm, mode, scene, device)
     cc = c if c > 0 else optimal_exponent(storage, mu, n)
     normalise = storage != "float32"
     basis = wp.empty((3, n, n), dtype=float, device=device)

@@ -32,7 +32,6 @@ Known failure: light bleeding with stacked occluders (``bleed`` reduces it).
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -210,10 +209,7 @@ class VSSM(Technique):
         def run_moments(res):
             dm = res[depth]
             n = dm.depth.shape[0]
-            zmin, zmax, _ = depth_range(dm, "pyramid", ctx.scene, ctx.device)
-            if not math.isfinite(zmin):
-                zmin, zmax = 0.0, 1.0
-            rng = max(zmax - zmin, 1e-6 * max(abs(zmax), 1.0))
+            zmin, rng, _ = depth_range(dm, "pyramid", ctx.scene, ctx.device)
             basis = wp.empty((2, n, n), dtype=float, device=ctx.device)
             launch_chunked(vssm_basis_kernel, n * n, inputs=[dm.depth, n, zmin, rng], outputs=[basis], device=ctx.device, min_chunk=4096)
             pyr = mean_pyramid(basis, ctx.device) if p.sat == "tiles" else [basis]
