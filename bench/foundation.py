@@ -80,7 +80,8 @@ def _gbuffer_points(scene_name, device, width=320, height=240):
 
 def _raster_vs_raycast(case: dict, ctx: dict) -> dict:
     from wsoft.parallel import cpu_threads
-    from wsoft.raster.lightview import DEPTH_CLEAR, fit_light_view, rasterize
+    from wsoft.lightspace.view import DEPTH_CLEAR, fit_light_view
+    from wsoft.raster.rasterizer import rasterize
     from wsoft.raster.raycast import raycast_depth
     from wsoft.scene.device import upload_scene
 
@@ -108,7 +109,8 @@ def _raster_vs_raycast(case: dict, ctx: dict) -> dict:
 
 def _throughput(case: dict, ctx: dict) -> dict:
     from wsoft.parallel import cpu_threads
-    from wsoft.reference import shadow_rays, trace_reference, trace_rays
+    from wsoft.lightspace.light import disk_shaped
+    from wsoft.reference import reference_pattern, shadow_rays, trace_reference, trace_rays
     from wsoft.render import RenderContext
     from wsoft.raster.camera import camera_gpu
     from wsoft.raster.gbuffer import render_gbuffer
@@ -124,8 +126,9 @@ def _throughput(case: dict, ctx: dict) -> dict:
     L = ctx_r.light_gpu(light)
     covered = int((gb.prim.numpy() >= 0).sum())
     nrays = covered * n
-    p_wall, p_cpu = _timed(lambda: trace_reference(ds, L, gb, n, 0, True))
-    o, d, t = shadow_rays(ds, L, gb, n)
+    pattern = reference_pattern(n, 0, True)
+    p_wall, p_cpu = _timed(lambda: trace_reference(ds, L, gb, pattern, disk_shaped(light)))
+    o, d, t = shadow_rays(ds, L, gb, pattern, disk_shaped(light))
     threads = cpu_threads() if dev == "cpu" else None
     e_wall, e_cpu = _timed(lambda: trace_rays(ds, o, d, t))
     row = {

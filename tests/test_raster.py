@@ -7,7 +7,8 @@ import pytest
 from conftest import scene_path
 
 import wsoft
-from wsoft.raster.lightview import DEPTH_CLEAR, fit_light_view, rasterize
+from wsoft.lightspace.view import DEPTH_CLEAR, fit_light_view
+from wsoft.raster.rasterizer import rasterize
 from wsoft.raster.raycast import raycast_depth
 from wsoft.scene.device import upload_scene
 

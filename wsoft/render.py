@@ -21,10 +21,11 @@ from wsoft.graph import FrameGraph, Pass, buffer_bytes
 from wsoft.parallel import cpu_threads, resolve_device
 from wsoft.raster.camera import camera_gpu, fit_aspect
 from wsoft.raster.gbuffer import GBuffer, render_gbuffer
-from wsoft.raster.lightview import fit_light_view, rasterize
+from wsoft.lightspace.light import light_gpu
+from wsoft.lightspace.view import fit_light_view
+from wsoft.raster.rasterizer import rasterize
 from wsoft.raster.shade import shade as shade_samples
 from wsoft.scene.device import upload_scene
-from wsoft.scene.light_gpu import light_gpu
 from wsoft.scene.types import Camera, Light, Scene
 from wsoft.scene.usd import auto_camera, load_scene
 

@@ -32,8 +32,8 @@ from typing import Any
 import numpy as np
 import warp as wp
 
+from wsoft.params import check
 from wsoft.parallel import launch_chunked
-from wsoft.raster.lightview import in_front_of_light, texel_of, view_of
 
 STORAGES = ("tiles", "uint32", "float32")
 BUILDS = ("doubling", "scan")
@@ -43,7 +43,14 @@ BUILDS = ("doubling", "scan")
 
 
 @wp.kernel
-def quantize_kernel(offset: int, src: wp.array3d[float], scale: float, n: int, dst: wp.array3d[wp.uint32]):
+def quantize_kernel(
+    offset: int,
+    src: wp.array3d[float],
+    scale: float,
+    n: int,
+    # outputs
+    dst: wp.array3d[wp.uint32],
+):
     i = wp.tid() + offset
     k = i / (n * n)
     r = i - k * n * n
@@ -54,7 +61,16 @@ def quantize_kernel(offset: int, src: wp.array3d[float], scale: float, n: int, d
 
 
 @wp.kernel
-def doubling_rows(offset: int, src: wp.array3d(dtype=Any), n: int, tile: int, step: int, reads: int, dst: wp.array3d(dtype=Any)):
+def doubling_rows(
+    offset: int,
+    src: wp.array3d(dtype=Any),
+    n: int,
+    tile: int,
+    step: int,
+    reads: int,
+    # outputs
+    dst: wp.array3d(dtype=Any),
+):
     i = wp.tid() + offset
     k = i / (n * n)
     r = i - k * n * n
@@ -70,7 +86,16 @@ def doubling_rows(offset: int, src: wp.array3d(dtype=Any), n: int, tile: int, st
 
 
 @wp.kernel
-def doubling_cols(offset: int, src: wp.array3d(dtype=Any), n: int, tile: int, step: int, reads: int, dst: wp.array3d(dtype=Any)):
+def doubling_cols(
+    offset: int,
+    src: wp.array3d(dtype=Any),
+    n: int,
+    tile: int,
+    step: int,
+    reads: int,
+    # outputs
+    dst: wp.array3d(dtype=Any),
+):
     i = wp.tid() + offset
     k = i / (n * n)
     r = i - k * n * n
@@ -86,7 +111,14 @@ def doubling_cols(offset: int, src: wp.array3d(dtype=Any), n: int, tile: int, st
 
 
 @wp.kernel
-def scan_rows(offset: int, src: wp.array3d(dtype=Any), n: int, tile: int, dst: wp.array3d(dtype=Any)):
+def scan_rows(
+    offset: int,
+    src: wp.array3d(dtype=Any),
+    n: int,
+    tile: int,
+    # outputs
+    dst: wp.array3d(dtype=Any),
+):
     # one task per (channel, row, tile column)
     i = wp.tid() + offset
     per_row = n / tile
@@ -103,7 +135,13 @@ def scan_rows(offset: int, src: wp.array3d(dtype=Any), n: int, tile: int, dst: w
 
 
 @wp.kernel
-def scan_cols(offset: int, n: int, tile: int, dst: wp.array3d(dtype=Any)):
+def scan_cols(
+    offset: int,
+    n: int,
+    tile: int,
+    # outputs
+    dst: wp.array3d(dtype=Any),
+):
     # in place, one task per (channel, column, tile row)
     i = wp.tid() + offset
     per_col = n / tile
@@ -119,37 +157,19 @@ def scan_cols(offset: int, n: int, tile: int, dst: wp.array3d(dtype=Any)):
 
 
 @wp.kernel
-def mean_down(offset: int, src: wp.array3d[float], n_dst: int, dst: wp.array3d[float]):
+def mean_down(
+    offset: int,
+    src: wp.array3d[float],
+    n_dst: int,
+    # outputs
+    dst: wp.array3d[float],
+):
     i = wp.tid() + offset
     k = i / (n_dst * n_dst)
     r = i - k * n_dst * n_dst
     y = r / n_dst
     x = r - y * n_dst
     dst[k, y, x] = 0.25 * (src[k, 2 * y, 2 * x] + src[k, 2 * y, 2 * x + 1] + src[k, 2 * y + 1, 2 * x] + src[k, 2 * y + 1, 2 * x + 1])
-
-
-@wp.kernel
-def minmax_level0(offset: int, depth: wp.array2d[float], n: int, clear: float, dst: wp.array2d[wp.vec2]):
-    i = wp.tid() + offset
-    y = i / n
-    x = i - y * n
-    d = depth[y, x]
-    if d >= clear:
-        dst[y, x] = wp.vec2(1.0e30, -1.0e30)
-    else:
-        dst[y, x] = wp.vec2(d, d)
-
-
-@wp.kernel
-def minmax_down(offset: int, src: wp.array2d[wp.vec2], n_dst: int, dst: wp.array2d[wp.vec2]):
-    i = wp.tid() + offset
-    y = i / n_dst
-    x = i - y * n_dst
-    a = src[2 * y, 2 * x]
-    b = src[2 * y, 2 * x + 1]
-    c = src[2 * y + 1, 2 * x]
-    d = src[2 * y + 1, 2 * x + 1]
-    dst[y, x] = wp.vec2(wp.min(wp.min(a[0], b[0]), wp.min(c[0], d[0])), wp.max(wp.max(a[1], b[1]), wp.max(c[1], d[1])))
 
 
 # --------------------------------------------------------------------------- look-ups
@@ -268,24 +288,8 @@ for _t in (wp.uint32, wp.float32):
     wp.overload(scan_cols, {"dst": _a})
 
 
-@wp.func
-def receiver_texel(lv: Any, p: wp.vec3, n: int) -> wp.vec4:
-    """(tx, ty, view depth, 1) of a world point seen by the light inside its ``n x n`` map, else w = 0
-    (behind a perspective light's near plane or outside the window: nothing mapped can shadow it)."""
-    pv = view_of(lv, p)
-    if not in_front_of_light(lv, pv):
-        return wp.vec4(0.0, 0.0, pv[2], 0.0)
-    tc = texel_of(lv, pv)
-    nf = float(n)
-    if tc[0] < 0.0 or tc[1] < 0.0 or tc[0] >= nf or tc[1] >= nf:
-        return wp.vec4(tc[0], tc[1], pv[2], 0.0)
-    return wp.vec4(tc[0], tc[1], pv[2], 1.0)
-
-
 def check_sat_params(p) -> None:
     """The parameters every SAT-filtered technique (essm, vssm) shares; raises ValueError."""
-    from wsoft.techniques.base import check
-
     n = p.shadow_map_size
     check(256 <= n <= 8192 and n & (n - 1) == 0, f"shadow_map_size {n} must be a power of two in [256, 8192]")
     check(p.sat in STORAGES, f"sat {p.sat!r} is not one of {', '.join(STORAGES)}")
@@ -366,27 +370,6 @@ def tile_from_pyramid(levels: list[wp.array], mu: int) -> tuple[int, dict]:
         if ok:
             return 2 ** lv, {"levels_tested": tried}
     return 1, {"levels_tested": tried}
-
-
-def minmax_range(depth: wp.array, device: str) -> tuple[float, float, list[wp.array]]:
-    """The min/max (hierarchical) pyramid of a square depth map; returns (z_min, z_max, levels).
-    Empty texels (``DEPTH_CLEAR``) are skipped; an empty map gives (inf, -inf)."""
-    from wsoft.raster.lightview import DEPTH_CLEAR
-
-    n = depth.shape[0]
-    l0 = wp.empty((n, n), dtype=wp.vec2, device=device)
-    launch_chunked(minmax_level0, n * n, inputs=[depth, n, DEPTH_CLEAR], outputs=[l0], device=device, min_chunk=4096)
-    levels = [l0]
-    while n > 1:
-        n //= 2
-        dst = wp.empty((n, n), dtype=wp.vec2, device=device)
-        launch_chunked(minmax_down, n * n, inputs=[levels[-1], n], outputs=[dst], device=device, min_chunk=4096)
-        levels.append(dst)
-    top = levels[-1].numpy()[0, 0]
-    zmin, zmax = float(top[0]), float(top[1])
-    if zmin > zmax:
-        return math.inf, -math.inf, levels
-    return zmin, zmax, levels
 
 
 def build_sat(basis: wp.array, *, storage: str, mu: int = 20, build: str = "doubling", reads: int = 8,
@@ -470,7 +453,16 @@ def reference_box_sums(basis: np.ndarray, boxes: np.ndarray) -> np.ndarray:
 
 
 @wp.kernel
-def lookup_kernel(offset: int, data: wp.array3d(dtype=Any), k: int, n: int, t: int, boxes: wp.array[wp.vec4], out: wp.array[wp.float64]):
+def lookup_kernel(
+    offset: int,
+    data: wp.array3d(dtype=Any),
+    k: int,
+    n: int,
+    t: int,
+    boxes: wp.array[wp.vec4],
+    # outputs
+    out: wp.array[wp.float64],
+):
     i = wp.tid() + offset
     b = boxes[i]
     out[i] = sat_box(data, k, n, t, b[0], b[1], b[2], b[3])

@@ -35,8 +35,9 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
+from wsoft.accel.pyramid import build_minmax_pyramid, level_offsets, log2_exact, merge_range, pyramid_base
+from wsoft.lightspace.view import DEPTH_CLEAR
 from wsoft.parallel import launch_chunked
-from wsoft.raster.lightview import DEPTH_CLEAR
 
 MODE_HSM = 0
 MODE_MSSM = 1
@@ -65,11 +66,6 @@ class DepthRanges:
     mssm_base: int
     mssm_first: int
     mssm_top: int
-
-
-@wp.func
-def merge_range(a: wp.vec2, b: wp.vec2) -> wp.vec2:
-    return wp.vec2(wp.min(a[0], b[0]), wp.max(a[1], b[1]))
 
 
 @wp.func
@@ -167,42 +163,6 @@ def depth_range(acc: DepthRanges, x0: int, y0: int, x1: int, y1: int) -> wp.vec2
 
 
 @wp.kernel
-def pyramid_base(
-    offset: int,
-    depth: wp.array2d[float],
-    # outputs
-    pyr: wp.array[wp.vec2],
-):
-    i = wp.tid() + offset
-    n = depth.shape[1]
-    y = i // n
-    x = i - y * n
-    d = depth[y, x]
-    pyr[i] = wp.vec2(d, d)
-
-
-@wp.kernel
-def pyramid_level(
-    offset: int,
-    src_off: int,
-    dst_off: int,
-    n: int,
-    # outputs
-    pyr: wp.array[wp.vec2],
-):
-    """Level of ``n`` per side from the level below (2n per side)."""
-    i = wp.tid() + offset
-    y = i // n
-    x = i - y * n
-    m = 2 * n
-    a = pyr[src_off + (2 * y) * m + 2 * x]
-    b = pyr[src_off + (2 * y) * m + 2 * x + 1]
-    c = pyr[src_off + (2 * y + 1) * m + 2 * x]
-    d = pyr[src_off + (2 * y + 1) * m + 2 * x + 1]
-    pyr[dst_off + i] = merge_range(merge_range(a, b), merge_range(c, d))
-
-
-@wp.kernel
 def mssm_scale(
     offset: int,
     src: wp.array[wp.vec2],
@@ -239,23 +199,6 @@ def mssm_copy(
     dst[i] = src[src_off + i]
 
 
-def _log2(n: int) -> int:
-    k = int(round(math.log2(n)))
-    if 1 << k != n:
-        raise ValueError(f"map size {n} is not a power of two")
-    return k
-
-
-def level_offsets(size: int) -> np.ndarray:
-    """Flat offsets of the levels of a full mip chain of a ``size``-square map (and the total)."""
-    offs = [0]
-    n = size
-    while n >= 1:
-        offs.append(offs[-1] + n * n)
-        n //= 2
-    return np.asarray(offs, np.int32)
-
-
 @dataclass
 class PruningStructure:
     """A built HSM, MSSM or YSM: the device struct and its arrays (``arrays()`` for memory stats)."""
@@ -281,23 +224,9 @@ class PruningStructure:
         return sum(int(a.size) * 8 for a in self.arrays().values())
 
 
-def build_pyramid(depth: wp.array, device: str) -> tuple[wp.array, np.ndarray]:
-    """The HSM: min/max pyramid of a square power-of-two depth map."""
-    n = depth.shape[1]
-    offs = level_offsets(n)
-    pyr = wp.empty(int(offs[-1]), dtype=wp.vec2, device=device)
-    launch_chunked(pyramid_base, n * n, inputs=[depth], outputs=[pyr], device=device)
-    k, m = 0, n // 2
-    while m >= 1:
-        launch_chunked(pyramid_level, m * m, inputs=[int(offs[k]), int(offs[k + 1]), m], outputs=[pyr], device=device)
-        k += 1
-        m //= 2
-    return pyr, offs
-
-
 def build_mssm(src: wp.array, src_off: int, m: int, first: int, device: str) -> wp.array:
     """Scales ``first..log2 m`` of the MSSM over an ``m``-square vec2 map (at ``src[src_off:]``)."""
-    top = _log2(m)
+    top = log2_exact(m)
     nlev = top + 1 - first
     out = wp.empty(max(nlev, 1) * m * m, dtype=wp.vec2, device=device)
     if nlev <= 0:
@@ -325,7 +254,7 @@ def build_structure(kind: str, depth: wp.array, device: str, ysm_size: int = 256
     n = depth.shape[1]
     if depth.shape[0] != n:
         raise ValueError("the map must be square")
-    top = _log2(n)
+    top = log2_exact(n)
     wp.synchronize_device(device)
     t0 = time.perf_counter()
     g = DepthRanges()
@@ -334,17 +263,17 @@ def build_structure(kind: str, depth: wp.array, device: str, ysm_size: int = 256
     g.top = top
     if kind == "mssm":
         base = wp.empty(n * n, dtype=wp.vec2, device=device)
-        launch_chunked(pyramid_base, n * n, inputs=[depth], outputs=[base], device=device)
+        launch_chunked(pyramid_base, n * n, inputs=[depth, 0], outputs=[base], device=device)
         mssm = build_mssm(base, 0, n, 0, device)
         pyr, offs = base, np.asarray([0, n * n], np.int32)
         g.mssm_m, g.mssm_base, g.mssm_first, g.mssm_top = n, 0, 0, top
     else:
-        pyr, offs = pyramid if pyramid is not None else build_pyramid(depth, device)
+        pyr, offs = pyramid if pyramid is not None else build_minmax_pyramid(depth, device, skip_empty=False)
         if kind == "ysm":
             m = min(ysm_size, n)
-            b = _log2(n // m)
+            b = log2_exact(n // m)
             mssm = build_mssm(pyr, int(offs[b]), m, 1, device)
-            g.mssm_m, g.mssm_base, g.mssm_first, g.mssm_top = m, b, 1, _log2(m)
+            g.mssm_m, g.mssm_base, g.mssm_first, g.mssm_top = m, b, 1, log2_exact(m)
         else:
             mssm = wp.empty(1, dtype=wp.vec2, device=device)
             g.mssm_m, g.mssm_base, g.mssm_first, g.mssm_top = 1, 0, 1, 0
@@ -496,7 +425,7 @@ class MicroRects:
 
 def build_microrects(depth: wp.array, device: str) -> MicroRects:
     n = depth.shape[1]
-    _log2(n)
+    log2_exact(n)
     offs = level_offsets(n)
     wp.synchronize_device(device)
     t0 = time.perf_counter()

@@ -1,6 +1,6 @@
 """A light depth map by casting one BVH ray per texel centre.
 
-Not the main path (the rasterizer in :mod:`wsoft.raster.lightview` is): this is the
+Not the main path (the rasterizer in :mod:`wsoft.raster.rasterizer` is): this is the
 brute-force check the rasterizer is tested against and the baseline it is benchmarked
 against. Depth is the same light-space linear depth, ``DEPTH_CLEAR`` where a ray misses.
 """
@@ -10,7 +10,8 @@ from __future__ import annotations
 import warp as wp
 
 from wsoft.parallel import launch_chunked
-from wsoft.raster.lightview import DEPTH_CLEAR, DepthMap, LightView, LightViewGPU
+from wsoft.lightspace.view import DEPTH_CLEAR, LightView, ViewGPU
+from wsoft.raster.rasterizer import DepthMap
 from wsoft.scene.device import Surfaces, DeviceScene, surface_present
 
 
@@ -20,7 +21,7 @@ def raycast_texels(
     mesh: wp.uint64,
     cut: Surfaces,
     alpha: int,
-    lv: LightViewGPU,
+    lv: ViewGPU,
     # outputs
     depth: wp.array[float],
 ):

@@ -10,7 +10,7 @@ from __future__ import annotations
 import warp as wp
 
 from wsoft.parallel import launch_chunked
-from wsoft.scene.light_gpu import LightGPU, light_center_dir
+from wsoft.lightspace.light import LightGPU, light_center_dir
 
 AMBIENT = 0.12  # share of the light that is unshadowed ambient
 

@@ -1,12 +1,13 @@
 """Ray-traced ground truth: the visible fraction of a light, with a standard error.
 
-For each G-buffer sample, ``samples`` shadow rays go to stratified points on the light
-(rect: jittered grid in the rectangle; disk and sphere: concentric mapping onto the disk,
-the sphere seen as its silhouette disk; distant: uniform in the sun's cone). Rays are
-any-hit against the scene's BVH and alpha-tested through cutout triangles. A perfect-square
-sample count uses a jittered ``m x m`` grid; any other count a randomly shifted rank-1
-(Fibonacci) lattice. Both are unbiased; ``jitter = False`` puts samples at stratum centres
-(one sample = the light's centre). Randomness is seeded by ``seed`` and the sample index.
+For each G-buffer sample, shadow rays go to the points of a light-sample pattern
+(:class:`~wsoft.lightspace.samples.SamplePattern`; by default ``stratified`` and generated per
+pixel: a jittered ``m x m`` grid for a perfect-square count, else a randomly shifted rank-1
+(Fibonacci) lattice, both unbiased; ``regular`` puts samples at stratum centres, one sample =
+the light's centre). Rect lights take the points in the rectangle; disk and sphere lights
+through the concentric map onto the disk (the sphere seen as its silhouette disk); distant
+lights uniformly in the sun's cone. Rays are any-hit against the scene's BVH and alpha-tested
+through cutout triangles. Randomness is seeded by the pattern's seed and the sample index.
 
 The standard error reported per sample is ``sqrt(p(1-p)/N)`` with the pseudo-count estimate
 ``p = (k + 0.5)/(N + 1)`` (k visible of N): the independent-sampling error, an upper bound
@@ -17,28 +18,11 @@ from __future__ import annotations
 
 import warp as wp
 
+from wsoft.lightspace.light import LightGPU, light_point
+from wsoft.lightspace.samples import LightSamples, SamplePattern, sample_coords, sampling_begin
 from wsoft.parallel import launch_chunked
-from wsoft.scene.device import Surfaces, DeviceScene, occluded
-from wsoft.scene.light_gpu import LightGPU, light_sample
+from wsoft.scene.device import DeviceScene, Surfaces, occluded
 
-
-
-@wp.func
-def stratified_sample(s: int, n: int, m: int, jitter: wp.vec2, shift: wp.vec2) -> wp.vec2:
-    """Sample ``s`` of ``n``: jittered m x m grid when m*m == n, else a shifted rank-1 lattice.
-
-    ``jitter`` is the offset inside the grid stratum (0.5, 0.5 = its centre); ``shift`` the
-    lattice's random shift.
-    """
-    if m * m == n:
-        gx = s % m
-        gy = s // m
-        jx = jitter[0]
-        jy = jitter[1]
-        return wp.vec2((float(gx) + jx) / float(m), (float(gy) + jy) / float(m))
-    x = (float(s) + 0.5) / float(n) + shift[0]
-    y = float(s) * 0.6180339887498949 + 0.5 / float(n) + shift[1]
-    return wp.vec2(x - wp.floor(x), y - wp.floor(y))
 
 
 @wp.func
@@ -56,13 +40,12 @@ def trace_visibility(
     cut: Surfaces,
     has_cutouts: int,
     light: LightGPU,
+    ls: LightSamples,
     pos: wp.array[wp.vec3],
     nrm: wp.array[wp.vec3],
     prim: wp.array[wp.int32],
-    samples: int,
-    grid: int,
-    jitter: int,
-    seed: int,
+    width: int,
+    height: int,
     eps: float,
     # outputs
     vis: wp.array[float],
@@ -75,17 +58,13 @@ def trace_visibility(
         return
     p = pos[i]
     n = nrm[i]
-    state = wp.rand_init(seed, i)
-    shift = wp.vec2(0.0, 0.0)
-    if jitter != 0:
-        shift = wp.vec2(wp.randf(state), wp.randf(state))
+    pix = i % (width * height)
+    state, base, rot = sampling_begin(ls, i, pix % width, pix / width)
     visible = int(0)
+    samples = ls.count
     for s in range(samples):
-        j = wp.vec2(0.5, 0.5)
-        if jitter != 0:
-            j = wp.vec2(wp.randf(state), wp.randf(state))
-        u = stratified_sample(s, samples, grid, j, shift)
-        r = light_sample(light, p, u[0], u[1])
+        c, state = sample_coords(ls, state, base, rot, s)
+        r = light_point(light, p, c)
         d = wp.vec3(r[0], r[1], r[2])
         if not occluded(mesh, cut, has_cutouts, ray_origin(p, n, d, eps), d, r[3] - eps):
             visible += 1
@@ -95,18 +74,21 @@ def trace_visibility(
     stderr[i] = wp.sqrt(pe * (1.0 - pe) / float(samples))
 
 
-def trace_reference(ds: DeviceScene, light: LightGPU, gb, samples: int, seed: int, jitter: bool) -> tuple[wp.array, wp.array]:
-    """Visibility and its standard error per G-buffer sample (flat float32 arrays)."""
-    import math
+def reference_pattern(samples: int, seed: int, jitter: bool) -> SamplePattern:
+    """The reference's default sampling: stratified per pixel (``jitter = False``: stratum centres)."""
+    return SamplePattern("stratified" if jitter else "regular", samples, seed=seed, per_pixel=True)
 
+
+def trace_reference(ds: DeviceScene, light: LightGPU, gb, pattern: SamplePattern, disk: bool) -> tuple[wp.array, wp.array]:
+    """Visibility and its standard error per G-buffer sample (flat float32 arrays), with the
+    light samples of ``pattern`` (mapped onto a disk when ``disk``)."""
     n = gb.count
     vis = wp.empty(n, dtype=float, device=ds.device)
     err = wp.empty(n, dtype=float, device=ds.device)
-    grid = int(math.isqrt(samples))
     launch_chunked(
         trace_visibility,
         n,
-        inputs=[ds.mesh.id, ds.cutouts, ds.has_cutouts, light, gb.pos, gb.nrm, gb.prim, samples, grid, int(jitter), seed, ray_epsilon(ds)],
+        inputs=[ds.mesh.id, ds.cutouts, ds.has_cutouts, light, pattern.on(ds.device, disk), gb.pos, gb.nrm, gb.prim, gb.width, gb.height, ray_epsilon(ds)],
         outputs=[vis, err],
         device=ds.device,
         min_chunk=256,
@@ -126,33 +108,32 @@ def ray_epsilon(ds: DeviceScene) -> float:
 def generate_shadow_rays(
     offset: int,
     light: LightGPU,
+    ls: LightSamples,
     pos: wp.array[wp.vec3],
     nrm: wp.array[wp.vec3],
     pix: wp.array[wp.int32],
-    samples: int,
-    grid: int,
-    seed: int,
+    width: int,
+    height: int,
     eps: float,
     # outputs
     origin: wp.array[wp.vec3],
     dir: wp.array[wp.vec3],
     tmax: wp.array[float],
 ):
-    r = wp.tid() + offset
-    k = r // samples
-    s = r - k * samples
+    k = wp.tid() + offset
     i = pix[k]
     p = pos[i]
     n = nrm[i]
-    state = wp.rand_init(seed, r)
-    shift = wp.vec2(wp.randf(state), wp.randf(state))
-    j = wp.vec2(wp.randf(state), wp.randf(state))
-    u = stratified_sample(s, samples, grid, j, shift)
-    ls = light_sample(light, p, u[0], u[1])
-    d = wp.vec3(ls[0], ls[1], ls[2])
-    origin[r] = ray_origin(p, n, d, eps)
-    dir[r] = d
-    tmax[r] = ls[3] - eps
+    q = i % (width * height)
+    state, base, rot = sampling_begin(ls, i, q % width, q / width)
+    samples = ls.count
+    for s in range(samples):
+        c, state = sample_coords(ls, state, base, rot, s)
+        r = light_point(light, p, c)
+        d = wp.vec3(r[0], r[1], r[2])
+        origin[k * samples + s] = ray_origin(p, n, d, eps)
+        dir[k * samples + s] = d
+        tmax[k * samples + s] = r[3] - eps
 
 
 @wp.kernel
@@ -174,19 +155,19 @@ def trace_shadow_rays(
         hit[r] = 0
 
 
-def shadow_rays(ds: DeviceScene, light: LightGPU, gb, samples: int, seed: int = 0):
-    """Origins, unit directions and lengths of ``samples`` shadow rays per covered G-buffer sample."""
-    import math
-
+def shadow_rays(ds: DeviceScene, light: LightGPU, gb, pattern: SamplePattern, disk: bool):
+    """Origins, unit directions and lengths of the shadow rays of every covered G-buffer sample:
+    the same rays the reference traces with ``pattern``, ``pattern.count`` per sample."""
     import numpy as np
 
     covered = np.nonzero(gb.prim.numpy() >= 0)[0].astype(np.int32)
     pix = wp.array(covered, dtype=wp.int32, device=ds.device)
-    n = len(covered) * samples
+    n = len(covered) * pattern.count
     o = wp.empty(n, dtype=wp.vec3, device=ds.device)
     d = wp.empty(n, dtype=wp.vec3, device=ds.device)
     t = wp.empty(n, dtype=float, device=ds.device)
-    launch_chunked(generate_shadow_rays, n, inputs=[light, gb.pos, gb.nrm, pix, samples, int(math.isqrt(samples)), seed, ray_epsilon(ds)], outputs=[o, d, t], device=ds.device)
+    launch_chunked(generate_shadow_rays, len(covered), inputs=[light, pattern.on(ds.device, disk), gb.pos, gb.nrm, pix, gb.width, gb.height, ray_epsilon(ds)],
+                   outputs=[o, d, t], device=ds.device, min_chunk=256)
     return o, d, t
 
 

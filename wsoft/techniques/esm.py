@@ -24,11 +24,9 @@ from dataclasses import dataclass
 import warp as wp
 
 from wsoft.accel.blur import blur_log
+from wsoft.lightspace.view import ViewGPU, bilinear_cell, in_front_of_light, inside_map, map_coords, normalised_depth, view_of, window_to_texel
 from wsoft.parallel import launch_chunked
-from wsoft.raster.lightview import LightViewGPU, in_front_of_light, view_of
 from wsoft.techniques.base import Technique, check, param
-from wsoft.techniques.filtering import bilinear_cell, map_coords
-from wsoft.techniques.vsm import normalised
 
 
 @dataclass(frozen=True)
@@ -48,13 +46,21 @@ class ESMParams:
 
 
 @wp.kernel
-def make_exponent(offset: int, depth: wp.array[float], near: float, far: float, c: float, out: wp.array[float]):
+def make_exponent(
+    offset: int,
+    depth: wp.array[float],
+    near: float,
+    far: float,
+    c: float,
+    # outputs
+    out: wp.array[float],
+):
     i = wp.tid() + offset
-    out[i] = c * normalised(depth[i], near, far)
+    out[i] = c * normalised_depth(depth[i], near, far - near)
 
 
 @wp.func
-def bilinear_log(lv: LightViewGPU, lmap: wp.array2d[float], m: wp.vec2) -> float:
+def bilinear_log(lv: ViewGPU, lmap: wp.array2d[float], m: wp.vec2) -> float:
     """log of the bilinear interpolation of exp(lmap), evaluated around the largest of the four."""
     cell = bilinear_cell(lv, m)
     ax = cell[2]
@@ -75,7 +81,7 @@ def bilinear_log(lv: LightViewGPU, lmap: wp.array2d[float], m: wp.vec2) -> float
 @wp.kernel
 def shade_esm(
     offset: int,
-    lv: LightViewGPU,
+    lv: ViewGPU,
     lmap: wp.array2d[float],
     pos: wp.array[wp.vec3],
     prim: wp.array[wp.int32],
@@ -93,10 +99,10 @@ def shade_esm(
         vis[i] = 1.0
         return
     m = map_coords(lv, pv)
-    if m[0] < lv.window[0] or m[0] > lv.window[1] or m[1] < lv.window[2] or m[1] > lv.window[3]:
+    if not inside_map(lv, window_to_texel(lv, m)):
         vis[i] = 1.0
         return
-    z = normalised(pv[2], lv.near, lv.far) - bias
+    z = normalised_depth(pv[2], lv.near, lv.far - lv.near) - bias
     vis[i] = wp.clamp(wp.exp(wp.min(bilinear_log(lv, lmap, m) - c * z, 0.0)), 0.0, 1.0)
 
 

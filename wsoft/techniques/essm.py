@@ -62,27 +62,21 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from wsoft.accel.sat import (
-    SAT,
-    box_area,
-    build_sat,
-    check_sat_params,
-    mean_pyramid,
-    minmax_range,
+from wsoft.accel.pyramid import effective_depth_range
+from wsoft.accel.sat import SAT, box_area, build_sat, check_sat_params, mean_pyramid, sat_box
+from wsoft.lightspace.light import LightKernel, light_kernel, spread_texels
+from wsoft.lightspace.view import (
+    ViewGPU,
+    map_coords,
+    normalised_depth,
+    receiver_plane_depth_or,
     receiver_texel,
-    sat_box,
+    texel_of,
+    view_dir,
+    view_of,
 )
 from wsoft.parallel import launch_chunked
-from wsoft.raster.lightview import DEPTH_CLEAR, LightViewGPU, texel_of, view_of
 from wsoft.techniques.base import Technique, check, param
-from wsoft.techniques.filtering import (
-    LightKernel,
-    light_kernel,
-    map_coords,
-    receiver_depth,
-    spread_texels,
-    view_dir,
-)
 
 FLT_MAX_LOG = math.log(np.finfo(np.float32).max)
 
@@ -149,15 +143,21 @@ class ESSMConsts:
 
 
 @wp.kernel
-def essm_basis_kernel(offset: int, depth: wp.array2d[float], n: int, zmin: float, zrange: float, c: float, normalise: int,
-                      out: wp.array3d[float]):
+def essm_basis_kernel(
+    offset: int,
+    depth: wp.array2d[float],
+    n: int,
+    zmin: float,
+    zrange: float,
+    c: float,
+    normalise: int,
+    # outputs
+    out: wp.array3d[float],
+):
     i = wp.tid() + offset
     y = i / n
     x = i - y * n
-    d = depth[y, x]
-    z = float(1.0)
-    if d < DEPTH_CLEAR:
-        z = wp.clamp((d - zmin) / zrange, 0.0, 1.0)
+    z = normalised_depth(depth[y, x], zmin, zrange)
     if normalise != 0:
         # (e^{cz} - 1) / (e^c - 1) and z e^{cz} / e^c, evaluated without overflow
         em = wp.exp(-c)
@@ -176,14 +176,11 @@ def norm_depth(q: ESSMConsts, depth: wp.array2d[float], x: int, y: int) -> float
     n = q.n
     if x < 0 or y < 0 or x >= n or y >= n:
         return 1.0
-    d = depth[y, x]
-    if d >= DEPTH_CLEAR:
-        return 1.0
-    return wp.clamp((d - q.zmin) / q.zrange, 0.0, 1.0)
+    return normalised_depth(depth[y, x], q.zmin, q.zrange)
 
 
 @wp.func
-def plane_depth(q: ESSMConsts, plane: wp.vec3, tc: wp.vec2, x: float, y: float) -> float:
+def tangent_plane_depth(q: ESSMConsts, plane: wp.vec3, tc: wp.vec2, x: float, y: float) -> float:
     """Biased normalised depth of the receiver's tangent plane at texel coordinates (x, y)."""
     return wp.clamp(plane[0] + plane[1] * (x - tc[0]) + plane[2] * (y - tc[1]), 0.0, 1.0) - q.bias
 
@@ -199,7 +196,7 @@ def pcf2x2(q: ESSMConsts, depth: wp.array2d[float], u0: float, u1: float, v0: fl
             x = u0 + (float(a) + 0.5) * 0.5 * (u1 - u0)
             y = v0 + (float(b) + 0.5) * 0.5 * (v1 - v0)
             z = norm_depth(q, depth, int(wp.floor(x)), int(wp.floor(y)))
-            if z < plane_depth(q, plane, tc, x, y):
+            if z < tangent_plane_depth(q, plane, tc, x, y):
                 occ += 0.25 * z
             else:
                 lit += 0.25
@@ -240,7 +237,7 @@ def region(q: ESSMConsts, data: wp.array3d(dtype=Any), depth: wp.array2d[float],
            plane: wp.vec3, tc: wp.vec2, want_z: int) -> wp.vec4:
     """A kernel rectangle with micro-subdivision: (s, occluded-depth weight, look-ups, PCF fallbacks).
     Each (sub-)kernel is tested against the receiver plane's depth at its centre."""
-    r = esm_box(q, data, u0, u1, v0, v1, plane_depth(q, plane, tc, 0.5 * (u0 + u1), 0.5 * (v0 + v1)), want_z)
+    r = esm_box(q, data, u0, u1, v0, v1, tangent_plane_depth(q, plane, tc, 0.5 * (u0 + u1), 0.5 * (v0 + v1)), want_z)
     looks = float(1.0)
     if r[2] == 0.0 or q.nsub <= 1:
         return wp.vec4(r[0], r[1], looks, 0.0)
@@ -254,7 +251,7 @@ def region(q: ESSMConsts, data: wp.array3d(dtype=Any), depth: wp.array2d[float],
         for b in range(m):
             x0 = u0 + float(a) * du
             y0 = v0 + float(b) * dv
-            ri = esm_box(q, data, x0, x0 + du, y0, y0 + dv, plane_depth(q, plane, tc, x0 + 0.5 * du, y0 + 0.5 * dv), want_z)
+            ri = esm_box(q, data, x0, x0 + du, y0, y0 + dv, tangent_plane_depth(q, plane, tc, x0 + 0.5 * du, y0 + 0.5 * dv), want_z)
             looks += 1.0
             if ri[2] != 0.0:
                 ri = pcf2x2(q, depth, x0, x0 + du, y0, y0 + dv, plane, tc)
@@ -302,7 +299,7 @@ def footprint_axis(pos: wp.array[wp.vec3], nrm: wp.array[wp.vec3], prim: wp.arra
 @wp.kernel
 def essm_shade(
     offset: int,
-    lv: LightViewGPU,
+    lv: ViewGPU,
     k: LightKernel,
     q: ESSMConsts,
     data: wp.array3d(dtype=Any),
@@ -323,7 +320,7 @@ def essm_shade(
     vis[i] = 1.0
     if prim[i] < 0:
         return
-    rt = receiver_texel(lv, pos[i], q.n)
+    rt = receiver_texel(lv, pos[i])
     if rt[3] == 0.0:
         return
     tc = wp.vec2(rt[0], rt[1])
@@ -335,8 +332,8 @@ def essm_shade(
     m0 = map_coords(lv, pv)
     tu = 1.0 / lv.scale[0]
     tv = 1.0 / lv.scale[1]
-    gu = (receiver_depth(lv, pv, nv, wp.vec2(m0[0] + tu, m0[1])) - receiver_depth(lv, pv, nv, wp.vec2(m0[0] - tu, m0[1]))) * 0.5 / q.zrange
-    gv = (receiver_depth(lv, pv, nv, wp.vec2(m0[0], m0[1] + tv)) - receiver_depth(lv, pv, nv, wp.vec2(m0[0], m0[1] - tv))) * 0.5 / q.zrange
+    gu = (receiver_plane_depth_or(lv, pv, nv, wp.vec2(m0[0] + tu, m0[1]), pv[2]) - receiver_plane_depth_or(lv, pv, nv, wp.vec2(m0[0] - tu, m0[1]), pv[2])) * 0.5 / q.zrange
+    gv = (receiver_plane_depth_or(lv, pv, nv, wp.vec2(m0[0], m0[1] + tv), pv[2]) - receiver_plane_depth_or(lv, pv, nv, wp.vec2(m0[0], m0[1] - tv), pv[2])) * 0.5 / q.zrange
     # only a receiver that faces the light's centre is in the map around its texel: for one that
     # faces away the plane says nothing about the stored depths (and is not used)
     towards = -pv
@@ -494,27 +491,9 @@ class Basis:
         return out
 
 
-def depth_range(dm, mode: str, scene, device: str) -> tuple[float, float, bool]:
-    """The effective depth range that normalises light-space linear depth: (z_min, z_max - z_min, empty).
-    ``pyramid``: from the map's min/max pyramid; ``bounds``: the scene bounds in light space. An empty
-    map gives (0, 1, True); the range is never narrower than 1e-6 of the depth."""
-    if mode == "bounds":
-        lo, hi = scene.bounds
-        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])], np.float64)
-        zv = dm.view.to_view(corners)[:, 2]
-        near = dm.view.near if dm.view.persp else float(zv.min())
-        zmin, zmax = max(float(zv.min()), near), float(zv.max())
-    else:
-        zmin, zmax, _ = minmax_range(dm.depth, device)
-    empty = not math.isfinite(zmin)
-    if empty:
-        zmin, zmax = 0.0, 1.0
-    return zmin, max(zmax - zmin, 1e-6 * max(abs(zmax), 1.0)), empty
-
-
 def make_basis(dm, *, storage: str, mu: int, c: float, mode: str, scene, device: str, pyramid: bool) -> Basis:
     n = dm.depth.shape[0]
-    zmin, rng, empty = depth_range(dm, mode, scene, device)
+    zmin, rng, empty = effective_depth_range(dm, mode, scene, device)
     cc = c if c > 0 else optimal_exponent(storage, mu, n)
     normalise = storage != "float32"
     basis = wp.empty((3, n, n), dtype=float, device=device)

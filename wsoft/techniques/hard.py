@@ -23,9 +23,9 @@ from dataclasses import dataclass
 
 import warp as wp
 
+from wsoft.lightspace.light import LightGPU, receiver_bias
+from wsoft.lightspace.view import ViewGPU, in_front_of_light, inside_map, texel_of, view_of
 from wsoft.parallel import launch_chunked
-from wsoft.raster.lightview import LightViewGPU, in_front_of_light, texel_of, view_of
-from wsoft.scene.light_gpu import LightGPU, light_center_dir
 from wsoft.techniques.base import Technique, check, param
 
 
@@ -42,22 +42,10 @@ class HardParams:
         check(self.slope_bias >= 0.0, "slope_bias must be >= 0")
 
 
-@wp.func
-def receiver_bias(lv: LightViewGPU, L: LightGPU, p: wp.vec3, n: wp.vec3, z: float, bias: float, slope_texels: float) -> float:
-    """Constant plus slope-scaled bias (world units) for a receiver at view depth ``z``."""
-    texel = wp.max((lv.window[1] - lv.window[0]) / float(lv.width), (lv.window[3] - lv.window[2]) / float(lv.height))
-    if lv.persp != 0:
-        texel = texel * z
-    c = light_center_dir(L, p)
-    cos_t = wp.abs(wp.dot(n, wp.vec3(c[0], c[1], c[2])))
-    tan_t = wp.min(wp.sqrt(wp.max(1.0 - cos_t * cos_t, 0.0)) / wp.max(cos_t, 1.0e-4), 10.0)
-    return bias + slope_texels * texel * tan_t
-
-
 @wp.kernel
 def shade_hard(
     offset: int,
-    lv: LightViewGPU,
+    lv: ViewGPU,
     L: LightGPU,
     depth: wp.array2d[float],
     pos: wp.array[wp.vec3],
@@ -78,11 +66,11 @@ def shade_hard(
         vis[i] = 1.0  # outside the light's view: nothing between it and the light was mapped
         return
     t = texel_of(lv, v)
-    x = int(wp.floor(t[0]))
-    y = int(wp.floor(t[1]))
-    if x < 0 or y < 0 or x >= lv.width or y >= lv.height:
+    if not inside_map(lv, t):
         vis[i] = 1.0
         return
+    x = int(wp.floor(t[0]))
+    y = int(wp.floor(t[1]))
     b = receiver_bias(lv, L, p, nrm[i], v[2], bias, slope_texels)
     if v[2] - b > depth[y, x]:
         vis[i] = 0.0

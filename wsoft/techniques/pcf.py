@@ -25,12 +25,11 @@ from dataclasses import dataclass
 
 import warp as wp
 
+from wsoft.accel.filters import pcf_visibility, taps_on
+from wsoft.lightspace.light import LightGPU, receiver_bias
+from wsoft.lightspace.view import ViewGPU, in_front_of_light, map_coords, texel_size, view_dir, view_of
 from wsoft.parallel import launch_chunked
-from wsoft.raster.lightview import LightViewGPU, in_front_of_light, view_of
-from wsoft.scene.light_gpu import LightGPU
 from wsoft.techniques.base import Technique, check, param
-from wsoft.techniques.filtering import depth_at, map_coords, receiver_depth, tap_offset, taps_on, texel_center, texel_size, view_dir
-from wsoft.techniques.hard import receiver_bias
 
 
 @dataclass(frozen=True)
@@ -52,38 +51,10 @@ class PCFParams:
         check(self.bias >= 0.0 and self.slope_bias >= 0.0, "biases must be >= 0")
 
 
-@wp.func
-def pcf_visibility(
-    lv: LightViewGPU,
-    depth: wp.array2d[float],
-    pv: wp.vec3,
-    nv: wp.vec3,
-    m0: wp.vec2,
-    half: wp.vec2,
-    disk: int,
-    taps: wp.array[wp.vec2],
-    ntaps: int,
-    bias: float,
-    use_plane: int,
-) -> float:
-    """Fraction of ``taps`` (offsets ``half`` x pattern around ``m0``) where the receiver is lit."""
-    lit = float(0.0)
-    for i in range(ntaps):
-        o = tap_offset(disk, taps[i])
-        m = wp.vec2(m0[0] + o[0] * half[0], m0[1] + o[1] * half[1])
-        c = texel_center(lv, m)
-        zr = pv[2]
-        if use_plane != 0 and c[2] > 0.0:
-            zr = receiver_depth(lv, pv, nv, wp.vec2(c[0], c[1]))
-        if zr - bias <= depth_at(lv, depth, m):
-            lit += 1.0
-    return lit / float(ntaps)
-
-
 @wp.kernel
 def shade_pcf(
     offset: int,
-    lv: LightViewGPU,
+    lv: ViewGPU,
     L: LightGPU,
     depth: wp.array2d[float],
     pos: wp.array[wp.vec3],

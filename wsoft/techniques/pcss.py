@@ -33,23 +33,23 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from wsoft.parallel import launch_chunked
-from wsoft.raster.lightview import DEPTH_CLEAR, LightViewGPU, in_front_of_light, view_of
-from wsoft.techniques.base import Technique, check, param
-from wsoft.techniques.filtering import (
-    LightKernel,
+from wsoft.accel.filters import pcf_visibility, taps_on
+from wsoft.lightspace.light import LightKernel, light_kernel, spread
+from wsoft.lightspace.samples import to_light_coords
+from wsoft.lightspace.view import (
+    DEPTH_CLEAR,
+    ViewGPU,
     depth_at,
-    light_kernel,
+    in_front_of_light,
     map_coords,
-    receiver_depth,
-    spread,
-    tap_offset,
-    taps_on,
+    receiver_plane_depth_or,
     texel_center,
     texel_size,
     view_dir,
+    view_of,
 )
-from wsoft.techniques.pcf import pcf_visibility
+from wsoft.parallel import launch_chunked
+from wsoft.techniques.base import Technique, check, param
 
 
 @dataclass(frozen=True)
@@ -74,7 +74,7 @@ class PCSSParams:
 
 
 @wp.func
-def clamp_half(lv: LightViewGPU, h: wp.vec2, lo_texels: float, hi_texels: float) -> wp.vec2:
+def clamp_half(lv: ViewGPU, h: wp.vec2, lo_texels: float, hi_texels: float) -> wp.vec2:
     t = texel_size(lv)
     return wp.vec2(wp.clamp(h[0], lo_texels * t[0], hi_texels * t[0]), wp.clamp(h[1], lo_texels * t[1], hi_texels * t[1]))
 
@@ -82,7 +82,7 @@ def clamp_half(lv: LightViewGPU, h: wp.vec2, lo_texels: float, hi_texels: float)
 @wp.kernel
 def shade_pcss(
     offset: int,
-    lv: LightViewGPU,
+    lv: ViewGPU,
     k: LightKernel,
     depth: wp.array2d[float],
     pos: wp.array[wp.vec3],
@@ -116,13 +116,13 @@ def shade_pcss(
     total = float(0.0)
     count = float(0.0)
     for s in range(nb):
-        o = tap_offset(k.disk, btaps[s])
+        o = to_light_coords(btaps[s], k.disk)
         m = wp.vec2(m0[0] + o[0] * search[0], m0[1] + o[1] * search[1])
         d = depth_at(lv, depth, m)
         c = texel_center(lv, m)
         zr = pv[2]
         if c[2] > 0.0:
-            zr = receiver_depth(lv, pv, nv, wp.vec2(c[0], c[1]))
+            zr = receiver_plane_depth_or(lv, pv, nv, wp.vec2(c[0], c[1]), pv[2])
         if d < zr - bias:
             total += d
             count += 1.0

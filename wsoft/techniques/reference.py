@@ -13,7 +13,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from wsoft.reference import trace_reference
+from wsoft.lightspace.light import disk_shaped
+from wsoft.reference import reference_pattern, trace_reference
 from wsoft.scene.device import upload_scene
 from wsoft.techniques.base import Technique, check, param
 
@@ -56,7 +57,7 @@ class Reference(Technique):
             ds = res[scene_key]
             if dynamic:  # occluders: the dynamic casters only (their own BVH, built once per device)
                 ds, _ = scene.dynamic_subset().device_copy(ctx.device, upload_scene)
-            vis, err = trace_reference(ds, L, res[gbuf], p.samples, p.seed, p.jitter)
+            vis, err = trace_reference(ds, L, res[gbuf], reference_pattern(p.samples, p.seed, p.jitter), disk_shaped(light))
             return {out: ctx.visibility(vis, err)}
 
         name = ("reference_alpha" if scene.has_cutouts else "reference") + ("_dynamic" if dynamic else "")

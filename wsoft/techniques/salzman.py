@@ -42,10 +42,10 @@ import warp as wp
 
 from wsoft.accel.blur import blur_vec4_within
 from wsoft.accel.grid import build_grid
+from wsoft.lightspace.view import DEPTH_CLEAR, ViewGPU, bilinear, in_front_of_light, inside_map, map_coords, normalised_depth, view_of, window_to_texel
 from wsoft.parallel import launch_chunked
-from wsoft.raster.lightview import DEPTH_CLEAR, LightViewGPU, in_front_of_light, rasterize, view_of
+from wsoft.raster.rasterizer import rasterize
 from wsoft.techniques.base import Technique, check, param
-from wsoft.techniques.filtering import bilinear, map_coords
 
 
 @dataclass(frozen=True)
@@ -101,18 +101,19 @@ def make_salzman_map(
 ):
     i = wp.tid() + offset
     c = caster[i]
-    if c >= 1.0e29:
+    if c >= DEPTH_CLEAR:
         out[i] = wp.vec4(1.0, 0.0, 1.0, 0.0)
         return
-    d = wp.clamp((c - znear) / (zfar - znear), 0.0, 1.0)
-    f = float(1.0)
-    if far[i] < 1.0e29:
-        f = wp.clamp((far[i] - znear) / (zfar - znear), 0.0, 1.0)
-    out[i] = wp.vec4(d, 1.0, f, opacity[i])
+    zrange = zfar - znear
+    out[i] = wp.vec4(normalised_depth(c, znear, zrange), 1.0, normalised_depth(far[i], znear, zrange), opacity[i])
 
 
 @wp.kernel
-def quantize8(offset: int, m: wp.array[wp.vec4]):
+def quantize8(
+    offset: int,
+    # outputs
+    m: wp.array[wp.vec4],
+):
     i = wp.tid() + offset
     v = m[i]
     m[i] = wp.vec4(
@@ -126,7 +127,7 @@ def quantize8(offset: int, m: wp.array[wp.vec4]):
 @wp.kernel
 def shade_salzman(
     offset: int,
-    lv: LightViewGPU,
+    lv: ViewGPU,
     smap: wp.array2d[wp.vec4],
     cells: wp.array[wp.int32],
     gsize: int,
@@ -150,17 +151,16 @@ def shade_salzman(
     if not in_front_of_light(lv, pv):
         return
     m = map_coords(lv, pv)
-    fx = (m[0] - lv.window[0]) * lv.scale[0]
-    fy = (m[1] - lv.window[2]) * lv.scale[1]
-    if fx < 0.0 or fy < 0.0 or fx >= float(lv.width) or fy >= float(lv.height):
+    t = window_to_texel(lv, m)
+    if not inside_map(lv, t):
         return
     if gsize > 0:
-        cx = int(fx) * gsize / lv.width
-        cy = int(fy) * gsize / lv.height
+        cx = int(t[0]) * gsize / lv.width
+        cy = int(t[1]) * gsize / lv.height
         if cells[cy * gsize + cx] == 0:  # outside every caster's influence
             rejected[i] = 1
             return
-    z = (pv[2] - znear) / (zfar - znear)
+    z = normalised_depth(pv[2], znear, zfar - znear)
     vis[i] = 1.0 - salzman_shadow(bilinear(lv, smap, m), z, bias, far_bound, transparency)
 
 
@@ -243,7 +243,7 @@ class Salzman(Technique):
             ctx.counters[f"salzman[{label}].caster_triangles"] = int(len(casters))
             blurred = blur_vec4_within(smap, texels, p.filter, p.radius)
             if p.bits == 8:
-                launch_chunked(quantize8, n, inputs=[blurred.reshape(-1)], outputs=[], device=dev, min_chunk=1 << 15)
+                launch_chunked(quantize8, n, inputs=[], outputs=[blurred.reshape(-1)], device=dev, min_chunk=1 << 15)
             return {map_key: SalzmanMap(blurred, wp.array(cells, dtype=wp.int32, device=dev), gsize, znear, zfar)}
 
         def run(res):

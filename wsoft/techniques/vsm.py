@@ -26,10 +26,9 @@ from dataclasses import dataclass
 import warp as wp
 
 from wsoft.accel.blur import blur_moments
+from wsoft.lightspace.view import ViewGPU, bilinear, in_front_of_light, inside_map, map_coords, normalised_depth, view_of, window_to_texel
 from wsoft.parallel import launch_chunked
-from wsoft.raster.lightview import LightViewGPU, in_front_of_light, view_of
 from wsoft.techniques.base import Technique, check, param
-from wsoft.techniques.filtering import bilinear, map_coords
 
 
 @dataclass(frozen=True)
@@ -50,22 +49,24 @@ class VSMParams:
         check(self.bias >= 0.0, "bias must be >= 0")
 
 
-@wp.func
-def normalised(z: float, near: float, far: float) -> float:
-    return wp.clamp((z - near) / (far - near), 0.0, 1.0)
-
-
 @wp.kernel
-def make_moments(offset: int, depth: wp.array[float], near: float, far: float, out: wp.array[wp.vec2]):
+def make_moments(
+    offset: int,
+    depth: wp.array[float],
+    near: float,
+    far: float,
+    # outputs
+    out: wp.array[wp.vec2],
+):
     i = wp.tid() + offset
-    d = normalised(depth[i], near, far)
+    d = normalised_depth(depth[i], near, far - near)
     out[i] = wp.vec2(d, d * d)
 
 
 @wp.kernel
 def shade_vsm(
     offset: int,
-    lv: LightViewGPU,
+    lv: ViewGPU,
     mom: wp.array2d[wp.vec2],
     pos: wp.array[wp.vec3],
     prim: wp.array[wp.int32],
@@ -84,10 +85,10 @@ def shade_vsm(
         vis[i] = 1.0
         return
     m = map_coords(lv, pv)
-    if m[0] < lv.window[0] or m[0] > lv.window[1] or m[1] < lv.window[2] or m[1] > lv.window[3]:
+    if not inside_map(lv, window_to_texel(lv, m)):
         vis[i] = 1.0
         return
-    z = normalised(pv[2], lv.near, lv.far) - bias
+    z = normalised_depth(pv[2], lv.near, lv.far - lv.near) - bias
     e = bilinear(lv, mom, m)
     mu = e[0]
     if z <= mu:

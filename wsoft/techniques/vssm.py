@@ -37,19 +37,12 @@ from typing import Any
 
 import warp as wp
 
-from wsoft.accel.sat import (
-    box_area,
-    build_sat,
-    check_sat_params,
-    mean_pyramid,
-    receiver_texel,
-    sat_box,
-)
+from wsoft.accel.pyramid import effective_depth_range
+from wsoft.accel.sat import box_area, build_sat, check_sat_params, mean_pyramid, sat_box
+from wsoft.lightspace.light import LightKernel, light_kernel, spread_texels
+from wsoft.lightspace.view import ViewGPU, normalised_depth, receiver_texel
 from wsoft.parallel import launch_chunked
-from wsoft.raster.lightview import DEPTH_CLEAR, LightViewGPU
 from wsoft.techniques.base import Technique, check, param
-from wsoft.techniques.essm import depth_range
-from wsoft.techniques.filtering import LightKernel, light_kernel, spread_texels
 
 
 @dataclass(frozen=True)
@@ -87,14 +80,19 @@ class VSSMConsts:
 
 
 @wp.kernel
-def vssm_basis_kernel(offset: int, depth: wp.array2d[float], n: int, zmin: float, zrange: float, out: wp.array3d[float]):
+def vssm_basis_kernel(
+    offset: int,
+    depth: wp.array2d[float],
+    n: int,
+    zmin: float,
+    zrange: float,
+    # outputs
+    out: wp.array3d[float],
+):
     i = wp.tid() + offset
     y = i / n
     x = i - y * n
-    d = depth[y, x]
-    z = float(1.0)
-    if d < DEPTH_CLEAR:
-        z = wp.clamp((d - zmin) / zrange, 0.0, 1.0)
+    z = normalised_depth(depth[y, x], zmin, zrange)
     out[0, y, x] = z
     out[1, y, x] = z * z
 
@@ -146,14 +144,24 @@ def vregion(q: VSSMConsts, data: wp.array3d(dtype=Any), u0: float, u1: float, v0
 
 
 @wp.kernel
-def vssm_shade(offset: int, lv: LightViewGPU, k: LightKernel, q: VSSMConsts, data: wp.array3d(dtype=Any),
-               pos: wp.array[wp.vec3], prim: wp.array[wp.int32], vis: wp.array[float], looks: wp.array[wp.int32]):
+def vssm_shade(
+    offset: int,
+    lv: ViewGPU,
+    k: LightKernel,
+    q: VSSMConsts,
+    data: wp.array3d(dtype=Any),
+    pos: wp.array[wp.vec3],
+    prim: wp.array[wp.int32],
+    # outputs
+    vis: wp.array[float],
+    looks: wp.array[wp.int32],
+):
     i = wp.tid() + offset
     vis[i] = 1.0
     looks[i] = 0
     if prim[i] < 0:
         return
-    rt = receiver_texel(lv, pos[i], q.n)
+    rt = receiver_texel(lv, pos[i])
     if rt[3] == 0.0:
         return
     tc = wp.vec2(rt[0], rt[1])
@@ -209,7 +217,7 @@ class VSSM(Technique):
         def run_moments(res):
             dm = res[depth]
             n = dm.depth.shape[0]
-            zmin, rng, _ = depth_range(dm, "pyramid", ctx.scene, ctx.device)
+            zmin, rng, _ = effective_depth_range(dm, "pyramid", ctx.scene, ctx.device)
             basis = wp.empty((2, n, n), dtype=float, device=ctx.device)
             launch_chunked(vssm_basis_kernel, n * n, inputs=[dm.depth, n, zmin, rng], outputs=[basis], device=ctx.device, min_chunk=4096)
             pyr = mean_pyramid(basis, ctx.device) if p.sat == "tiles" else [basis]

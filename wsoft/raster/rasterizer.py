@@ -1,11 +1,9 @@
-"""Light-space views and the software depth rasterizer.
+"""The software rasterizer of light views (and any view): scan-converts triangles into a map.
 
-A :class:`LightView` is a perspective frustum from a local light's centre (rect, disk,
-sphere, point) or an orthographic box along a distant light, fitted to the receivers the
-camera sees. :func:`rasterize_depth` fills a ``[H, W]`` map of light-space *linear* depth
-(distance along the view axis) by scan-converting every triangle in Warp: near-plane
-clipping, perspective-correct depth and uv, alpha test for cutouts, and an optional
-conservative mode that writes every texel a triangle touches.
+:func:`rasterize` fills a ``[H, W]`` map of light-space *linear* depth (distance along the view
+axis) by scan-converting every triangle in Warp: near-plane clipping, perspective-correct depth
+and uv, alpha test for cutouts, and an optional conservative mode that writes every texel a
+triangle touches.
 
 Each triangle is visited once. On CPU every worker thread rasterizes its share of the
 triangles into a private map (interleaved chunks, so clustered geometry is shared out) and
@@ -15,223 +13,20 @@ rows (so a large triangle is shared by many threads) and writes with ``atomic_mi
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 import warp as wp
 
+from wsoft.lightspace.view import DEPTH_CLEAR, LightView, ViewGPU, texel_of, view_of
 from wsoft.parallel import cpu_threads, ensure_loaded, launch_chunked, run_tasks
-from wsoft.scene.device import Surfaces, DeviceScene, surface_present
-from wsoft.scene.types import LIGHT_DISTANT, LIGHT_SPHERE, LIGHT_POINT, Light
+from wsoft.scene.device import DeviceScene, Surfaces, surface_present
 
-DEPTH_CLEAR = 1.0e30  # value of texels no triangle covers (finite on purpose)
 GPU_BAND_ROWS = 64  # CUDA: rows per band (one thread per triangle and band)
 SMALL_BOX_TEXELS = wp.constant(8)  # triangles whose texel box is this small take the flat loop
 CPU_CHUNK = 32768  # CPU: triangles per launch; a worker's chunks are interleaved with the others'
 BIG_TRIANGLE_TEXELS = 4096  # CPU: triangles with a larger texel bounding box go to the banded pass
 PRIVATE_MAP_BUDGET = 1 << 30  # CPU: bytes allowed for per-worker private depth maps
-MAX_TAN = math.tan(math.radians(80.0))  # widest half-angle a perspective light view may open
-
-
-def to_frame(p: np.ndarray, origin: np.ndarray, axes: np.ndarray) -> np.ndarray:
-    """``(p - origin) @ axes`` for an (N, 3) array, without BLAS: a BLAS matrix product leaves
-    OpenBLAS's threads spinning, taking the cores from the Warp launches that follow."""
-    d = p - origin
-    return d[:, 0:1] * axes[0] + d[:, 1:2] * axes[1] + d[:, 2:3] * axes[2]
-
-
-@wp.struct
-class LightViewGPU:
-    origin: wp.vec3
-    ax: wp.vec3
-    ay: wp.vec3
-    az: wp.vec3  # view axis (depth grows along it)
-    persp: int
-    window: wp.vec4  # l, r, b, t (tangents for perspective, world units for orthographic)
-    scale: wp.vec2  # texels per window unit: width / (r - l), height / (t - b)
-    near: float
-    far: float
-    width: int
-    height: int
-
-
-@dataclass
-class LightView:
-    """Where a light looks: frame, window and depth range. Texel (0, 0) is at (l, b)."""
-
-    light_path: str
-    persp: bool
-    origin: np.ndarray
-    axes: np.ndarray  # 3x3 columns: x, y, view axis
-    window: tuple[float, float, float, float]
-    near: float
-    far: float
-    width: int
-    height: int
-    receivers_outside: int = 0
-
-    def gpu(self) -> LightViewGPU:
-        g = LightViewGPU()
-        g.origin = wp.vec3(*self.origin)
-        g.ax = wp.vec3(*self.axes[:, 0])
-        g.ay = wp.vec3(*self.axes[:, 1])
-        g.az = wp.vec3(*self.axes[:, 2])
-        g.persp = int(self.persp)
-        g.window = wp.vec4(*self.window)
-        l, r, b, t = self.window
-        g.scale = wp.vec2(self.width / (r - l), self.height / (t - b))
-        g.near = float(self.near)
-        g.far = float(self.far)
-        g.width = int(self.width)
-        g.height = int(self.height)
-        return g
-
-    def to_view(self, p: np.ndarray) -> np.ndarray:
-        return to_frame(np.asarray(p, np.float64), self.origin, self.axes)
-
-    def texel_coords(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Continuous texel coordinates (x, y) of the world points ``p`` in front of the view
-        (perspective: beyond the near plane), as the rasterizer places them."""
-        v = self.to_view(p)
-        if self.persp:
-            v = v[v[:, 2] > self.near]
-            x, y = v[:, 0] / v[:, 2], v[:, 1] / v[:, 2]
-        else:
-            x, y = v[:, 0], v[:, 1]
-        l, r, b, t = self.window
-        return (x - l) / (r - l) * self.width, (y - b) / (t - b) * self.height
-
-
-def _basis_from_axis(z: np.ndarray) -> np.ndarray:
-    z = z / np.linalg.norm(z)
-    helper = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    x = np.cross(helper, z)
-    x /= np.linalg.norm(x)
-    y = np.cross(z, x)
-    return np.stack([x, y, z], axis=1)
-
-
-def fit_light_view(
-    light: Light,
-    receivers: np.ndarray,
-    scene_lo: np.ndarray,
-    scene_hi: np.ndarray,
-    size: int,
-    margin: float = 0.0,
-    margin_texels: float = 1.0,
-    casters: np.ndarray | None = None,
-) -> LightView:
-    """Fit a view of ``light`` to ``receivers`` (world points [N, 3], the camera's visible surface).
-
-    ``margin`` widens the window by a world distance at the receivers; ``margin_texels`` keeps
-    a border of texels. ``casters`` (world points, e.g. the scene's vertices) asks for a view
-    for soft shadows: the window is widened so that every caster that can block part of the
-    *whole* light from a receiver is mapped (for a local light of half-extent w, a caster at
-    depth z blocks within w (1/z - 1/z_r) of a receiver's tangent; for a distant light of cone
-    half-angle a, within (z_r - z) tan a). Perspective windows are clamped to ±80° around the
-    view axis; receivers beyond are counted in ``receivers_outside``.
-    """
-    if not 256 <= size <= 8192:
-        from wsoft.errors import ParameterError
-
-        raise ParameterError(f"shadow_map_size {size} out of range [256, 8192]")
-    diag = float(np.linalg.norm(scene_hi - scene_lo)) or 1.0
-    center = 0.5 * (scene_lo + scene_hi)
-    rec = np.asarray(receivers, np.float64).reshape(-1, 3)
-    if len(rec) == 0:
-        rec = np.stack([scene_lo, scene_hi])
-    if light.kind == LIGHT_DISTANT:
-        axes = np.stack([light.frame[:, 0], light.frame[:, 1], -light.frame[:, 2]], axis=1)  # view along emission
-        corners = np.array([[x, y, z] for x in (scene_lo[0], scene_hi[0]) for y in (scene_lo[1], scene_hi[1]) for z in (scene_lo[2], scene_hi[2])])
-        origin = center - axes[:, 2] * diag
-        vr = to_frame(rec, origin, axes)
-        vc = to_frame(corners, origin, axes)
-        pad = margin + 1e-4 * diag
-        if casters is not None and light.angle_deg > 0:
-            pad += math.tan(math.radians(0.5 * light.angle_deg)) * max(float(vr[:, 2].max() - vc[:, 2].min()), 0.0)
-        l, r = vr[:, 0].min() - pad, vr[:, 0].max() + pad
-        b, t = vr[:, 1].min() - pad, vr[:, 1].max() + pad
-        near = max(vc[:, 2].min() - 1e-3 * diag, 0.0)
-        far = vc[:, 2].max() + 1e-3 * diag
-        persp, outside = False, 0
-    else:
-        origin = np.asarray(light.position, np.float64)
-        if light.kind in (LIGHT_SPHERE, LIGHT_POINT):
-            d = rec.mean(axis=0) - origin
-            axes = _basis_from_axis(d if np.linalg.norm(d) > 1e-9 else -light.frame[:, 2])
-        else:
-            axes = np.stack([light.frame[:, 0], -light.frame[:, 1], -light.frame[:, 2]], axis=1)  # right-handed, view along −Z
-        vr = to_frame(rec, origin, axes)
-        zmin_ok = 1e-6 * diag
-        ok = vr[:, 2] > zmin_ok
-        tx = vr[ok, 0] / vr[ok, 2]
-        ty = vr[ok, 1] / vr[ok, 2]
-        # widen by the margin seen at each receiver's depth
-        mz = margin / np.maximum(vr[ok, 2], zmin_ok) if margin > 0 else 0.0
-        inside = ok.copy()
-        if ok.any():
-            l, r = float(np.min(tx - mz)), float(np.max(tx + mz))
-            b, t = float(np.min(ty - mz)), float(np.max(ty + mz))
-            inside[ok] = (np.abs(tx) <= MAX_TAN) & (np.abs(ty) <= MAX_TAN)
-        else:
-            l, r, b, t = -1.0, 1.0, -1.0, 1.0
-        zr = vr[ok, 2]
-        w = light.extent()
-        if casters is not None and w > 0 and len(zr):
-            zr_max = float(zr.max())
-            vc = to_frame(np.asarray(casters, np.float64).reshape(-1, 3), origin, axes)
-            vc = vc[(vc[:, 2] > 1e-3 * diag) & (vc[:, 2] < zr_max)]
-            if len(vc):
-                grow = w * (1.0 / vc[:, 2] - 1.0 / zr_max)
-                cx, cy = vc[:, 0] / vc[:, 2], vc[:, 1] / vc[:, 2]
-                near_window = (cx >= l - grow) & (cx <= r + grow) & (cy >= b - grow) & (cy <= t + grow)
-                if near_window.any():
-                    g = float(grow[near_window].max())
-                    l, r, b, t = l - g, r + g, b - g, t + g
-        l, r = max(l, -MAX_TAN), min(r, MAX_TAN)
-        b, t = max(b, -MAX_TAN), min(t, MAX_TAN)
-        outside = int(np.count_nonzero(~inside))
-        near = max(1e-4 * diag, 1e-7)
-        if len(zr):
-            near = min(near, 0.5 * float(zr.min()))
-        far = (float(zr.max()) if len(zr) else diag) * 1.01 + 1e-3 * diag
-        persp = True
-    # keep a border of texels and avoid a zero-area window
-    w = max(r - l, 1e-6)
-    h = max(t - b, 1e-6)
-    ex = w * margin_texels / max(size - 2 * margin_texels, 1)
-    ey = h * margin_texels / max(size - 2 * margin_texels, 1)
-    window = (l - ex, l + w + ex, b - ey, b + h + ey)
-    return LightView(
-        light_path=light.path, persp=persp, origin=origin, axes=axes, window=window,
-        near=float(near), far=float(far), width=size, height=size, receivers_outside=outside,
-    )
-
-
-@wp.func
-def view_of(lv: LightViewGPU, p: wp.vec3) -> wp.vec3:
-    d = p - lv.origin
-    return wp.vec3(wp.dot(d, lv.ax), wp.dot(d, lv.ay), wp.dot(d, lv.az))
-
-
-@wp.func
-def in_front_of_light(lv: LightViewGPU, v: wp.vec3) -> bool:
-    """Is the view-space point inside the view's depth range on the light's side (perspective:
-    beyond the near plane)? Receivers that are not have nothing mapped between them and the light."""
-    return lv.persp == 0 or v[2] > lv.near
-
-
-@wp.func
-def texel_of(lv: LightViewGPU, v: wp.vec3) -> wp.vec2:
-    """Continuous texel coordinates of a view-space point (texel centres at integer + 0.5)."""
-    x = v[0]
-    y = v[1]
-    if lv.persp != 0:
-        inv = 1.0 / v[2]
-        x = x * inv
-        y = y * inv
-    return wp.vec2((x - lv.window[0]) * lv.scale[0], (y - lv.window[2]) * lv.scale[1])
 
 
 @wp.func
@@ -254,7 +49,7 @@ def span_limit(lim: wp.vec2, e: float, g: float, inv_g: float, pxr: float) -> wp
 
 @wp.func
 def raster_triangle(
-    lv: LightViewGPU,
+    lv: ViewGPU,
     tri: int,
     ta: wp.vec2,
     tb: wp.vec2,
@@ -486,7 +281,7 @@ def rasterize_depth(
     big_texels: float,
     points: wp.array[wp.vec3],
     indices: wp.array[wp.int32],
-    lv: LightViewGPU,
+    lv: ViewGPU,
     cut: Surfaces,
     alpha: int,
     conservative: int,

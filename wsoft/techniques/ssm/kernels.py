@@ -32,14 +32,19 @@ from __future__ import annotations
 import warp as wp
 
 from wsoft.accel.ssm_structures import DepthRanges, depth_range, pyr_at
-from wsoft.raster.lightview import (
+from wsoft.lightspace.bitmask import mask_quad, mask_rect, mask_t, mask_visibility
+from wsoft.lightspace.light import LightKernel, spread
+from wsoft.lightspace.view import (
     DEPTH_CLEAR,
-    LightViewGPU,
+    MISS,
+    ViewGPU,
     in_front_of_light,
+    light_facing,
+    receiver_plane_depth,
     texel_of,
+    view_dir,
     view_of,
 )
-from wsoft.techniques.filtering import LightKernel, spread, view_dir
 
 STATUS_LIT = 0
 STATUS_UMBRA = 1
@@ -50,21 +55,14 @@ OCC_MICROPATCH = 0
 OCC_MICROQUAD = 1
 OCC_MICRORECT = 2
 
-PATTERN_REGULAR = 0
-PATTERN_JITTERED = 1
-PATTERN_ANY = 2  # random, or any pattern mapped into a disk: every sample is tested
-
-MASK_WORDS = 32  # room for 32 x 32 light samples
-mask_t = wp.types.vector(length=MASK_WORDS, dtype=wp.uint32)
 poly_t = wp.types.vector(length=8, dtype=float)
-BIG = wp.constant(3.0e38)
 
 
 @wp.struct
 class SSMSetup:
     """What every SSM kernel needs besides the maps: light view, light, settings."""
 
-    lv: LightViewGPU
+    lv: ViewGPU
     k: LightKernel
     occluder: int  # OCC_*
     bitmask: int  # 0: area accumulation, 1: occlusion bitmask
@@ -95,36 +93,19 @@ def grown_bounds(x0: float, x1: float, cell: int, extra: int) -> wp.vec2i:
 
 
 @wp.func
-def plane_depth(lv: LightViewGPU, pv: wp.vec3, nv: wp.vec3, u: float, v: float) -> float:
-    """Depth of the receiver's tangent plane along window coordinates (u, v); -BIG where the
-    ray misses it (the plane seen edge-on or behind the light)."""
-    if lv.persp != 0:
-        den = nv[0] * u + nv[1] * v + nv[2]
-        if wp.abs(den) < 1.0e-12:
-            return -BIG
-        z = wp.dot(nv, pv) / den
-        if z <= 0.0:
-            return -BIG
-        return z
-    if wp.abs(nv[2]) < 1.0e-6:
-        return -BIG
-    return pv[2] - (nv[0] * (u - pv[0]) + nv[1] * (v - pv[1])) / nv[2]
-
-
-@wp.func
-def plane_min_over(lv: LightViewGPU, pv: wp.vec3, nv: wp.vec3, x0: int, y0: int, x1: int, y1: int) -> float:
+def plane_min_over(lv: ViewGPU, pv: wp.vec3, nv: wp.vec3, x0: int, y0: int, x1: int, y1: int) -> float:
     """Nearest depth of the receiver's tangent plane over level-0 texels [x0, x1] x [y0, y1] (its
     corners: the depth is monotonic along lines of the window while the plane stays in front)."""
     u0 = lv.window[0] + float(x0) / lv.scale[0]
     u1 = lv.window[0] + float(x1 + 1) / lv.scale[0]
     v0 = lv.window[2] + float(y0) / lv.scale[1]
     v1 = lv.window[2] + float(y1 + 1) / lv.scale[1]
-    a = plane_depth(lv, pv, nv, u0, v0)
-    b = plane_depth(lv, pv, nv, u1, v0)
-    c = plane_depth(lv, pv, nv, u0, v1)
-    d = plane_depth(lv, pv, nv, u1, v1)
-    if a <= -BIG or b <= -BIG or c <= -BIG or d <= -BIG:
-        return -BIG
+    a = receiver_plane_depth(lv, pv, nv, wp.vec2(u0, v0))
+    b = receiver_plane_depth(lv, pv, nv, wp.vec2(u1, v0))
+    c = receiver_plane_depth(lv, pv, nv, wp.vec2(u0, v1))
+    d = receiver_plane_depth(lv, pv, nv, wp.vec2(u1, v1))
+    if a <= MISS or b <= MISS or c <= MISS or d <= MISS:
+        return MISS
     return wp.min(wp.min(a, b), wp.min(c, d))
 
 
@@ -264,7 +245,7 @@ def smooth_loq(
 
 
 @wp.func
-def light_x(lv: LightViewGPU, k: LightKernel, pv: wp.vec3, u: float, d: float, axis: int) -> float:
+def light_x(lv: ViewGPU, k: LightKernel, pv: wp.vec3, u: float, d: float, axis: int) -> float:
     """Light coordinate (along ``axis``) of the ray from the receiver through window coordinate
     ``u`` at depth ``d``."""
     pa = pv[axis]
@@ -274,18 +255,7 @@ def light_x(lv: LightViewGPU, k: LightKernel, pv: wp.vec3, u: float, d: float, a
 
 
 @wp.func
-def light_facing(lv: LightViewGPU, pv: wp.vec3, nv: wp.vec3) -> wp.vec3:
-    """The receiver's normal (view space) turned toward the light's centre."""
-    to_light = wp.vec3(0.0, 0.0, -1.0)
-    if lv.persp != 0:
-        to_light = -pv
-    if wp.dot(nv, to_light) < 0.0:
-        return -nv
-    return nv
-
-
-@wp.func
-def front_distance(lv: LightViewGPU, pv: wp.vec3, nl: wp.vec3, d: float, cu: float, cv: float, hu: float, hv: float) -> float:
+def front_distance(lv: ViewGPU, pv: wp.vec3, nl: wp.vec3, d: float, cu: float, cv: float, hu: float, hv: float) -> float:
     """Smallest signed distance, over the window rectangle centred at (cu, cv) with half sizes
     (hu, hv) placed at depth ``d``, in front of the receiver's tangent plane (normal ``nl``
     toward the light). Only what lies in front of that plane can be between the receiver and
@@ -293,121 +263,6 @@ def front_distance(lv: LightViewGPU, pv: wp.vec3, nl: wp.vec3, d: float, cu: flo
     if lv.persp != 0:
         return d * (nl[0] * cu + nl[1] * cv + nl[2] - wp.abs(nl[0]) * hu - wp.abs(nl[1]) * hv) - wp.dot(nl, pv)
     return nl[0] * cu + nl[1] * cv + nl[2] * d - wp.abs(nl[0]) * hu - wp.abs(nl[1]) * hv - wp.dot(nl, pv)
-
-
-# -- occlusion bitmask -----------------------------------------------------------------------
-
-
-@wp.func
-def popcount(v: wp.uint32) -> int:
-    x = v - ((v >> wp.uint32(1)) & wp.uint32(0x55555555))
-    x = (x & wp.uint32(0x33333333)) + ((x >> wp.uint32(2)) & wp.uint32(0x33333333))
-    x = (x + (x >> wp.uint32(4))) & wp.uint32(0x0F0F0F0F)
-    return int((x * wp.uint32(0x01010101)) >> wp.uint32(24))
-
-
-@wp.func
-def set_bit(m: mask_t, b: int) -> mask_t:
-    w = b >> 5
-    m[w] = m[w] | (wp.uint32(1) << wp.uint32(b & 31))
-    return m
-
-
-@wp.func
-def set_run(m: mask_t, n: int, row: int, c0: int, c1: int) -> mask_t:
-    """Set the bits of columns c0..c1 (inclusive) of a row (rows never straddle words: n | 32)."""
-    if c0 > c1:
-        return m
-    b = row * n + c0
-    w = b >> 5
-    run = wp.uint32((wp.uint64(1) << wp.uint64(c1 - c0 + 1)) - wp.uint64(1))
-    bits = run << wp.uint32(b & 31)
-    m[w] = m[w] | bits
-    return m
-
-
-@wp.func
-def mask_rect(m: mask_t, st: SSMSetup, samples: wp.array[wp.vec2], lo: wp.vec2, hi: wp.vec2) -> mask_t:
-    """Mark the light samples inside the light-coordinate rectangle [lo, hi]."""
-    n = st.n
-    fn = float(n)
-    if st.pattern == PATTERN_REGULAR:
-        c0 = wp.max(int(wp.ceil((lo[0] + 1.0) * 0.5 * fn - 0.5)), 0)
-        c1 = wp.min(int(wp.ceil((hi[0] + 1.0) * 0.5 * fn - 0.5)) - 1, n - 1)
-        r0 = wp.max(int(wp.ceil((lo[1] + 1.0) * 0.5 * fn - 0.5)), 0)
-        r1 = wp.min(int(wp.ceil((hi[1] + 1.0) * 0.5 * fn - 0.5)) - 1, n - 1)
-        for r in range(r0, r1 + 1):
-            m = set_run(m, n, r, c0, c1)
-        return m
-    if st.pattern == PATTERN_JITTERED:
-        c0 = wp.max(int(wp.floor((lo[0] + 1.0) * 0.5 * fn)), 0)
-        c1 = wp.min(int(wp.floor((hi[0] + 1.0) * 0.5 * fn)), n - 1)
-        r0 = wp.max(int(wp.floor((lo[1] + 1.0) * 0.5 * fn)), 0)
-        r1 = wp.min(int(wp.floor((hi[1] + 1.0) * 0.5 * fn)), n - 1)
-        for r in range(r0, r1 + 1):
-            if r > r0 and r < r1:
-                m = set_run(m, n, r, c0 + 1, c1 - 1)  # cells wholly inside
-                for c in range(c0, c1 + 1, wp.max(c1 - c0, 1)):
-                    q = samples[r * n + c]
-                    if q[0] >= lo[0] and q[0] < hi[0]:
-                        m = set_bit(m, r * n + c)
-            else:
-                for c in range(c0, c1 + 1):
-                    q = samples[r * n + c]
-                    if q[0] >= lo[0] and q[0] < hi[0] and q[1] >= lo[1] and q[1] < hi[1]:
-                        m = set_bit(m, r * n + c)
-        return m
-    for b in range(n * n):
-        q = samples[b]
-        if q[0] >= lo[0] and q[0] < hi[0] and q[1] >= lo[1] and q[1] < hi[1]:
-            m = set_bit(m, b)
-    return m
-
-
-@wp.func
-def edge_side(a: wp.vec2, b: wp.vec2, p: wp.vec2) -> float:
-    return (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0])
-
-
-@wp.func
-def in_triangle(a: wp.vec2, b: wp.vec2, c: wp.vec2, p: wp.vec2) -> bool:
-    e0 = edge_side(a, b, p)
-    e1 = edge_side(b, c, p)
-    e2 = edge_side(c, a, p)
-    return (e0 >= 0.0 and e1 >= 0.0 and e2 >= 0.0) or (e0 <= 0.0 and e1 <= 0.0 and e2 <= 0.0)
-
-
-@wp.func
-def mask_quad(m: mask_t, st: SSMSetup, samples: wp.array[wp.vec2], a: wp.vec2, b: wp.vec2, c: wp.vec2, d: wp.vec2) -> mask_t:
-    """Mark the light samples inside the quadrilateral a b c d (two triangles a b c, a c d)."""
-    n = st.n
-    fn = float(n)
-    lo = wp.min(wp.min(a, b), wp.min(c, d))
-    hi = wp.max(wp.max(a, b), wp.max(c, d))
-    c0 = int(0)
-    c1 = n - 1
-    r0 = int(0)
-    r1 = n - 1
-    if st.pattern != PATTERN_ANY:
-        c0 = wp.max(int(wp.floor((lo[0] + 1.0) * 0.5 * fn)), 0)
-        c1 = wp.min(int(wp.floor((hi[0] + 1.0) * 0.5 * fn)), n - 1)
-        r0 = wp.max(int(wp.floor((lo[1] + 1.0) * 0.5 * fn)), 0)
-        r1 = wp.min(int(wp.floor((hi[1] + 1.0) * 0.5 * fn)), n - 1)
-    for r in range(r0, r1 + 1):
-        for cc in range(c0, c1 + 1):
-            q = samples[r * n + cc]
-            if in_triangle(a, b, c, q) or in_triangle(a, c, d, q):
-                m = set_bit(m, r * n + cc)
-    return m
-
-
-@wp.func
-def mask_visibility(m: mask_t, n: int) -> float:
-    words = (n * n + 31) // 32
-    hits = int(0)
-    for w in range(words):
-        hits += popcount(m[w])
-    return 1.0 - float(hits) / float(n * n)
 
 
 # -- area accumulation -----------------------------------------------------------------------
@@ -568,7 +423,7 @@ def level_visibility(
                 if hi[0] <= -1.0 or hi[1] <= -1.0 or lo[0] >= 1.0 or lo[1] >= 1.0:
                     continue
                 if st.bitmask != 0:
-                    m = mask_quad(m, st, samples, qa, qb, qc, qd)
+                    m = mask_quad(m, st.n, st.pattern, samples, qa, qb, qc, qd)
                 else:
                     covered += quad_area(qa, qb, qc, qd)
                 continue
@@ -607,7 +462,7 @@ def level_visibility(
             if hi[0] <= -1.0 or hi[1] <= -1.0 or lo[0] >= 1.0 or lo[1] >= 1.0:
                 continue
             if st.bitmask != 0:
-                m = mask_rect(m, st, samples, lo, hi)
+                m = mask_rect(m, st.n, st.pattern, samples, lo, hi)
             else:
                 covered += rect_area(lo, hi)
     vis = float(0.0)

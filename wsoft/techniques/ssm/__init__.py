@@ -81,13 +81,24 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from wsoft.accel.ssm_kernels import (
+from wsoft.accel.pyramid import build_minmax_pyramid
+from wsoft.accel.ssm_structures import (
+    MicroRects,
+    PruningStructure,
+    build_microrects,
+    build_structure,
+)
+from wsoft.errors import ParameterError
+from wsoft.lightspace.bitmask import PATTERN_ANY, PATTERN_JITTERED, PATTERN_REGULAR
+from wsoft.lightspace.light import light_kernel
+from wsoft.lightspace.samples import SamplePattern
+from wsoft.parallel import launch_chunked
+from wsoft.scene.types import LIGHT_DISTANT, LIGHT_POINT, LIGHT_RECT
+from wsoft.techniques.base import Technique, check, param
+from wsoft.techniques.ssm.kernels import (
     OCC_MICROPATCH,
     OCC_MICROQUAD,
     OCC_MICRORECT,
-    PATTERN_ANY,
-    PATTERN_JITTERED,
-    PATTERN_REGULAR,
     STATUS_BACKGROUND,
     STATUS_LIT,
     STATUS_PENUMBRA,
@@ -99,18 +110,6 @@ from wsoft.accel.ssm_kernels import (
     search_areas,
     smooth_loq,
 )
-from wsoft.accel.ssm_structures import (
-    MicroRects,
-    PruningStructure,
-    build_microrects,
-    build_pyramid,
-    build_structure,
-)
-from wsoft.errors import ParameterError
-from wsoft.parallel import launch_chunked
-from wsoft.scene.types import LIGHT_DISTANT, LIGHT_POINT, LIGHT_RECT
-from wsoft.techniques.base import Technique, check, param
-from wsoft.techniques.filtering import light_kernel
 
 OCCLUDERS = {"micropatch": OCC_MICROPATCH, "microquad": OCC_MICROQUAD, "microrect": OCC_MICRORECT}
 PATTERNS = ("regular", "jittered", "random")
@@ -163,31 +162,14 @@ class SSMParams:
         check(self.bias >= 0.0, "bias must be >= 0")
 
 
-def light_samples(pattern: str, n: int, disk: bool, seed: int) -> tuple[np.ndarray, int]:
-    """``n * n`` light samples in [-1, 1]^2, row-major (sample r * n + c in cell (c, r) for the
-    regular and jittered patterns), and the kernel's pattern code. On a disk light the samples
-    are mapped into the unit disk (concentric map) and every one is tested."""
-    rng = np.random.default_rng(seed)
-    c, r = np.meshgrid(np.arange(n), np.arange(n))
-    if pattern == "regular":
-        u, v = (c + 0.5) / n, (r + 0.5) / n
-        code = PATTERN_REGULAR
-    elif pattern == "jittered":
-        u, v = (c + rng.random((n, n))) / n, (r + rng.random((n, n))) / n
-        code = PATTERN_JITTERED
-    else:
-        u, v = rng.random((n, n)), rng.random((n, n))
-        code = PATTERN_ANY
-    u, v = u.ravel(), v.ravel()
+def light_samples(pattern: str, n: int, disk: bool, seed: int, device: str) -> tuple[wp.array, int]:
+    """``n * n`` light samples in light coordinates (row-major: sample r * n + c in cell (c, r) for
+    the regular and jittered patterns) on ``device``, and the bitmask's pattern code. On a disk
+    light the samples are mapped into the unit disk and every one is tested."""
+    pts = SamplePattern(pattern, n * n, seed=seed).light_coords(device, disk)
     if disk:
-        a, b = 2 * u - 1, 2 * v - 1
-        big = np.abs(a) > np.abs(b)
-        rad = np.where(big, a, b)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            phi = np.where(big, np.pi / 4 * b / np.where(a == 0, 1, a), np.pi / 2 - np.pi / 4 * a / np.where(b == 0, 1, b))
-        x, y = rad * np.cos(phi), rad * np.sin(phi)
-        return np.stack([x, y], -1).astype(np.float32), PATTERN_ANY
-    return np.stack([2 * u - 1, 2 * v - 1], -1).astype(np.float32), code
+        return pts, PATTERN_ANY
+    return pts, {"regular": PATTERN_REGULAR, "jittered": PATTERN_JITTERED}.get(pattern, PATTERN_ANY)
 
 
 def budget_image(p: SSMParams, width: int, height: int) -> np.ndarray:
@@ -262,7 +244,7 @@ def build_maps(depth: wp.array, p: SSMParams, device: str) -> SSMMaps:
     st = build_structure(p.structure, depth, device, ysm_size=p.ysm_size)
     occ = st
     if p.structure == "mssm":
-        pyr = build_pyramid(depth, device)
+        pyr = build_minmax_pyramid(depth, device, skip_empty=False)
         occ = build_structure("hsm", depth, device, pyramid=pyr)
     mr = build_microrects(depth, device) if p.occluder == "microrect" else None
     return SSMMaps(st, occ, mr)
@@ -378,7 +360,7 @@ class SSM(Technique):
         dev = ctx.device
         disk = light.kind != LIGHT_RECT
         budget = budget_image(p, ctx.width, ctx.height)
-        pts, code = light_samples(p.pattern, p.bitmask_size, disk, p.seed)
+        pts, code = light_samples(p.pattern, p.bitmask_size, disk, p.seed, dev)
 
         def setup_of(dm) -> SSMSetup:
             st = SSMSetup()
@@ -414,7 +396,7 @@ class SSM(Technique):
 
         def visibility(res):
             gb, dm, s = res[gbuf], res[depth], res[search_key]
-            run_visibility(setup_of(dm), res[maps_key], gb, s, wp.array(pts, dtype=wp.vec2, device=dev), dev)
+            run_visibility(setup_of(dm), res[maps_key], gb, s, pts, dev)
             ctx.counters.update(search_counters(s, prefix))
             status = s.status.numpy()
             pen = status == STATUS_PENUMBRA

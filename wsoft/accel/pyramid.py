@@ -1,0 +1,131 @@
+"""The min/max depth pyramid of a square power-of-two depth map (a hierarchical shadow map), and
+the effective depth range techniques normalise depth over.
+
+Levels ``k = 0..log2 N`` of ``N >> k`` texels per side, each texel the (min, max) of the 2 x 2
+texels below, stored flat (vec2) with the level offsets of :func:`level_offsets`. Empty texels
+(``DEPTH_CLEAR``) follow one of two conventions, chosen by the caller:
+
+* ``skip_empty = False`` — an empty texel is a surface at ``DEPTH_CLEAR``: a range whose max is
+  ``DEPTH_CLEAR`` holds a texel through which the light passes (backprojection's umbra test
+  needs this);
+* ``skip_empty = True`` — empty texels are ignored: the top level is the range of the covered
+  texels, ``(DEPTH_CLEAR, -DEPTH_CLEAR)`` if there are none (the depth range of a map).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import warp as wp
+
+from wsoft.lightspace.view import DEPTH_CLEAR
+from wsoft.parallel import launch_chunked
+
+
+@wp.func
+def merge_range(a: wp.vec2, b: wp.vec2) -> wp.vec2:
+    return wp.vec2(wp.min(a[0], b[0]), wp.max(a[1], b[1]))
+
+
+@wp.kernel
+def pyramid_base(
+    offset: int,
+    depth: wp.array2d[float],
+    skip_empty: int,
+    # outputs
+    pyr: wp.array[wp.vec2],
+):
+    i = wp.tid() + offset
+    n = depth.shape[1]
+    y = i // n
+    x = i - y * n
+    d = depth[y, x]
+    if skip_empty != 0 and d >= DEPTH_CLEAR:
+        pyr[i] = wp.vec2(DEPTH_CLEAR, -DEPTH_CLEAR)
+    else:
+        pyr[i] = wp.vec2(d, d)
+
+
+@wp.kernel
+def pyramid_level(
+    offset: int,
+    src_off: int,
+    dst_off: int,
+    n: int,
+    # outputs
+    pyr: wp.array[wp.vec2],
+):
+    """Level of ``n`` per side from the level below (2n per side)."""
+    i = wp.tid() + offset
+    y = i // n
+    x = i - y * n
+    m = 2 * n
+    a = pyr[src_off + (2 * y) * m + 2 * x]
+    b = pyr[src_off + (2 * y) * m + 2 * x + 1]
+    c = pyr[src_off + (2 * y + 1) * m + 2 * x]
+    d = pyr[src_off + (2 * y + 1) * m + 2 * x + 1]
+    pyr[dst_off + i] = merge_range(merge_range(a, b), merge_range(c, d))
+
+
+def log2_exact(n: int) -> int:
+    k = int(round(math.log2(n))) if n > 0 else -1
+    if k < 0 or 1 << k != n:
+        raise ValueError(f"map size {n} is not a power of two")
+    return k
+
+
+def level_offsets(size: int) -> np.ndarray:
+    """Flat offsets of the levels of a full mip chain of a ``size``-square map (and the total)."""
+    offs = [0]
+    n = size
+    while n >= 1:
+        offs.append(offs[-1] + n * n)
+        n //= 2
+    return np.asarray(offs, np.int32)
+
+
+def build_minmax_pyramid(depth: wp.array, device: str, *, skip_empty: bool) -> tuple[wp.array, np.ndarray]:
+    """The min/max pyramid of a square power-of-two ``[N, N]`` depth map: (flat vec2 levels, offsets)."""
+    n = depth.shape[1]
+    if depth.shape[0] != n:
+        raise ValueError("the map must be square")
+    log2_exact(n)
+    offs = level_offsets(n)
+    pyr = wp.empty(int(offs[-1]), dtype=wp.vec2, device=device)
+    launch_chunked(pyramid_base, n * n, inputs=[depth, int(skip_empty)], outputs=[pyr], device=device)
+    k, m = 0, n // 2
+    while m >= 1:
+        launch_chunked(pyramid_level, m * m, inputs=[int(offs[k]), int(offs[k + 1]), m], outputs=[pyr], device=device)
+        k += 1
+        m //= 2
+    return pyr, offs
+
+
+def minmax_range(depth: wp.array, device: str) -> tuple[float, float]:
+    """(z_min, z_max) of the covered texels of a square depth map from its pyramid's top;
+    ``(inf, -inf)`` for an empty map."""
+    pyr, _ = build_minmax_pyramid(depth, device, skip_empty=True)
+    top = pyr[pyr.shape[0] - 1 :].numpy()[0]
+    zmin, zmax = float(top[0]), float(top[1])
+    if zmin > zmax:
+        return math.inf, -math.inf
+    return zmin, zmax
+
+
+def effective_depth_range(dm, mode: str, scene, device: str) -> tuple[float, float, bool]:
+    """The effective depth range that normalises a depth map's linear depth: (z_min, z_max - z_min,
+    empty). ``pyramid``: from the map's min/max pyramid; ``bounds``: the scene bounds in light
+    space. An empty map gives (0, 1, True); the range is never narrower than 1e-6 of the depth."""
+    if mode == "bounds":
+        lo, hi = scene.bounds
+        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])], np.float64)
+        zv = dm.view.to_view(corners)[:, 2]
+        near = dm.view.near if dm.view.persp else float(zv.min())
+        zmin, zmax = max(float(zv.min()), near), float(zv.max())
+    else:
+        zmin, zmax = minmax_range(dm.depth, device)
+    empty = not math.isfinite(zmin)
+    if empty:
+        zmin, zmax = 0.0, 1.0
+    return zmin, max(zmax - zmin, 1e-6 * max(abs(zmax), 1.0)), empty

@@ -1,0 +1,162 @@
+"""Lights on the device: how to sample a point (or direction) on them, the light as a filter kernel
+(its spread over a map from a blocker's depth), and the slope-scaled receiver bias."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import warp as wp
+
+from wsoft.lightspace.view import ViewGPU
+from wsoft.scene.types import LIGHT_DISK, LIGHT_DISTANT, LIGHT_POINT, LIGHT_RECT, LIGHT_SPHERE, Light  # noqa: F401
+
+
+@wp.struct
+class LightGPU:
+    kind: int  # LIGHT_RECT, LIGHT_DISK, LIGHT_SPHERE, LIGHT_DISTANT, LIGHT_POINT
+    position: wp.vec3
+    ax: wp.vec3  # unit X axis
+    ay: wp.vec3  # unit Y axis
+    az: wp.vec3  # unit Z axis (rect/disk emit along -Z; distant light comes from +Z)
+    half_size: wp.vec2  # rect half width / height
+    radius: float  # disk / sphere radius
+    cos_max: float  # distant: cosine of the cone half angle
+    far: float  # distant: length of shadow rays
+
+
+def light_gpu(light: Light, scene_diagonal: float) -> LightGPU:
+    g = LightGPU()
+    g.kind = int(light.kind)
+    g.position = wp.vec3(*np.asarray(light.position, np.float64))
+    g.ax = wp.vec3(*light.frame[:, 0])
+    g.ay = wp.vec3(*light.frame[:, 1])
+    g.az = wp.vec3(*light.frame[:, 2])
+    g.half_size = wp.vec2(*light.half_size)
+    g.radius = float(light.radius)
+    g.cos_max = float(math.cos(math.radians(0.5 * light.angle_deg)))
+    g.far = float(4.0 * scene_diagonal)
+    return g
+
+
+@wp.func
+def light_point(L: LightGPU, p: wp.vec3, c: wp.vec2) -> wp.vec4:
+    """A shadow ray from ``p`` toward the point of light coordinates ``c`` (``[-1, 1]^2`` on a rect
+    light, the unit disk on the others, :mod:`wsoft.lightspace.samples`): unit direction (xyz)
+    and length (w). A sphere light is its silhouette disk seen from ``p``; a distant light's
+    disk is its cone (uniform in solid angle); a point light ignores ``c``."""
+    target = L.position
+    if L.kind == 0:  # rect
+        target = L.position + L.ax * (c[0] * L.half_size[0]) + L.ay * (c[1] * L.half_size[1])
+    elif L.kind == 1:  # disk
+        target = L.position + (L.ax * c[0] + L.ay * c[1]) * L.radius
+    elif L.kind == 2:  # sphere: the silhouette disk seen from p
+        to_c = L.position - p
+        dist = wp.length(to_c)
+        if dist > L.radius * 1.0001:
+            n = to_c / dist
+            helper = wp.vec3(1.0, 0.0, 0.0)
+            if wp.abs(n[0]) > 0.9:
+                helper = wp.vec3(0.0, 1.0, 0.0)
+            tx = wp.normalize(wp.cross(helper, n))
+            ty = wp.cross(n, tx)
+            rr = L.radius * L.radius / dist
+            rad = L.radius * wp.sqrt(wp.max(1.0 - rr / dist, 0.0))
+            target = L.position - n * rr + (tx * c[0] + ty * c[1]) * rad
+    elif L.kind == 3:  # distant: uniform in the cone's solid angle
+        rho2 = c[0] * c[0] + c[1] * c[1]
+        cos_t = 1.0 - rho2 * (1.0 - L.cos_max)
+        sin_t = wp.sqrt(wp.max(1.0 - cos_t * cos_t, 0.0))
+        rho = wp.sqrt(rho2)
+        dx = float(0.0)
+        dy = float(0.0)
+        if rho > 0.0:
+            dx = c[0] / rho
+            dy = c[1] / rho
+        dir = wp.normalize(L.az * cos_t + (L.ax * dx + L.ay * dy) * sin_t)
+        return wp.vec4(dir[0], dir[1], dir[2], L.far)
+    v = target - p
+    dist = wp.length(v)
+    if dist <= 0.0:
+        return wp.vec4(L.az[0], L.az[1], L.az[2], 0.0)
+    dir = v / dist
+    return wp.vec4(dir[0], dir[1], dir[2], dist)
+
+
+def disk_shaped(light: Light) -> bool:
+    """Are the light's samples mapped onto a disk (disk, sphere and distant lights) rather than a rectangle?"""
+    return light.kind != LIGHT_RECT
+
+
+@wp.func
+def light_center_dir(L: LightGPU, p: wp.vec3) -> wp.vec4:
+    """Unit direction from ``p`` to the light's centre (distant: toward the sun) and its distance."""
+    if L.kind == 3:
+        return wp.vec4(L.az[0], L.az[1], L.az[2], L.far)
+    v = L.position - p
+    dist = wp.length(v)
+    if dist <= 0.0:
+        return wp.vec4(L.az[0], L.az[1], L.az[2], 0.0)
+    dir = v / dist
+    return wp.vec4(dir[0], dir[1], dir[2], dist)
+
+
+# --------------------------------------------------------------------------- the light as a filter kernel
+
+
+@wp.struct
+class LightKernel:
+    """The light as a filter sees it from the light view's centre.
+
+    ``disk``: 1 for a disk-shaped light (disk, sphere, distant), 0 for a rectangle.
+    ``half``: local lights: half-extent in world units along the map's x and y;
+    distant lights: tan of the cone's half angle (both components).
+    """
+
+    disk: int
+    half: wp.vec2
+
+
+def light_kernel(light: Light) -> LightKernel:
+    k = LightKernel()
+    if light.kind == LIGHT_RECT:
+        k.disk = 0
+        k.half = wp.vec2(*light.half_size)
+    elif light.kind == LIGHT_DISTANT:
+        k.disk = 1
+        t = math.tan(math.radians(0.5 * light.angle_deg))
+        k.half = wp.vec2(t, t)
+    else:
+        k.disk = 1
+        k.half = wp.vec2(light.radius, light.radius)
+    return k
+
+
+@wp.func
+def spread(lv: ViewGPU, k: LightKernel, zb: float, zr: float) -> wp.vec2:
+    """Half-size (window units) of the region over which a blocker at depth ``zb`` covers the
+    light as seen from a receiver at depth ``zr``: w (1/zb - 1/zr) for a local light of
+    half-extent w, (zr - zb) tan(a) for a distant light."""
+    if lv.persp != 0:
+        f = 1.0 / wp.max(zb, 1.0e-20) - 1.0 / wp.max(zr, 1.0e-20)
+        return k.half * wp.max(f, 0.0)
+    return k.half * wp.max(zr - zb, 0.0)
+
+
+@wp.func
+def spread_texels(lv: ViewGPU, k: LightKernel, zb: float, zr: float, lo: float, hi: float) -> wp.vec2:
+    """:func:`spread` in texels along x and y, clamped to [lo, hi]."""
+    h = spread(lv, k, zb, zr)
+    return wp.vec2(wp.clamp(h[0] * lv.scale[0], lo, hi), wp.clamp(h[1] * lv.scale[1], lo, hi))
+
+
+@wp.func
+def receiver_bias(lv: ViewGPU, L: LightGPU, p: wp.vec3, n: wp.vec3, z: float, bias: float, slope_texels: float) -> float:
+    """Constant plus slope-scaled bias (world units) for a receiver at view depth ``z``."""
+    texel = wp.max((lv.window[1] - lv.window[0]) / float(lv.width), (lv.window[3] - lv.window[2]) / float(lv.height))
+    if lv.persp != 0:
+        texel = texel * z
+    c = light_center_dir(L, p)
+    cos_t = wp.abs(wp.dot(n, wp.vec3(c[0], c[1], c[2])))
+    tan_t = wp.min(wp.sqrt(wp.max(1.0 - cos_t * cos_t, 0.0)) / wp.max(cos_t, 1.0e-4), 10.0)
+    return bias + slope_texels * texel * tan_t

@@ -1,0 +1,376 @@
+"""Views and texel maths: where a light (or a camera) looks, and how points map to its texels.
+
+A :class:`LightView` is a perspective frustum from a local light's centre (rect, disk, sphere,
+point) or an orthographic box along a distant light, fitted to the receivers the camera sees.
+On the device a view is a :class:`ViewGPU`. Coordinates, from world to texel:
+
+* **view space** (:func:`view_of`): x, y along the view's axes, z the *linear* depth along its
+  axis (what depth maps store);
+* **window coordinates** (:func:`map_coords`): tangents (x/z, y/z) for a perspective view, world
+  units for an orthographic one; the window ``(l, r, b, t)`` spans the map;
+* **texel coordinates** (:func:`texel_of`): texel (i, j) covers ``[i, i+1) x [j, j+1)``, its
+  centre at ``(i + 0.5, j + 0.5)``; texel (0, 0) is at window corner (l, b).
+
+Everything else a shadow-map technique asks of a point lives here once: is it inside the map
+(:func:`inside_map`), the receiver's tangent plane's depth along another ray
+(:func:`receiver_plane_depth`), depth normalised to [0, 1] (:func:`normalised_depth`), bilinear
+reads and the slope-scaled receiver bias.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import warp as wp
+
+from wsoft.scene.types import LIGHT_DISTANT, LIGHT_POINT, LIGHT_SPHERE, Light
+
+DEPTH_CLEAR = 1.0e30  # value of texels no surface covers (finite on purpose)
+MISS = wp.constant(-3.0e38)  # receiver_plane_depth: the ray does not meet the plane in front of the view
+MAX_TAN = math.tan(math.radians(80.0))  # widest half-angle a perspective light view may open
+
+
+def to_frame(p: np.ndarray, origin: np.ndarray, axes: np.ndarray) -> np.ndarray:
+    """``(p - origin) @ axes`` for an (N, 3) array, without BLAS: a BLAS matrix product leaves
+    OpenBLAS's threads spinning, taking the cores from the Warp launches that follow."""
+    d = p - origin
+    return d[:, 0:1] * axes[0] + d[:, 1:2] * axes[1] + d[:, 2:3] * axes[2]
+
+
+@wp.struct
+class ViewGPU:
+    """A view on the device: a light view, or any pinhole / orthographic view a rasterizer targets."""
+
+    origin: wp.vec3
+    ax: wp.vec3
+    ay: wp.vec3
+    az: wp.vec3  # view axis (depth grows along it)
+    persp: int
+    window: wp.vec4  # l, r, b, t (tangents for perspective, world units for orthographic)
+    scale: wp.vec2  # texels per window unit: width / (r - l), height / (t - b)
+    near: float
+    far: float
+    width: int
+    height: int
+
+
+@dataclass
+class LightView:
+    """Where a light looks: frame, window and depth range. Texel (0, 0) is at (l, b)."""
+
+    light_path: str
+    persp: bool
+    origin: np.ndarray
+    axes: np.ndarray  # 3x3 columns: x, y, view axis
+    window: tuple[float, float, float, float]
+    near: float
+    far: float
+    width: int
+    height: int
+    receivers_outside: int = 0
+
+    def gpu(self) -> ViewGPU:
+        g = ViewGPU()
+        g.origin = wp.vec3(*self.origin)
+        g.ax = wp.vec3(*self.axes[:, 0])
+        g.ay = wp.vec3(*self.axes[:, 1])
+        g.az = wp.vec3(*self.axes[:, 2])
+        g.persp = int(self.persp)
+        g.window = wp.vec4(*self.window)
+        l, r, b, t = self.window
+        g.scale = wp.vec2(self.width / (r - l), self.height / (t - b))
+        g.near = float(self.near)
+        g.far = float(self.far)
+        g.width = int(self.width)
+        g.height = int(self.height)
+        return g
+
+    def to_view(self, p: np.ndarray) -> np.ndarray:
+        return to_frame(np.asarray(p, np.float64), self.origin, self.axes)
+
+    def texel_coords(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Continuous texel coordinates (x, y) of the world points ``p`` in front of the view
+        (perspective: beyond the near plane), as the rasterizer places them."""
+        v = self.to_view(p)
+        if self.persp:
+            v = v[v[:, 2] > self.near]
+            x, y = v[:, 0] / v[:, 2], v[:, 1] / v[:, 2]
+        else:
+            x, y = v[:, 0], v[:, 1]
+        l, r, b, t = self.window
+        return (x - l) / (r - l) * self.width, (y - b) / (t - b) * self.height
+
+
+def _basis_from_axis(z: np.ndarray) -> np.ndarray:
+    z = z / np.linalg.norm(z)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    x = np.cross(helper, z)
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    return np.stack([x, y, z], axis=1)
+
+
+def fit_light_view(
+    light: Light,
+    receivers: np.ndarray,
+    scene_lo: np.ndarray,
+    scene_hi: np.ndarray,
+    size: int,
+    margin: float = 0.0,
+    margin_texels: float = 1.0,
+    casters: np.ndarray | None = None,
+) -> LightView:
+    """Fit a view of ``light`` to ``receivers`` (world points [N, 3], the camera's visible surface).
+
+    ``margin`` widens the window by a world distance at the receivers; ``margin_texels`` keeps
+    a border of texels. ``casters`` (world points, e.g. the scene's vertices) asks for a view
+    for soft shadows: the window is widened so that every caster that can block part of the
+    *whole* light from a receiver is mapped (for a local light of half-extent w, a caster at
+    depth z blocks within w (1/z - 1/z_r) of a receiver's tangent; for a distant light of cone
+    half-angle a, within (z_r - z) tan a). Perspective windows are clamped to ±80° around the
+    view axis; receivers beyond are counted in ``receivers_outside``.
+    """
+    if not 256 <= size <= 8192:
+        from wsoft.errors import ParameterError
+
+        raise ParameterError(f"shadow_map_size {size} out of range [256, 8192]")
+    diag = float(np.linalg.norm(scene_hi - scene_lo)) or 1.0
+    center = 0.5 * (scene_lo + scene_hi)
+    rec = np.asarray(receivers, np.float64).reshape(-1, 3)
+    if len(rec) == 0:
+        rec = np.stack([scene_lo, scene_hi])
+    if light.kind == LIGHT_DISTANT:
+        axes = np.stack([light.frame[:, 0], light.frame[:, 1], -light.frame[:, 2]], axis=1)  # view along emission
+        corners = np.array([[x, y, z] for x in (scene_lo[0], scene_hi[0]) for y in (scene_lo[1], scene_hi[1]) for z in (scene_lo[2], scene_hi[2])])
+        origin = center - axes[:, 2] * diag
+        vr = to_frame(rec, origin, axes)
+        vc = to_frame(corners, origin, axes)
+        pad = margin + 1e-4 * diag
+        if casters is not None and light.angle_deg > 0:
+            pad += math.tan(math.radians(0.5 * light.angle_deg)) * max(float(vr[:, 2].max() - vc[:, 2].min()), 0.0)
+        l, r = vr[:, 0].min() - pad, vr[:, 0].max() + pad
+        b, t = vr[:, 1].min() - pad, vr[:, 1].max() + pad
+        near = max(vc[:, 2].min() - 1e-3 * diag, 0.0)
+        far = vc[:, 2].max() + 1e-3 * diag
+        persp, outside = False, 0
+    else:
+        origin = np.asarray(light.position, np.float64)
+        if light.kind in (LIGHT_SPHERE, LIGHT_POINT):
+            d = rec.mean(axis=0) - origin
+            axes = _basis_from_axis(d if np.linalg.norm(d) > 1e-9 else -light.frame[:, 2])
+        else:
+            axes = np.stack([light.frame[:, 0], -light.frame[:, 1], -light.frame[:, 2]], axis=1)  # right-handed, view along −Z
+        vr = to_frame(rec, origin, axes)
+        zmin_ok = 1e-6 * diag
+        ok = vr[:, 2] > zmin_ok
+        tx = vr[ok, 0] / vr[ok, 2]
+        ty = vr[ok, 1] / vr[ok, 2]
+        # widen by the margin seen at each receiver's depth
+        mz = margin / np.maximum(vr[ok, 2], zmin_ok) if margin > 0 else 0.0
+        inside = ok.copy()
+        if ok.any():
+            l, r = float(np.min(tx - mz)), float(np.max(tx + mz))
+            b, t = float(np.min(ty - mz)), float(np.max(ty + mz))
+            inside[ok] = (np.abs(tx) <= MAX_TAN) & (np.abs(ty) <= MAX_TAN)
+        else:
+            l, r, b, t = -1.0, 1.0, -1.0, 1.0
+        zr = vr[ok, 2]
+        w = light.extent()
+        if casters is not None and w > 0 and len(zr):
+            zr_max = float(zr.max())
+            vc = to_frame(np.asarray(casters, np.float64).reshape(-1, 3), origin, axes)
+            vc = vc[(vc[:, 2] > 1e-3 * diag) & (vc[:, 2] < zr_max)]
+            if len(vc):
+                grow = w * (1.0 / vc[:, 2] - 1.0 / zr_max)
+                cx, cy = vc[:, 0] / vc[:, 2], vc[:, 1] / vc[:, 2]
+                near_window = (cx >= l - grow) & (cx <= r + grow) & (cy >= b - grow) & (cy <= t + grow)
+                if near_window.any():
+                    g = float(grow[near_window].max())
+                    l, r, b, t = l - g, r + g, b - g, t + g
+        l, r = max(l, -MAX_TAN), min(r, MAX_TAN)
+        b, t = max(b, -MAX_TAN), min(t, MAX_TAN)
+        outside = int(np.count_nonzero(~inside))
+        near = max(1e-4 * diag, 1e-7)
+        if len(zr):
+            near = min(near, 0.5 * float(zr.min()))
+        far = (float(zr.max()) if len(zr) else diag) * 1.01 + 1e-3 * diag
+        persp = True
+    # keep a border of texels and avoid a zero-area window
+    w = max(r - l, 1e-6)
+    h = max(t - b, 1e-6)
+    ex = w * margin_texels / max(size - 2 * margin_texels, 1)
+    ey = h * margin_texels / max(size - 2 * margin_texels, 1)
+    window = (l - ex, l + w + ex, b - ey, b + h + ey)
+    return LightView(
+        light_path=light.path, persp=persp, origin=origin, axes=axes, window=window,
+        near=float(near), far=float(far), width=size, height=size, receivers_outside=outside,
+    )
+
+
+# --------------------------------------------------------------------------- device maths
+
+
+@wp.func
+def view_of(lv: ViewGPU, p: wp.vec3) -> wp.vec3:
+    """A world point in view space (x, y, linear depth z)."""
+    d = p - lv.origin
+    return wp.vec3(wp.dot(d, lv.ax), wp.dot(d, lv.ay), wp.dot(d, lv.az))
+
+
+@wp.func
+def view_dir(lv: ViewGPU, n: wp.vec3) -> wp.vec3:
+    """A world direction in view space."""
+    return wp.vec3(wp.dot(n, lv.ax), wp.dot(n, lv.ay), wp.dot(n, lv.az))
+
+
+@wp.func
+def in_front_of_light(lv: ViewGPU, v: wp.vec3) -> bool:
+    """Is the view-space point inside the view's depth range on the light's side (perspective:
+    beyond the near plane)? Receivers that are not have nothing mapped between them and the light."""
+    return lv.persp == 0 or v[2] > lv.near
+
+
+@wp.func
+def map_coords(lv: ViewGPU, v: wp.vec3) -> wp.vec2:
+    """Window coordinates of a view-space point."""
+    if lv.persp != 0:
+        return wp.vec2(v[0] / v[2], v[1] / v[2])
+    return wp.vec2(v[0], v[1])
+
+
+@wp.func
+def texel_of(lv: ViewGPU, v: wp.vec3) -> wp.vec2:
+    """Continuous texel coordinates of a view-space point (texel centres at integer + 0.5)."""
+    x = v[0]
+    y = v[1]
+    if lv.persp != 0:
+        inv = 1.0 / v[2]
+        x = x * inv
+        y = y * inv
+    return wp.vec2((x - lv.window[0]) * lv.scale[0], (y - lv.window[2]) * lv.scale[1])
+
+
+@wp.func
+def window_to_texel(lv: ViewGPU, m: wp.vec2) -> wp.vec2:
+    """Texel coordinates of window coordinates ``m``."""
+    return wp.vec2((m[0] - lv.window[0]) * lv.scale[0], (m[1] - lv.window[2]) * lv.scale[1])
+
+
+@wp.func
+def inside_map(lv: ViewGPU, t: wp.vec2) -> bool:
+    """Do continuous texel coordinates ``t`` fall on a texel of the map (0 <= t < size)?"""
+    return t[0] >= 0.0 and t[1] >= 0.0 and t[0] < float(lv.width) and t[1] < float(lv.height)
+
+
+@wp.func
+def texel_size(lv: ViewGPU) -> wp.vec2:
+    """One texel in window units, along x and y."""
+    return wp.vec2((lv.window[1] - lv.window[0]) / float(lv.width), (lv.window[3] - lv.window[2]) / float(lv.height))
+
+
+@wp.func
+def texel_center(lv: ViewGPU, m: wp.vec2) -> wp.vec3:
+    """Snap window coordinates to the centre of their texel: (cx, cy, 1), or (mx, my, 0) outside the map."""
+    t = window_to_texel(lv, m)
+    if not inside_map(lv, t):
+        return wp.vec3(m[0], m[1], 0.0)
+    x = wp.floor(t[0])
+    y = wp.floor(t[1])
+    return wp.vec3(lv.window[0] + (x + 0.5) / lv.scale[0], lv.window[2] + (y + 0.5) / lv.scale[1], 1.0)
+
+
+@wp.func
+def depth_at(lv: ViewGPU, depth: wp.array2d[float], m: wp.vec2) -> float:
+    """Stored depth of the texel holding window coordinates ``m`` (``DEPTH_CLEAR`` outside the map)."""
+    t = window_to_texel(lv, m)
+    if not inside_map(lv, t):
+        return DEPTH_CLEAR
+    return depth[int(t[1]), int(t[0])]
+
+
+@wp.func
+def receiver_texel(lv: ViewGPU, p: wp.vec3) -> wp.vec4:
+    """(tx, ty, view depth, 1) of a world point seen by the light inside its map, else w = 0
+    (behind a perspective light's near plane or outside the map: nothing mapped can shadow it)."""
+    pv = view_of(lv, p)
+    if not in_front_of_light(lv, pv):
+        return wp.vec4(0.0, 0.0, pv[2], 0.0)
+    tc = texel_of(lv, pv)
+    if not inside_map(lv, tc):
+        return wp.vec4(tc[0], tc[1], pv[2], 0.0)
+    return wp.vec4(tc[0], tc[1], pv[2], 1.0)
+
+
+@wp.func
+def normalised_depth(d: float, zmin: float, zrange: float) -> float:
+    """Linear depth ``d`` mapped to [0, 1] over [zmin, zmin + zrange]; empty texels
+    (``DEPTH_CLEAR``) at 1, the far end."""
+    if d >= DEPTH_CLEAR:
+        return 1.0
+    return wp.clamp((d - zmin) / zrange, 0.0, 1.0)
+
+
+@wp.func
+def receiver_plane_depth(lv: ViewGPU, pv: wp.vec3, nv: wp.vec3, m: wp.vec2) -> float:
+    """Depth at which the ray of window coordinates ``m`` meets the receiver's tangent plane
+    (point ``pv``, normal ``nv``, view space): the receiver-plane depth. ``MISS`` where the ray
+    runs along the plane or meets it behind a perspective view's origin."""
+    if lv.persp != 0:
+        den = nv[0] * m[0] + nv[1] * m[1] + nv[2]
+        if wp.abs(den) < 1.0e-6:
+            return MISS
+        z = wp.dot(nv, pv) / den
+        if z <= 0.0:
+            return MISS
+        return z
+    if wp.abs(nv[2]) < 1.0e-6:
+        return MISS
+    return pv[2] - (nv[0] * (m[0] - pv[0]) + nv[1] * (m[1] - pv[1])) / nv[2]
+
+
+@wp.func
+def receiver_plane_depth_or(lv: ViewGPU, pv: wp.vec3, nv: wp.vec3, m: wp.vec2, fallback: float) -> float:
+    """:func:`receiver_plane_depth`, or ``fallback`` where the ray misses the plane."""
+    z = receiver_plane_depth(lv, pv, nv, m)
+    if z <= MISS:
+        return fallback
+    return z
+
+
+@wp.func
+def light_facing(lv: ViewGPU, pv: wp.vec3, nv: wp.vec3) -> wp.vec3:
+    """The receiver's normal (view space) turned toward the light's centre."""
+    to_light = wp.vec3(0.0, 0.0, -1.0)
+    if lv.persp != 0:
+        to_light = -pv
+    if wp.dot(nv, to_light) < 0.0:
+        return -nv
+    return nv
+
+
+@wp.func
+def bilinear_cell(lv: ViewGPU, m: wp.vec2) -> wp.vec4:
+    """Bilinear footprint of window coordinates ``m``: (x0, y0, ax, ay) with the texel pair
+    (x0, x0 + 1) x (y0, y0 + 1) and weights ax, ay toward the second of each pair."""
+    t = window_to_texel(lv, m)
+    fx = t[0] - 0.5
+    fy = t[1] - 0.5
+    x0 = wp.floor(fx)
+    y0 = wp.floor(fy)
+    return wp.vec4(x0, y0, fx - x0, fy - y0)
+
+
+@wp.func
+def bilinear(lv: ViewGPU, tex: wp.array2d(dtype=Any), m: wp.vec2):
+    """Bilinear read of a map (any vector or float texel type) at window coordinates ``m``, clamped at the edges."""
+    c = bilinear_cell(lv, m)
+    xa = wp.clamp(int(c[0]), 0, lv.width - 1)
+    xb = wp.clamp(int(c[0]) + 1, 0, lv.width - 1)
+    ya = wp.clamp(int(c[1]), 0, lv.height - 1)
+    yb = wp.clamp(int(c[1]) + 1, 0, lv.height - 1)
+    top = tex[ya, xa] * (1.0 - c[2]) + tex[ya, xb] * c[2]
+    bot = tex[yb, xa] * (1.0 - c[2]) + tex[yb, xb] * c[2]
+    return top * (1.0 - c[3]) + bot * c[3]
