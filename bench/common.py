@@ -1,5 +1,6 @@
-"""What sweeps share: a measured render row against the cached reference, side-by-side images,
-the accuracy table and the error-versus-time plot of a report."""
+"""What sweeps share: a measured render row with its error from the metric pass, side-by-side
+images, the accuracy table and the error-versus-time plot of a report, and readers of the
+stats' namespaced counters and pass kinds (reports never parse pass names)."""
 
 from __future__ import annotations
 
@@ -7,25 +8,26 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.harness import measure_render, reference
+from wsoft.bench.harness import ground_truth, measure_render, reference
 
 
 def render_row(case: dict, ctx: dict, extra=None) -> dict:
-    """Render ``case`` (median of 3 after a warm-up) and measure its error against the cached reference.
-    ``extra(frame, reference) -> dict`` adds a sweep's own measurements to the row."""
-    from wsoft.metrics import visibility_error
-
+    """Render ``case`` (median of 3 after a warm-up) with its error against the cached reference,
+    measured by the graph's metric pass. ``extra(frame, reference) -> dict`` adds a sweep's own
+    measurements to the row."""
     ref = reference(case["scene"], width=case["width"], height=case["height"], light=case["light"], samples=case["ref_samples"], device=case["device"],
                     casters=case.get("ref_casters", "all"))
-    fr = measure_render(case["scene"], case["technique"], case["params"], device=case["device"], width=case["width"], height=case["height"], light=case["light"])
-    err = visibility_error(fr.V, ref["V"], ref["V_stderr"], ref["A"])
+    truth = ground_truth(case["scene"], ref, case["light"])
+    fr = measure_render(case["scene"], case["technique"], case["params"], device=case["device"], width=case["width"], height=case["height"],
+                        light=case["light"], truth=truth)
     st = fr.stats
     row = {
-        "scene": case["scene"], "technique": st["technique"], "params": st["params"], "device": st["device"],
-        "width": case["width"], "height": case["height"], "light": st["light"], "ref_samples": case["ref_samples"],
-        "timings_ms": st["timings_ms"], "timings_ms_runs": st["timings_ms_runs"], "cpu_ms": st["cpu_ms"],
-        "memory_bytes": st["memory_bytes"], "counters": st["counters"], "passes": st["passes"], "error": err,
-        "reference_ms": float(ref["ms"]), "ref_casters": case.get("ref_casters", "all"),
+        "scene": case["scene"], "technique": st["technique"], "label": st["label"], "params": st["params"], "device": st["device"],
+        "width": case["width"], "height": case["height"], "light": st["light"], "light_label": st["light_labels"][0], "ref_samples": case["ref_samples"],
+        "timings_ms": st["timings_ms"], "timings_ms_runs": st["timings_ms_runs"], "timings_by_kind_ms": st["timings_by_kind_ms"],
+        "pass_kinds": st["pass_kinds"], "pass_stages": st["pass_stages"], "cpu_ms": st["cpu_ms"],
+        "memory_bytes": st["memory_bytes"], "counters": st["counters"], "passes": st["passes"], "error": st["error"],
+        "reference_ms": float(ref["ms"]), "ref_casters": case.get("ref_casters", "all"), "warnings": st["warnings"],
     }
     if extra is not None:
         row.update(extra(fr, ref))
@@ -33,6 +35,37 @@ def render_row(case: dict, ctx: dict, extra=None) -> dict:
         label = f"{case['technique']} " + " ".join(f"{k}={v}" for k, v in case["params"].items())
         row["image"] = side_by_side(case, label, fr.V, ref["V"], ref["A"], ctx)
     return row
+
+
+# -- reading rows ---------------------------------------------------------------------------------
+
+
+def counters(row: dict) -> dict:
+    """The technique's counters for the row's light."""
+    t = next(iter(row["counters"]["techniques"].values()), {})
+    return t.get(row["light_label"], {})
+
+
+def kind_ms(row: dict, *kinds: str) -> float:
+    """Milliseconds the row's frame spent in passes of these kinds."""
+    return float(sum(row["timings_by_kind_ms"].get(k, 0.0) for k in kinds))
+
+
+def stage_ms(row: dict, *stages: str) -> float:
+    """Milliseconds the row's frame spent in the technique's passes of these stages."""
+    return float(sum(ms for name, ms in row["timings_ms"].items() if row["pass_stages"].get(name) in stages))
+
+
+def shadow_ms(row: dict) -> float:
+    """The light maps and the technique's own passes (the reference's traced rays for it)."""
+    return kind_ms(row, "light_map", "technique", "reference")
+
+
+def params_text(p: dict) -> str:
+    return ", ".join(f"{k}={v}" for k, v in p.items())
+
+
+# -- images ----------------------------------------------------------------------------------------
 
 
 def side_by_side(case: dict, label: str, v: np.ndarray, ref: np.ndarray, cov: np.ndarray, ctx: dict) -> str:
@@ -51,7 +84,8 @@ def side_by_side(case: dict, label: str, v: np.ndarray, ref: np.ndarray, cov: np
     ref_label = f"reference {case['ref_samples']} spp" + (" (dynamic casters)" if case.get("ref_casters", "all") != "all" else "")
     for i, text in enumerate([label, ref_label, "|difference| x4"]):
         d.text((i * w + 4, 3), text, fill=0)
-    name = f"{case['scene']}-{case['light'] or 'light'}-{case['technique']}-{case['device'].replace(':', '')}.png"
+    light = (case.get("light") or "light").split("/")[-1]
+    name = f"{case['scene']}-{light}-{case['technique']}-{case['device'].replace(':', '')}.png"
     rel = Path("images") / ctx["stem"] / name
     path = ctx["out_dir"] / rel
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -59,13 +93,23 @@ def side_by_side(case: dict, label: str, v: np.ndarray, ref: np.ndarray, cov: np
     return str(rel)
 
 
+# -- report parts ----------------------------------------------------------------------------------
+
+
 def report_header(sweep: str, rows: list[dict], md: Path, ctx: dict) -> list[str]:
+    """Title, command, machine and what the rows hold (scenes, devices, resolutions, from the rows)."""
     m = rows[0]["machine"] if rows else {}
     L = [f"# Sweep `{sweep}`{' (quick)' if ctx['quick'] else ''}", ""]
     L.append(f"Produced by `{ctx['command']}` (rows: `{md.with_suffix('.jsonl').name}`; rerun resumes, `--fresh` starts over).")
     L.append(f"Machine: {m.get('cpu', '?')}, {m.get('threads', '?')} CPU threads for Warp launches, Python {m.get('python', '?')}.")
-    L.append("Error is against the cached ray-traced reference on the same covered pixels; penumbra = reference in (0.01, 0.99);")
-    L.append("`>3se` = fraction of pixels further than 3 reference standard errors from it. Times: median of 3 runs after a warm-up.")
+    scenes = sorted({r["scene"] for r in rows if "scene" in r})
+    devices = sorted({r["device"] for r in rows if "device" in r})
+    res = sorted({f"{r['width']}x{r['height']}" for r in rows if "width" in r}, key=lambda t: int(t.split("x")[0]))
+    if scenes:
+        L.append(f"Rows: {len(rows)} on {', '.join(f'`{s}`' for s in scenes)}; device {', '.join(devices)}; {', '.join(res)} pixels.")
+    L.append("Error is against the cached ray-traced reference on the same covered pixels, measured by the frame graph's metric pass;")
+    L.append("penumbra = reference in (0.01, 0.99); `>3se` = fraction of pixels further than 3 reference standard errors from it.")
+    L.append("Times: median of 3 runs after a warm-up.")
     L.append("")
     return L
 
@@ -78,12 +122,10 @@ def accuracy_table(renders: list[dict]) -> list[str]:
     L.append("| scene | light | device | res | technique | params | frame ms | G-buffer ms | shadow ms | MAE | RMSE | max | MAE penumbra | >3se | reference occluders |")
     L.append("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in sorted(renders, key=lambda r: (r["scene"], r["light"], r["device"], r["width"], r["technique"], str(r["params"]))):
-        gb_ms = sum(v for k, v in r["timings_ms"].items() if k.startswith("gbuffer"))
-        shadow_ms = sum(v for k, v in r["timings_ms"].items() if k not in ("total", "upload_scene", "resolve", "shade") and not k.startswith("gbuffer"))
         p = r["case"]["params"]
         e = r["error"]
         L.append(f"| {r['scene']} | {r['light'].split('/')[-1]} | {r['device']} | {r['width']}x{r['height']} | {r['technique']} | "
-                 f"{', '.join(f'{k}={v}' for k, v in p.items())} | {r['timings_ms']['total']:.1f} | {gb_ms:.1f} | {shadow_ms:.1f} | {e['mae']:.4f} | "
+                 f"{params_text(p)} | {r['timings_ms']['total']:.1f} | {kind_ms(r, 'gbuffer'):.1f} | {shadow_ms(r):.1f} | {e['mae']:.4f} | "
                  f"{e['rmse']:.4f} | {e['max']:.3f} | {e['mae_penumbra']:.4f} | {e.get('frac_outside_3se', 0):.3f} | {r.get('ref_casters', 'all')} |")
     return L
 

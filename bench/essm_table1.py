@@ -11,8 +11,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from bench.common import report_header
-from bench.harness import measure_render
+from wsoft.bench.common import kind_ms, report_header, stage_ms
+from wsoft.bench.harness import measure_render
 
 # scene -> (light, map size, paper scene name, paper faces)
 SCENES = {
@@ -42,25 +42,22 @@ def cases(quick: bool, devices: list[str]) -> list[dict]:
     return out
 
 
-def stages(timings: dict) -> dict:
-    """Table 1's columns from a render's pass timings."""
-    gb = sum(v for k, v in timings.items() if k.startswith("gbuffer"))
-    eb = sum(v for k, v in timings.items() if k.startswith(("fit_light_view", "light_depth", "essm_basis")))
-    stg = sum(v for k, v in timings.items() if k.startswith("essm_sat"))
-    sh = sum(v for k, v in timings.items() if k.startswith("essm_shadow"))
-    return {"GB": gb, "EB": eb, "STG": stg, "Shadow": sh, "Total": timings["total"]}
+def stages(row: dict) -> dict:
+    """Table 1's columns from a render's pass kinds and ESSM's stages: GB the G-buffer; EB the light
+    view, depth map and basis; STG the SAT; Shadow the shading."""
+    return {"GB": kind_ms(row, "gbuffer"), "EB": kind_ms(row, "light_map") + stage_ms(row, "basis"), "STG": stage_ms(row, "sat"),
+            "Shadow": stage_ms(row, "shadow"), "Total": row["timings_ms"]["total"]}
 
 
 def run_case(case: dict, ctx: dict) -> dict:
     fr = measure_render(case["scene"], "essm", case["params"], device=case["device"], width=case["width"], height=case["height"], light=case["light"])
     st = fr.stats
-    c = st["counters"]
-    sat = next(v for k, v in c.items() if k.endswith(".sat"))
-    return {"scene": case["scene"], "light": st["light"], "device": st["device"], "triangles": st["scene"]["triangles"],
-            "width": case["width"], "height": case["height"], "params": st["params"], "stages_ms": stages(st["timings_ms"]),
-            "timings_ms": st["timings_ms"], "timings_ms_runs": st["timings_ms_runs"], "cpu_ms": st["cpu_ms"],
-            "sat": sat, "lookups_per_sample": next(v for k, v in c.items() if k.endswith("lookups_per_sample")),
-            "c_normalised": next(v for k, v in c.items() if k.endswith("c_normalised"))}
+    c = fr.counters()
+    row = {"scene": case["scene"], "light": st["light"], "device": st["device"], "triangles": st["scene"]["triangles"],
+           "width": case["width"], "height": case["height"], "params": st["params"], "timings_ms": st["timings_ms"],
+           "timings_by_kind_ms": st["timings_by_kind_ms"], "pass_stages": st["pass_stages"], "timings_ms_runs": st["timings_ms_runs"],
+           "cpu_ms": st["cpu_ms"], "sat": c["sat"], "lookups_per_sample": c["lookups_per_sample"], "c_normalised": c["c_normalised"]}
+    return row | {"stages_ms": stages(row)}
 
 
 def report(rows: list[dict], md: Path, ctx: dict) -> None:

@@ -10,9 +10,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from bench.common import report_header
-from bench.essm_table1 import stages
-from bench.harness import measure_render
+from wsoft.bench.common import report_header
+from wsoft.bench.essm_table1 import stages
+from wsoft.bench.harness import measure_render
 
 SIZES = [512, 1024, 2048, 4096]
 # the paper's Table 2: size -> (SAT build, SAT shadow, STG build, STG shadow, SAT passes, STG passes)
@@ -39,11 +39,11 @@ def cases(quick: bool, devices: list[str]) -> list[dict]:
 def run_case(case: dict, ctx: dict) -> dict:
     fr = measure_render(case["scene"], "essm", case["params"], device=case["device"], width=case["width"], height=case["height"], light=case["light"])
     st = fr.stats
-    c = st["counters"]
-    sat = next(v for k, v in c.items() if k.endswith(".sat"))
-    return {"scene": case["scene"], "light": st["light"], "device": st["device"], "width": case["width"], "height": case["height"],
-            "params": st["params"], "stages_ms": stages(st["timings_ms"]), "timings_ms": st["timings_ms"], "timings_ms_runs": st["timings_ms_runs"],
-            "sat": sat, "lookups_per_sample": next(v for k, v in c.items() if k.endswith("lookups_per_sample"))}
+    c = fr.counters()
+    row = {"scene": case["scene"], "light": st["light"], "device": st["device"], "width": case["width"], "height": case["height"],
+           "params": st["params"], "timings_ms": st["timings_ms"], "timings_by_kind_ms": st["timings_by_kind_ms"], "pass_stages": st["pass_stages"],
+           "timings_ms_runs": st["timings_ms_runs"], "sat": c["sat"], "lookups_per_sample": c["lookups_per_sample"]}
+    return row | {"stages_ms": stages(row)}
 
 
 def report(rows: list[dict], md: Path, ctx: dict) -> None:

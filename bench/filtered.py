@@ -11,16 +11,17 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from bench.common import accuracy_table, error_vs_time, image_list, lowest_mae, render_row, report_header
+from wsoft.bench.common import accuracy_table, counters, error_vs_time, image_list, lowest_mae, params_text, render_row, report_header
 
-# technique -> (main quality parameter, its values, fixed parameters)
-QUALITY = {
-    "pcf": ("taps", [4, 16, 64], {"radius": 2.0}),
-    "pcss": ("filter_samples", [16, 36, 100], {"blocker_samples": 16}),
-    "vsm": ("radius", [1, 2, 4], {}),
-    "esm": ("c", [40.0, 80.0, 160.0], {}),
-    "salzman": ("radius", [2, 4, 8], {}),
-}
+TECHNIQUES = ("pcf", "pcss", "vsm", "esm", "salzman")  # each swept over its main quality knob (Technique.quality[0])
+
+
+def main_knob(name: str):
+    """A technique's main quality knob (parameter, values) as the technique declares it."""
+    from wsoft.techniques import get_technique
+
+    q = get_technique(name).quality[0]
+    return q.param, list(q.values)
 DYNAMIC_SCENES = {"lightmapped_bridge"}
 FULL_VIEWS = [("box_plane", None), ("contact", None), ("penumbra_ramp", None), ("lightmapped_bridge", "Sun")]
 QUICK_VIEWS = [("box_plane", None)]
@@ -35,12 +36,13 @@ def cases(quick: bool, devices: list[str]) -> list[dict]:
     for dev in devices:
         for scene, light in views:
             base = {"kind": "render", "scene": scene, "light": light, "device": dev, "width": w, "height": h, "ref_samples": ref_samples}
-            for tech, (name, values, fixed) in QUALITY.items():
+            for tech in TECHNIQUES:
+                name, values = main_knob(tech)
                 values = values[1:2] if quick else values
                 for size in sizes:
                     for v in values:
                         image = size == sizes[len(sizes) // 2] and v == values[len(values) // 2]
-                        row = base | {"technique": tech, "params": {"shadow_map_size": size, name: v, **fixed}, "image": image}
+                        row = base | {"technique": tech, "params": {"shadow_map_size": size, name: v}, "image": image}
                         if tech == "salzman" and scene in DYNAMIC_SCENES:
                             row["ref_casters"] = "dynamic"
                         out.append(row)
@@ -55,7 +57,7 @@ def cases(quick: bool, devices: list[str]) -> list[dict]:
                 out.append(base | {"technique": "reference", "params": {"samples": n, "seed": 1}, "image": False})
         if not quick:
             out.append({"kind": "torch", "scene": "lightmapped_bridge", "light": "Sun", "device": dev, "width": 640, "height": 480})
-        from bench.failures import FAILURES
+        from wsoft.bench.failures import FAILURES
 
         for name in FAILURES:
             out.append({"kind": "failure", "name": name, "device": dev, "width": 192, "height": 192})
@@ -73,21 +75,19 @@ def run_case(case: dict, ctx: dict) -> dict:
 def failure_images(case: dict, ctx: dict) -> dict:
     """A known failure (bench.failures): the technique, the reference and their difference."""
     import wsoft
-    from bench.common import side_by_side
-    from bench.failures import FAILURES
-    from wsoft.metrics import visibility_error
+    from wsoft.bench.common import side_by_side
+    from wsoft.bench.failures import FAILURES
 
     build, tech, params, ref_params = FAILURES[case["name"]]
     scene = wsoft.load_scene(build())
     kw = dict(width=case["width"], height=case["height"], device=case["device"])
-    fr = wsoft.render(scene, tech, **kw, **params)
-    ref = wsoft.render(scene, "reference", **kw, **ref_params)
+    fs = wsoft.compare(scene, [(tech, params), ("reference", ref_params)], **kw)
+    fr, ref = fs[tech], fs["reference"]
     label = f"{tech} " + " ".join(f"{k}={v}" for k, v in params.items())
     info = {"scene": case["name"], "light": None, "technique": tech, "device": case["device"], "ref_samples": ref_params["samples"],
             "ref_casters": ref_params.get("casters", "all")}
     image = side_by_side(info, label, fr.V, ref.V, ref["A"], ctx)
-    return {"name": case["name"], "technique": tech, "params": params, "image": image,
-            "error": visibility_error(fr.V, ref.V, ref["V_stderr"], ref["A"])}
+    return {"name": case["name"], "technique": tech, "params": params, "image": image, "error": fr.stats["error"]}
 
 
 def torch_images(case: dict, ctx: dict) -> dict:
@@ -97,7 +97,7 @@ def torch_images(case: dict, ctx: dict) -> dict:
     from PIL import Image, ImageDraw
 
     import wsoft
-    from bench.harness import load
+    from wsoft.bench.harness import load
     from wsoft.io import to_srgb8
 
     scene = load(case["scene"])
@@ -124,9 +124,13 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
     failures = [r for r in rows if r["case"].get("kind") == "failure"]
     rows = [r for r in rows if r["case"].get("kind") not in ("torch", "failure")]
     L = report_header("filtered", rows, md, ctx)
-    L.append("Each technique runs at shadow-map sizes 512, 1024 and 2048 and three values of its main quality parameter")
-    L.append("(pcf: taps at radius 2 texels; pcss: filter taps with 16 blocker taps; vsm: prefilter radius; esm: exponent c);")
-    L.append("`reference` rows are the ray tracer itself at 4, 16 and 64 samples, for scale. Salzman (radius 2, 4, 8 texels)")
+    sizes = sorted({r["params"]["shadow_map_size"] for r in rows if "shadow_map_size" in r["params"]})
+    knobs = {t: main_knob(t)[0] for t in TECHNIQUES}
+    swept = {t: sorted({r["params"][knobs[t]] for r in rows if r["technique"] == t}) for t in TECHNIQUES}
+    ref_n = sorted({r["params"]["samples"] for r in rows if r["technique"] == "reference"})
+    L.append(f"Each technique runs at shadow-map sizes {', '.join(map(str, sizes))} and the values of its main quality parameter")
+    L.append("(declared by the technique, `Technique.quality`): " + "; ".join(f"{t}: {knobs[t]} {', '.join(f'{v:g}' for v in swept[t])}" for t in TECHNIQUES) + ".")
+    L.append(f"`reference` rows are the ray tracer itself at {', '.join(map(str, ref_n))} samples, for scale. Salzman")
     L.append("also runs without its far bound and at 8 bits. On `lightmapped_bridge` its map holds only the dynamic")
     L.append("casters (character, ball), so it is measured against a reference whose occluders are those casters; there")
     L.append("the far bound *removes* the character's shadow from the riverbed under the deck (which that reference counts")
@@ -136,19 +140,18 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
     best = lowest_mae(rows)
     L += ["", "## Lowest MAE per scene and technique", "", "| scene | technique | params | frame ms | MAE | MAE penumbra |", "|---|---|---|---|---|---|"]
     for (scene, tech), r in sorted(best.items()):
-        p = ", ".join(f"{k}={v}" for k, v in r["case"]["params"].items())
+        p = params_text(r["case"]["params"])
         L.append(f"| {scene} | {tech} | {p} | {r['timings_ms']['total']:.1f} | {r['error']['mae']:.4f} | {r['error']['mae_penumbra']:.4f} |")
     variant_sizes = {r["params"]["shadow_map_size"] for r in rows if r["technique"] == "salzman" and not r["params"]["far_bound"]}
     sal = [r for r in rows if r["technique"] == "salzman" and r["params"]["radius"] == 4 and r["params"]["shadow_map_size"] in variant_sizes]
     if sal:
         L += ["", "## Salzman: far bound and storage", "", "| scene | far bound | bits | frame ms | MAE | MAE penumbra | fraction blurred | receivers rejected by the grid |", "|---|---|---|---|---|---|---|---|"]
         for r in sorted(sal, key=lambda r: (r["scene"], not r["params"]["far_bound"], r["params"]["bits"])):
-            c = r["counters"]
-            lab = next(k.split("[")[1].split("]")[0] for k in c if k.startswith("salzman["))
+            c = counters(r)
             L.append(f"| {r['scene']} | {r['params']['far_bound']} | {r['params']['bits']} | {r['timings_ms']['total']:.1f} | {r['error']['mae']:.4f} | "
-                     f"{r['error']['mae_penumbra']:.4f} | {c[f'salzman[{lab}].fraction_blurred']:.3f} | {c[f'salzman[{lab}].receivers_rejected_by_grid']:.3f} |")
-    L += error_vs_time(rows, md, ctx, "filtered: pcf, pcss, vsm, esm, salzman over map size and quality; reference over samples")
-    L += image_list(rows, "technique at map 1024 and its middle quality, reference, |difference| x4")
+                     f"{r['error']['mae_penumbra']:.4f} | {c['fraction_blurred']:.3f} | {c['receivers_rejected_by_grid']:.3f} |")
+    L += error_vs_time(rows, md, ctx, f"filtered: {', '.join(TECHNIQUES)} over map size and quality; reference over samples")
+    L += image_list(rows, f"technique at map {sizes[len(sizes) // 2] if sizes else '?'} and its middle quality, reference, |difference| x4")
     for t in torch:
         L += ["", "## The torch under the bridge (Salzman's far bound)", "", f"![torch]({t['image']})"]
     if failures:

@@ -1,6 +1,7 @@
 """Sweep ``foundation``: ``hard`` and low-sample ``reference`` against the cached reference on the
-bundled scenes at two resolutions, the rasterizer against one BVH ray per texel, and reference
-shadow-ray throughput beside Embree's (embreex) on the same rays and thread count.
+bundled scenes at two resolutions, the rasterizer against one BVH ray per texel and against the
+rasterizer before the fragment factory (issue 9; from the git history of a checkout), and
+reference shadow-ray throughput beside Embree's (embreex) on the same rays and thread count.
 """
 
 from __future__ import annotations
@@ -10,8 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.common import accuracy_table, error_vs_time, image_list, render_row, report_header
-from bench.harness import load
+from wsoft.bench.common import accuracy_table, error_vs_time, image_list, render_row, report_header
+from wsoft.bench.harness import load
 
 FULL_VIEWS = [
     ("box_plane", None), ("contact", None), ("cutout", None),
@@ -19,6 +20,8 @@ FULL_VIEWS = [
     ("city", "Sun"), ("city", "Rect"),
 ]
 QUICK_VIEWS = [("box_plane", None), ("cutout", None), ("multi_light", "Disk")]
+BASELINE_REV = "da242d3"  # the last commit with the single depth rasterizer (runtime mode flags)
+BASELINE_PATH = "wsoft/raster/lightview.py"
 
 
 def cases(quick: bool, devices: list[str]) -> list[dict]:
@@ -43,13 +46,15 @@ def cases(quick: bool, devices: list[str]) -> list[dict]:
         else:
             for light in ("Sun", "Rect"):
                 out.append({"kind": "raster_vs_raycast", "scene": "city", "light": light, "size": 2048, "device": dev})
+                out.append({"kind": "raster_baseline", "scene": "city", "light": light, "size": 2048, "device": dev, "baseline": BASELINE_REV})
             out.append({"kind": "ray_throughput", "scene": "city", "light": "Sun", "width": 320, "height": 240, "samples": 16, "device": dev})
             out.append({"kind": "ray_throughput", "scene": "contact", "light": None, "width": 320, "height": 240, "samples": 16, "device": dev})
     return out
 
 
 def run_case(case: dict, ctx: dict) -> dict:
-    return {"render": render_row, "raster_vs_raycast": _raster_vs_raycast, "ray_throughput": _throughput}[case["kind"]](case, ctx)
+    return {"render": render_row, "raster_vs_raycast": _raster_vs_raycast, "ray_throughput": _throughput,
+            "raster_baseline": _raster_baseline}[case["kind"]](case, ctx)
 
 
 # -- rows --------------------------------------------------------------------------------------
@@ -105,6 +110,78 @@ def _raster_vs_raycast(case: dict, ctx: dict) -> dict:
         "coverage_mismatch": float(np.mean((a < DEPTH_CLEAR) != (b < DEPTH_CLEAR))),
         "depth_rel_err_p99": float(np.percentile(np.abs(a - b)[both] / b[both], 99)) if both.any() else 0.0,
     }
+
+
+def _baseline_module(rev: str):
+    """The rasterizer module of ``rev`` from the git history of the checkout wsoft runs from, or None."""
+    import subprocess
+    import sys
+    import types
+
+    import wsoft
+
+    root = Path(wsoft.__file__).resolve().parents[1]
+    try:
+        src = subprocess.run(["git", "show", f"{rev}:{BASELINE_PATH}"], cwd=root, capture_output=True, text=True, check=True, timeout=60).stdout
+    except (OSError, subprocess.SubprocessError):
+        return None
+    name = f"wsoft_baseline_{rev}"
+    path = Path(cache_dir_for_baseline()) / f"{name}.py"
+    path.write_text(src)  # a file, so that Warp can read the kernels' source
+    mod = types.ModuleType(name)
+    mod.__file__ = str(path)
+    sys.modules[name] = mod
+    exec(compile(src, str(path), "exec"), mod.__dict__)
+    return mod
+
+
+def cache_dir_for_baseline() -> str:
+    from wsoft.bench.harness import cache_dir
+
+    d = cache_dir().parent / "baselines"
+    d.mkdir(parents=True, exist_ok=True)
+    return str(d)
+
+
+def _raster_baseline(case: dict, ctx: dict) -> dict:
+    """The rasterizer against the one of ``case["baseline"]`` on the same view, timed alternately in
+    one process (11 rounds after a warm-up; median), with the maps compared texel by texel."""
+    import statistics
+
+    import warp as wp
+
+    from wsoft.lightspace.view import DEPTH_CLEAR, fit_light_view
+    from wsoft.raster.rasterizer import rasterize
+    from wsoft.scene.device import upload_scene
+
+    scene = load(case["scene"])
+    light = scene.find_light(case["light"]) if case["light"] else scene.lights[0]
+    row = {"scene": case["scene"], "light": light.path, "device": case["device"], "size": case["size"], "baseline": case["baseline"]}
+    old = _baseline_module(case["baseline"])
+    if old is None:
+        return row | {"skipped": f"no git history with {case['baseline']}:{BASELINE_PATH} (run from a checkout)"}
+    dev = case["device"]
+    ds, _ = scene.device_copy(dev, upload_scene)
+    lo, hi = scene.bounds
+    rec = _gbuffer_points(case["scene"], dev)
+    view = fit_light_view(light, rec, lo, hi, case["size"])
+    oview = old.fit_light_view(light, rec, lo, hi, case["size"])
+    new_fn = lambda: rasterize(ds, view, alpha_tested=scene.has_cutouts)  # noqa: E731
+    old_fn = lambda: old.rasterize(ds, oview, alpha_tested=scene.has_cutouts)  # noqa: E731
+    a, b = new_fn().depth.numpy(), old_fn().depth.numpy()
+    tn, to = [], []
+    for _ in range(11):
+        for fn, acc in ((new_fn, tn), (old_fn, to)):
+            wp.synchronize()
+            t0 = time.perf_counter()
+            fn()
+            wp.synchronize()
+            acc.append(1e3 * (time.perf_counter() - t0))
+    both = (a < DEPTH_CLEAR) & (b < DEPTH_CLEAR)
+    rel = np.abs(a - b)[both] / b[both]
+    return row | {"new_ms": statistics.median(tn), "baseline_ms": statistics.median(to), "new_over_baseline": statistics.median(tn) / statistics.median(to),
+                  "new_ms_runs": tn, "baseline_ms_runs": to, "identical_texels": float(np.mean(a == b)),
+                  "coverage_mismatch": int(((a < DEPTH_CLEAR) != (b < DEPTH_CLEAR)).sum()), "max_rel_diff": float(rel.max()) if rel.size else 0.0}
 
 
 def _throughput(case: dict, ctx: dict) -> dict:
@@ -235,11 +312,27 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
                 emb = f"{r.get('embree')} | | | | | "
             L.append(f"| {r['scene']} | {r['light'].split('/')[-1]} | {r['device']} | {r['threads']} | {r['rays']} | {r['warp_pass_mrays_s']:.2f} ({r['warp_pass_cpu_over_wall']:.2f}) | "
                      f"{r['warp_rays_mrays_s']:.2f} ({r['warp_rays_cpu_over_wall']:.2f}) | {emb} |")
+    base = [r for r in rows if r["case"]["kind"] == "raster_baseline"]
+    if base:
+        L += ["", "## Rasterizer before and after the fragment factory (issue 9; same view, alternating runs in one process)", ""]
+        L.append("`before`: the single depth rasterizer with runtime mode flags at commit " + base[0]["baseline"] + ", loaded from the git")
+        L.append("history; `after`: `make_rasterizer` specialised at code generation with the `depth_min` fragment. Median of 11")
+        L.append("alternating runs each. Texels differ only where a large triangle's depth was stepped from a band's first row before")
+        L.append("(now from its line's start, whichever band: the result no longer depends on the thread count).")
+        L.append("")
+        L.append("| scene | light | device | size | before ms | after ms | after / before | identical texels | max rel. difference |")
+        L.append("|---|---|---|---|---|---|---|---|---|")
+        for r in base:
+            if "skipped" in r:
+                L.append(f"| {r['scene']} | {r['light'].split('/')[-1]} | {r['device']} | {r['size']} | {r['skipped']} | | | | |")
+                continue
+            L.append(f"| {r['scene']} | {r['light'].split('/')[-1]} | {r['device']} | {r['size']} | {r['baseline_ms']:.1f} | {r['new_ms']:.1f} | "
+                     f"{r['new_over_baseline']:.3f} | {r['identical_texels']:.5f} | {r['max_rel_diff']:.1e} |")
     # CPU utilisation of the heavy passes inside renders
     util = []
     for r in renders:
         for k, ms in r["timings_ms"].items():
-            if ms > 20 and (k.startswith("light_depth") or k.startswith("reference")) and r["device"] == "cpu":
+            if ms > 20 and r.get("pass_kinds", {}).get(k) in ("light_map", "reference") and r["device"] == "cpu":
                 util.append((r["scene"], r["width"], k, ms, r["cpu_ms"][k] / ms))
     if util:
         L += ["", "## CPU time / wall time of heavy passes in the renders above (passes over 20 ms)", ""]
@@ -247,6 +340,10 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
         L.append("|---|---|---|---|---|")
         for s, w, k, ms, u in sorted(util):
             L.append(f"| {s} | {w} | {k} | {ms:.1f} | {u:.2f} |")
-    L += error_vs_time(renders, md, ctx, "foundation: hard (map 1024, 2048) and reference (4, 16, 64 samples) vs a 256-sample reference")
+    sizes = sorted({r["params"]["shadow_map_size"] for r in renders if r["technique"] == "hard"})
+    samples = sorted({r["params"]["samples"] for r in renders if r["technique"] == "reference"})
+    refs = sorted({r["ref_samples"] for r in renders})
+    L += error_vs_time(renders, md, ctx, f"foundation: hard (map {', '.join(map(str, sizes))}) and reference ({', '.join(map(str, samples))} samples) "
+                                         f"vs a {'/'.join(map(str, refs))}-sample reference")
     L += image_list(renders, "hard, reference, |difference| x4")
     md.write_text("\n".join(L) + "\n")

@@ -1,9 +1,13 @@
 """Harness core: sweeps of scenes x techniques x parameters x devices.
 
-Each finished row is appended to ``reports/<sweep>.jsonl`` at once (a rerun skips rows
+Each finished row is appended to ``<out-dir>/<sweep>.jsonl`` at once (a rerun skips rows
 already there, so an interrupted sweep resumes); a progress bar shows the sweep; the sweep
-ends by writing ``reports/<sweep>.md``. ``--quick`` is the CI-sized version and writes
-``<sweep>-quick.*`` so it never mixes with the full results.
+ends by writing ``<out-dir>/<sweep>.md``. ``--quick`` is the CI-sized version and writes
+``<sweep>-quick.*`` so it never mixes with the full results (``.gitignore`` covers those).
+``--out-dir`` defaults to ``./reports``.
+
+Scenes are looked up by name in the bundled stages (``wsoft.usd_scenes``, installed with the
+package) or in ``--scenes DIR`` / ``$WSOFT_SCENES``.
 
 References are cached on disk (``$WSOFT_CACHE_DIR``, default ``~/.cache/wsoft``) by scene
 file (path, size, modification time), time code, camera, light, resolution, sample count
@@ -24,20 +28,44 @@ from pathlib import Path
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parents[1]
-SCENES = REPO / "usd_scenes"
-SWEEPS = {"foundation": "bench.foundation", "filtered": "bench.filtered", "essm": "bench.essm", "essm-table1": "bench.essm_table1", "essm-table2": "bench.essm_table2",
-          "ssm": "bench.ssm", "ssm-table1": "bench.ssm_table1", "ssm-table2": "bench.ssm_table2"}
-REFERENCE_VERSION = 1  # bump when the reference's sampling changes
+SWEEPS = {"foundation": "wsoft.bench.foundation", "filtered": "wsoft.bench.filtered", "essm": "wsoft.bench.essm",
+          "essm-table1": "wsoft.bench.essm_table1", "essm-table2": "wsoft.bench.essm_table2", "ssm": "wsoft.bench.ssm",
+          "ssm-table1": "wsoft.bench.ssm_table1", "ssm-table2": "wsoft.bench.ssm_table2", "pareto": "wsoft.bench.pareto"}
+REFERENCE_VERSION = 2  # bump when the reference's sampling changes (2: rows render one named light)
+_SCENE_DIR: Path | None = None
+
+
+def scenes_dir() -> Path:
+    """Where scenes are looked up: ``--scenes`` / ``$WSOFT_SCENES``, else the bundled stages."""
+    if _SCENE_DIR is not None:
+        return _SCENE_DIR
+    env = os.environ.get("WSOFT_SCENES")
+    if env:
+        return Path(env)
+    from wsoft import usd_scenes
+
+    return usd_scenes.folder()
+
+
+def set_scenes_dir(path: str | None) -> None:
+    global _SCENE_DIR
+    _SCENE_DIR = Path(path) if path else None
 
 
 def scene_file(name: str) -> str:
+    """The file of scene ``name`` (a bundled name such as ``box_plane``, or a path)."""
+    from wsoft.errors import ParameterError
+
     p = Path(name)
-    if not p.suffix:
-        for ext in (".usda", ".usdc", ".usdz", ".usd"):
-            if (SCENES / (name + ext)).exists():
-                return str(SCENES / (name + ext))
-    return str(p if p.is_absolute() else SCENES / p)
+    if p.suffix and p.is_file():
+        return str(p)
+    d = scenes_dir()
+    if not d.is_dir():
+        raise ParameterError(f"scene folder {d} does not exist (give the bundled stages' folder with --scenes DIR)")
+    for cand in [d / name] + [d / (name + ext) for ext in (".usda", ".usdc", ".usdz", ".usd")]:
+        if cand.is_file():
+            return str(cand)
+    raise ParameterError(f"scene {name!r} not found in {d} (give its folder with --scenes DIR)")
 
 
 def cache_dir() -> Path:
@@ -58,41 +86,83 @@ def load(name: str):
     return _SCENES[f]
 
 
+def first_light(name: str, light: str | None) -> str:
+    """The light a row renders: ``light``, else the scene's first shadow-casting light (its path)."""
+    return light or load(name).lights[0].path
+
+
 def reference(name: str, *, width: int, height: int, light: str | None, samples: int, seed: int = 0, camera: str | None = None,
               device: str | None = None, casters: str = "all") -> dict:
-    """The cached reference (V, V_stderr, A and the ms it took) for a view of a scene.
+    """The cached reference (V, V_stderr, A and the ms it took) for a view of one light of a scene
+    (``light``: a path or name; None: the first shadow-casting light).
 
     ``casters = "dynamic"``: only the dynamic casters occlude (the ground truth of Salzman's mask)."""
     import wsoft
 
     f = scene_file(name)
     st = os.stat(f)
+    light = first_light(name, light)
     ident = json.dumps([os.path.abspath(f), st.st_size, st.st_mtime_ns, camera, light, width, height, samples, seed, REFERENCE_VERSION]
                        + ([casters] if casters != "all" else []))
     path = cache_dir() / (hashlib.sha256(ident.encode()).hexdigest()[:24] + ".npz")
     if path.exists():
         z = np.load(path)
-        return {k: z[k] for k in z.files} | {"cached": True}
+        return {k: z[k] for k in z.files} | {"cached": True, "samples": samples}
     fr = wsoft.render(load(name), "reference", width=width, height=height, camera=camera, light=light, device=device, samples=samples, seed=seed, casters=casters)
     out = {"V": fr.V, "V_stderr": fr["V_stderr"], "A": fr["A"], "ms": np.float64(fr.stats["timings_ms"]["total"])}
     tmp = path.with_suffix(".tmp.npz")
     np.savez_compressed(tmp, **out)
     os.replace(tmp, path)
-    return out | {"cached": False}
+    return out | {"cached": False, "samples": samples}
 
 
-def measure_render(name: str, technique: str, params: dict, *, device: str, width: int, height: int, light: str | None, repeats: int = 3):
-    """Render once to warm up (kernel compiles), then ``repeats`` times; the median run's frame and stats."""
+def ground_truth(name: str, ref: dict, light: str | None):
+    """A cached reference as the metric pass's :class:`~wsoft.metrics.GroundTruth` for ``light``."""
+    from wsoft.metrics import GroundTruth
+
+    scene = load(name)
+    path = first_light(name, light)
+    L = scene.find_light(path)
+    names = [l.name for l in scene.lights]
+    label = L.name if names.count(L.name) == 1 else L.path
+    return GroundTruth({label: {"V": ref["V"], "V_stderr": ref["V_stderr"], "A": ref["A"]}}, int(ref["samples"]))
+
+
+def measure(name: str, techniques: list, *, device: str, width: int, height: int, light: str | None, truth=None, repeats: int = 3,
+            pixel_samples: int = 1):
+    """Render ``techniques`` (a list as :func:`wsoft.render` takes) in one graph, with their error
+    against ``truth`` (a GroundTruth) when given: once to warm up (kernel compiles), then
+    ``repeats`` times. Returns the FrameSet whose frames carry each technique's median run (its
+    ``timings_ms_runs`` lists every run's total)."""
     import wsoft
 
     scene = load(name)
-    kw = dict(width=width, height=height, light=light, device=device, **params)
-    wsoft.render(scene, technique, **kw)
-    runs = [wsoft.render(scene, technique, **kw) for _ in range(repeats)]
-    totals = [r.stats["timings_ms"]["total"] for r in runs]
-    med = runs[totals.index(statistics.median_low(totals))]
-    med.stats["timings_ms_runs"] = totals
-    return med
+    kw = dict(width=width, height=height, light=first_light(name, light), device=device, pixel_samples=pixel_samples)
+
+    def once():
+        if truth is None:
+            return wsoft.render(scene, list(techniques), **kw)
+        return wsoft.compare(scene, list(techniques), ground_truth=truth, **kw)
+
+    once()
+    runs = [once() for _ in range(repeats)]
+    out = runs[0]
+    for label in out:
+        totals = [r[label].stats["timings_ms"]["total"] for r in runs]
+        med = runs[totals.index(statistics.median_low(totals))][label]
+        med.stats["timings_ms_runs"] = totals
+        out.frames[label] = med
+    return out
+
+
+def measure_render(name: str, technique: str, params: dict, *, device: str, width: int, height: int, light: str | None, repeats: int = 3,
+                   truth=None):
+    """One technique as :func:`measure` (``params`` may hold ``pixel_samples``): its median frame."""
+    params = dict(params)
+    spp = int(params.pop("pixel_samples", 1))
+    fs = measure(name, [(technique, params)], device=device, width=width, height=height, light=light, truth=truth, repeats=repeats,
+                 pixel_samples=spp)
+    return next(iter(fs.values()))
 
 
 def read_rows(path: Path) -> list[dict]:
@@ -144,7 +214,8 @@ def machine() -> dict:
     return {"python": platform.python_version(), "cpu": platform.processor() or platform.machine(), "threads": cpu_threads(), "cores": os.cpu_count()}
 
 
-def run_sweep(name: str, *, quick: bool = False, device: list[str] | None = None, out_dir: str = "reports", fresh: bool = False) -> int:
+def run_sweep(name: str, *, quick: bool = False, device: list[str] | None = None, out_dir: str = "reports", fresh: bool = False,
+              scenes: str | None = None) -> int:
     from tqdm import tqdm
 
     from wsoft.errors import ParameterError, WsoftError
@@ -153,6 +224,10 @@ def run_sweep(name: str, *, quick: bool = False, device: list[str] | None = None
     if name not in SWEEPS:
         raise ParameterError(f"unknown sweep {name!r}; sweeps: {', '.join(sorted(SWEEPS))}")
     mod = importlib.import_module(SWEEPS[name])
+    set_scenes_dir(scenes)
+    scenes_dir()  # a bad --scenes is an error before anything runs
+    if scenes and not Path(scenes).is_dir():
+        raise ParameterError(f"--scenes {scenes}: no such folder")
     devices = [resolve_device(d) for d in (device or [None])]
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -178,7 +253,8 @@ def run_sweep(name: str, *, quick: bool = False, device: list[str] | None = None
         row.update({"key": case_key(case), "sweep": name, "case": case, "finished": time.strftime("%Y-%m-%dT%H:%M:%S"), "row_seconds": round(time.time() - t0, 2), "machine": machine()})
         append_row(jsonl, row)
     rows = [r for r in read_rows(jsonl) if r["key"] in {case_key(c) for c in cases}]
-    cmd = f"wsoft bench {name}" + (" --quick" if quick else "") + "".join(f" --device {d}" for d in (device or []))
+    cmd = f"wsoft bench {name}" + (" --quick" if quick else "") + "".join(f" --device {d}" for d in (device or [])) + \
+        (f" --out-dir {out_dir}" if str(out_dir) != "reports" else "") + (f" --scenes {scenes}" if scenes else "")
     md = out / f"{stem}.md"
     mod.report(rows, md, ctx | {"command": cmd})
     print(f"wrote {md} ({len(rows)} rows){f'; {failed} rows failed' if failed else ''}", file=sys.stderr)

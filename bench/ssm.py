@@ -14,12 +14,14 @@ their errors against the reference:
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from bench.common import render_row, report_header
-from bench.harness import load, reference
+from wsoft.bench.common import counters as row_counters
+from wsoft.bench.common import render_row, report_header, stage_ms
+from wsoft.bench.harness import load, reference
 
 SCENES = ["fig1_plant", "fig8_tree", "palm_dino"]
 BASE = {"shadow_map_size": 1024, "structure": "ysm"}
@@ -68,20 +70,32 @@ def run_case(case: dict, ctx: dict) -> dict:
 # -- helpers -----------------------------------------------------------------------------------
 
 
-def run_ssm(scene_name: str, params: dict, w: int, h: int, device: str, pixel_samples: int = 1):
-    """Render ``ssm`` and keep its search pass (levels, status): (channels, search, counters)."""
-    import warp as wp
+@dataclass
+class SearchView:
+    """What the figures read of ``ssm``'s search: status and raw LOQ per receiver, and the smoothed LOQ."""
 
-    from wsoft.render import build_graph
+    status: object
+    loq_raw: object
+    loq: object
+
+
+def run_ssm(scene_name: str, params: dict, w: int, h: int, device: str, pixel_samples: int = 1):
+    """Render ``ssm`` and keep its search and LOQ resources: (channels, search, counters), the
+    counters with ``_maps`` (its pruning structure and microrects)."""
+    from wsoft.render import build_graph, execute
     from wsoft.techniques import create
 
     scene = load(scene_name)
-    ctx, req, lights = build_graph(scene, create("ssm", params), width=w, height=h, device=device, pixel_samples=pixel_samples)
-    key = f"ssm_search[{ctx.label(lights[0])}]"
-    with wp.ScopedDevice(device):
-        res, _ = ctx.graph.execute(req + [key], device)
-    ctx.counters["_maps"] = res[f"ssm_maps[{ctx.label(lights[0])}]"]
-    return res["channels"], res[key], ctx.counters
+    built = build_graph(scene, create("ssm", params), width=w, height=h, device=device, pixel_samples=pixel_samples)
+    light = built.lights["ssm"][0]
+    tctx = built.ctx.technique(built.techniques[0], "ssm")
+    skey, lkey = tctx.key("ssm_search", light), tctx.key("ssm_loq", light)
+    mkey = next(k for k in built.ctx.graph.producers if k.kind == "ssm_maps")
+    res, _, _ = execute(built, device, extra=[skey, lkey, mkey])
+    s = res[skey]
+    counters = dict(built.ctx.counters["techniques"]["ssm"][built.ctx.label(light)])
+    counters["_maps"] = res[mkey]
+    return res[built.channels["ssm"]], SearchView(s.status, s.loq_raw, res[lkey].loq), counters
 
 
 def coverage(maps, levels: range) -> dict:
@@ -174,7 +188,7 @@ def _ref(case: dict) -> dict:
 
 
 def _ssm_counter(counters: dict, name: str):
-    return next(v for k, v in counters.items() if k.startswith("ssm[") and k.endswith("." + name))
+    return counters[name]
 
 
 # -- figures -----------------------------------------------------------------------------------
@@ -275,7 +289,7 @@ def fig9(case: dict, ctx: dict) -> dict:
     import sys
 
     import wsoft
-    from bench.ssm_msaa import measure
+    from wsoft.bench.ssm_msaa import measure
 
     w, h, dev = case["width"], case["height"], case["device"]
     scene = load(case["scene"])
@@ -285,7 +299,7 @@ def fig9(case: dict, ctx: dict) -> dict:
     edge = (cov > 0) & (cov < 1)  # pixels the geometry covers partly: where the samples differ
     grazing = _multi_depth_pixels(case["scene"], w, h, dev)
     runs = measure(case["scene"], w, h, dev)
-    child = subprocess.run([sys.executable, "-m", "bench.ssm_msaa", case["scene"], str(w), str(h), dev], capture_output=True, text=True,
+    child = subprocess.run([sys.executable, "-m", "wsoft.bench.ssm_msaa", case["scene"], str(w), str(h), dev], capture_output=True, text=True,
                            env=os.environ | {"OPENBLAS_NUM_THREADS": "1"}, cwd=str(Path(__file__).resolve().parents[1]), check=True)
     blas1 = json.loads(child.stdout.strip().splitlines()[-1])
     out, panels = {}, [("reference, 4 samples a pixel", gray(ref4.V, cov))]
@@ -306,9 +320,9 @@ def _multi_depth_pixels(scene_name: str, w: int, h: int, dev: str) -> np.ndarray
     from wsoft.render import build_graph
     from wsoft.techniques import create
 
-    ctx, _, _ = build_graph(load(scene_name), create("hard", {}), width=w, height=h, device=dev, pixel_samples=4)
+    built = build_graph(load(scene_name), create("hard", {}), width=w, height=h, device=dev, pixel_samples=4)
     with wp.ScopedDevice(dev):
-        gb = ctx.graph.execute(["gbuffer"], dev)[0]["gbuffer"]
+        gb = built.ctx.graph.execute([built.ctx.gbuffer()], dev)[0][built.ctx.gbuffer()]
     d, hit = gb.host("dist"), gb.host("prim") >= 0
     first = np.argmax(hit, axis=0)
     d0 = np.take_along_axis(d, first[None], 0)[0]
@@ -367,15 +381,22 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
     renders = [r for r in rows if r["case"]["kind"] == "render"]
     figs = {(r["case"]["kind"], r["case"]["scene"]): r for r in rows if r["case"]["kind"] != "render"}
     L = report_header("ssm", rows, md, ctx)
-    L.append("`ssm` (1024² map, YSM 1024²/256² unless stated) on the paper-analog scenes at 320×240 over b_mo ∈ {4, 8, 16, ∞},")
-    L.append("micro-occluders {micropatch, microquad, microrect} × visibility {area, bitmask (jittered 16×16)}, and map sizes")
-    L.append("512² / 2048² for micropatch/bitmask at b_mo = 8. Figures at 480×360 (Fig. 9: 320×240 with 4 samples a pixel).")
+    budgets = sorted({r["case"]["params"]["budget"] for r in renders})
+    res = sorted({f"{r['width']}×{r['height']}" for r in renders})
+    other = sorted({r["case"]["params"]["shadow_map_size"] for r in renders} - {1024})
+    fres = sorted({f"{r['case']['width']}×{r['case']['height']}" for r in rows if r["case"]["kind"] in ("fig1", "fig8", "fig12")})
+    f9 = [r for r in rows if r["case"]["kind"] == "fig9"]
+    L.append(f"`ssm` (1024² map, YSM 1024²/256² unless stated) on {', '.join(sorted({r['scene'] for r in renders}))} at {', '.join(res)} over "
+             f"b_mo ∈ {{{', '.join('∞' if not math.isfinite(b) else f'{b:g}' for b in budgets)}}},")
+    L.append("micro-occluders {micropatch, microquad, microrect} × visibility {area, bitmask (jittered 16×16)}"
+             + (f", and map sizes {' / '.join(f'{n}²' for n in other)} for micropatch/bitmask at b_mo = 8." if other else "."))
+    L.append(f"Figures at {', '.join(fres)}" + (f" (Fig. 9: {f9[0]['case']['width']}×{f9[0]['case']['height']} with 4 samples a pixel)." if f9 else "."))
     L.append("")
     L.append("| scene | occluder | visibility | b_mo | map | frame ms | ssm ms | backprojecting | mean occluders | MAE | MAE penumbra |")
     L.append("|---|---|---|---|---|---|---|---|---|---|---|")
     for r in sorted(renders, key=lambda r: (r["scene"], r["case"]["params"]["occluder"], r["case"]["params"]["visibility"], r["case"]["params"]["shadow_map_size"], r["case"]["params"]["budget"])):
-        p, c = r["case"]["params"], r["counters"]
-        ssm_ms = sum(v for k, v in r["timings_ms"].items() if k.startswith("ssm"))
+        p, c = r["case"]["params"], row_counters(r)
+        ssm_ms = stage_ms(r, "structure", "search", "smooth", "backprojection")
         L.append(f"| {r['scene']} | {p['occluder']} | {p['visibility']} | {p['budget']:g} | {p['shadow_map_size']} | {r['timings_ms']['total']:.1f} | {ssm_ms:.1f} | "
                  f"{100 * _ssm_counter(c, 'backprojecting_fraction'):.1f}% | {_ssm_counter(c, 'occluders_mean'):.0f} | {r['error']['mae']:.4f} | {r['error']['mae_penumbra']:.4f} |")
     if renders:

@@ -1,6 +1,6 @@
 """Times of ``ssm`` at 1 and 4 samples a pixel (Fig. 9's setups), for ``bench.ssm``.
 
-Run as ``python -m bench.ssm_msaa SCENE WIDTH HEIGHT DEVICE``: prints one JSON line. ``bench.ssm``
+Run as ``python -m wsoft.bench.ssm_msaa SCENE WIDTH HEIGHT DEVICE``: prints one JSON line. ``bench.ssm``
 runs it in a child process with ``OPENBLAS_NUM_THREADS=1`` beside its in-process measurement:
 NumPy's OpenBLAS threads keep spinning for a while after a large matrix product, and on a 2-core
 machine they take the cores from the Warp launches that follow. The light view's fit over 4x the
@@ -20,14 +20,15 @@ SETUPS = [("1 sample a pixel", {}, 1), ("4 samples, one visibility, no interpola
 
 def measure(scene: str, width: int, height: int, device: str) -> dict:
     """Per setup: the median frame's total ms, technique ms (passes named ssm*) and G-buffer ms, and the frame."""
-    from bench.harness import measure_render
+    from wsoft.bench.harness import measure_render
 
     out = {}
     for label, p, spp in SETUPS:
         fr = measure_render(scene, "ssm", BASE | p | {"pixel_samples": spp}, device=device, width=width, height=height, light=None)
         t = fr.stats["timings_ms"]
-        out[label] = {"frame_ms": t["total"], "ssm_ms": sum(v for k, v in t.items() if k.startswith("ssm")),
-                      "gbuffer_ms": sum(v for k, v in t.items() if k.startswith("gbuffer")), "timings_ms_runs": fr.stats["timings_ms_runs"], "frame": fr}
+        kinds = fr.stats["timings_by_kind_ms"]
+        out[label] = {"frame_ms": t["total"], "ssm_ms": kinds.get("technique", 0.0), "gbuffer_ms": kinds.get("gbuffer", 0.0),
+                      "timings_ms_runs": fr.stats["timings_ms_runs"], "frame": fr}
     return out
 
 

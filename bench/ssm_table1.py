@@ -12,7 +12,7 @@ import statistics
 import time
 from pathlib import Path
 
-from bench.harness import load
+from wsoft.bench.harness import load
 
 # Table 1 of the paper: (structure, size) -> (construction ms, memory MB)
 PAPER = {
@@ -40,9 +40,9 @@ def depth_map(scene_name: str, size: int, device: str):
 
     scene = load(scene_name)
     tech = create("hard", {"shadow_map_size": size})
-    ctx, _, lights = build_graph(scene, tech, width=320, height=240, device=device)
-    key = ctx.light_depth(lights[0], size=size, soft=True)
-    res, _ = ctx.graph.execute([key], device)
+    built = build_graph(scene, tech, width=320, height=240, device=device)
+    key = built.ctx.light_depth(built.lights["hard"][0], size=size, soft=True)
+    res, _ = built.ctx.graph.execute([key], device)
     return res[key].depth
 
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from bench.common import render_row, report_header
+from wsoft.bench.common import counters, render_row, report_header, stage_ms
 
 # Table 2 of the paper: (their figure, b_mo) -> (fps, % pixels backprojecting, mean, stdev of micro-occluders)
 PAPER = [
@@ -57,13 +57,11 @@ def run_case(case: dict, ctx: dict) -> dict:
 
 
 def _ssm(r: dict, name: str):
-    c = r["counters"]
-    key = next(k for k in c if k.startswith("ssm[") and k.endswith("." + name))
-    return c[key]
+    return counters(r)[name]
 
 
 def shadow_ms(r: dict) -> float:
-    return sum(v for k, v in r["timings_ms"].items() if k.startswith("ssm"))
+    return stage_ms(r, "structure", "search", "smooth", "backprojection")
 
 
 def report(rows: list[dict], md: Path, ctx: dict) -> None:

@@ -3,14 +3,14 @@
 from __future__ import annotations
 
 import os
-import sys
 
 import numpy as np
 import pytest
 
+from wsoft.bench.stages import add_box, add_camera, add_quad, add_rect_light, make_stage  # noqa: F401  (the tests' stage builders)
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SCENES = os.path.join(ROOT, "usd_scenes")
-sys.path.insert(0, ROOT)
 
 
 def _devices():
@@ -35,61 +35,6 @@ def device(request):
 
 def scene_path(name: str) -> str:
     return os.path.join(SCENES, name)
-
-
-def make_stage(up: str = "Z"):
-    from pxr import Usd, UsdGeom
-
-    stage = Usd.Stage.CreateInMemory()
-    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z if up == "Z" else UsdGeom.Tokens.y)
-    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
-    UsdGeom.Xform.Define(stage, "/World")
-    return stage
-
-
-def add_quad(stage, path: str, center, half: float, *, normal_axis: str = "z", double_sided: bool = True, st: bool = False):
-    """A square in the plane perpendicular to ``normal_axis`` (z: XY plane), counter-clockwise from +axis."""
-    from pxr import UsdGeom, Sdf
-
-    cx, cy, cz = center
-    if normal_axis == "z":
-        pts = [(cx - half, cy - half, cz), (cx + half, cy - half, cz), (cx + half, cy + half, cz), (cx - half, cy + half, cz)]
-    else:  # y
-        pts = [(cx - half, cy, cz - half), (cx - half, cy, cz + half), (cx + half, cy, cz + half), (cx + half, cy, cz - half)]
-    mesh = UsdGeom.Mesh.Define(stage, path)
-    mesh.CreatePointsAttr(pts)
-    mesh.CreateFaceVertexCountsAttr([4])
-    mesh.CreateFaceVertexIndicesAttr([0, 1, 2, 3])
-    mesh.CreateDoubleSidedAttr(double_sided)
-    if st:
-        pv = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex)
-        pv.Set([(0, 0), (1, 0), (1, 1), (0, 1)])
-    return mesh
-
-
-def add_rect_light(stage, path: str, pos, w: float, h: float, shadow=None):
-    from pxr import Gf, UsdGeom, UsdLux
-
-    light = UsdLux.RectLight.Define(stage, path)
-    light.CreateWidthAttr(w)
-    light.CreateHeightAttr(h)
-    UsdGeom.XformCommonAPI(light).SetTranslate(Gf.Vec3d(*pos))
-    if shadow is not None:
-        UsdLux.ShadowAPI.Apply(light.GetPrim()).CreateShadowEnableAttr(shadow)
-    return light
-
-
-def add_camera(stage, path: str, eye, target, up=(0, 0, 1), focal=18.0):
-    from pxr import Gf, UsdGeom
-
-    cam = UsdGeom.Camera.Define(stage, path)
-    m = Gf.Matrix4d().SetLookAt(Gf.Vec3d(*eye), Gf.Vec3d(*target), Gf.Vec3d(*up)).GetInverse()
-    cam.AddTransformOp().Set(m)
-    cam.CreateFocalLengthAttr(focal)
-    cam.CreateHorizontalApertureAttr(20.955)
-    cam.CreateVerticalApertureAttr(20.955)
-    cam.CreateClippingRangeAttr(Gf.Vec2f(0.01, 1000))
-    return cam
 
 
 def parallel_rect_exact(px, py, light_z, occ_z, occ_half, light_half):

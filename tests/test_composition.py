@@ -98,7 +98,7 @@ def test_pixel_samples_average_visibility(device):
     scene = wsoft.load_scene(scene_path("box_plane.usda"))
     one = wsoft.render(scene, "reference", width=64, height=48, device=device, samples=64)
     four = wsoft.render(scene, "reference", width=64, height=48, device=device, samples=64, pixel_samples=4)
-    assert four.stats["counters"]["gbuffer_samples"] == 4 * 64 * 48
+    assert four.stats["counters"]["frame"]["gbuffer_samples"] == 4 * 64 * 48
     partial = (four["A"] > 0) & (four["A"] < 1)
     assert partial.sum() > 0  # silhouettes are partly covered
     assert set(np.unique(four["A"])) <= {0.0, 0.25, 0.5, 0.75, 1.0}

@@ -7,7 +7,7 @@ import pytest
 from conftest import box_plane_ground_error, scene_path
 
 import wsoft
-from bench.essm_cases import essm_contact_box, essm_nonplanar
+from wsoft.bench.essm_cases import essm_contact_box, essm_nonplanar
 from wsoft.errors import ParameterError
 from wsoft.render import build_graph
 from wsoft.techniques import create
@@ -44,19 +44,20 @@ def test_no_inf_or_nan_at_optimal_c_4096_contact():
     scene = wsoft.load_scene(scene_path("contact.usda"))
     for storage in ("tiles", "uint32", "float32"):
         tech = create("essm", {"shadow_map_size": 4096, "sat": storage, "build": "scan"})
-        ctx, requested, _ = build_graph(scene, tech, width=48, height=36, device="cpu")
-        res, _ = ctx.graph.execute(requested, "cpu")
-        basis = next(v for k, v in res.items() if k.startswith("essm_basis"))
-        sat = next(v for k, v in res.items() if k.startswith("essm_sat"))
+        built = build_graph(scene, tech, width=48, height=36, device="cpu")
+        res, _ = built.ctx.graph.execute(built.requested, "cpu", keep=["essm_basis[Light]@4096" + ("" if storage == "tiles" else f"{{sat={storage}}}"),
+                                                                      "essm_sat[Light]@4096" + (f"{{build=scan}}" if storage == "tiles" else f"{{sat={storage},build=scan}}")])
+        basis = next(v for k, v in res.items() if k.kind == "essm_basis")
+        sat = next(v for k, v in res.items() if k.kind == "essm_sat")
         assert basis.c == pytest.approx(optimal_exponent(storage, 20, 4096))
         assert np.isfinite(basis.basis.numpy()).all()
         data = sat.data.numpy()
         assert np.isfinite(data.astype(np.float64)).all()
         if storage == "float32":
             assert data.max() < np.finfo(np.float32).max
-        v = res["channels"]["V"]
+        v = res["channels[essm]"]["V"]
         assert np.isfinite(v).all() and v.min() >= 0.0 and v.max() <= 1.0
-        assert ctx.counters[next(k for k in ctx.counters if k.endswith(".c_normalised"))] == basis.c
+        assert built.ctx.counters["techniques"]["essm"]["Light"]["c_normalised"] == basis.c
 
 
 def test_optimal_exponent():
@@ -96,7 +97,7 @@ def test_nonplanar_kernel_micro_subdivision(device):
     d_off = (off.V - ref.V)[plate]
     assert d_on.max() < 0.1
     assert d_off.max() > 0.4 and (d_off > 0.1).mean() > 0.1
-    assert on.stats["counters"][next(k for k in on.stats["counters"] if k.endswith("pcf_fallbacks"))] > 0
+    assert on.counters()["pcf_fallbacks"] > 0
 
 
 def test_sat_tile_grid_stats_and_passes():
@@ -104,16 +105,17 @@ def test_sat_tile_grid_stats_and_passes():
     comes from the min/max pyramid or the scene bounds."""
     scene = wsoft.load_scene(scene_path("box_plane.usda"))
     f = wsoft.render(scene, "essm", width=64, height=48, shadow_map_size=512)
-    c = f.stats["counters"]
-    sat = c[next(k for k in c if k.endswith(".sat"))]
+    c = f.counters()
+    sat = c["sat"]
     assert sat["storage"] == "tiles" and sat["tile"] * sat["tiles_per_side"] == 512
     assert sat["passes"] == 2 * math.ceil(math.log(sat["tile"], 8) - 1e-9)
     assert any(t["passes"] for t in sat["levels_tested"])
-    zr = c[next(k for k in c if k.endswith(".z_range"))]
+    zr = c["z_range"]
     fb = wsoft.render(scene, "essm", width=64, height=48, shadow_map_size=512, depth_range="bounds")
-    zb = fb.stats["counters"][next(k for k in c if k.endswith(".z_range"))]
+    zb = fb.counters()["z_range"]
     assert zb[0] <= zr[0] + 1e-5 and zb[1] >= zr[1] - 1e-5
     assert any(p.startswith("essm_sat") for p in f.stats["passes"])
+    assert {f.stats["pass_stages"][p] for p in f.stats["passes"] if p.startswith("essm")} == {"basis", "sat", "shadow"}
 
 
 def test_anisotropic_levels_and_c_override_run():
@@ -131,7 +133,7 @@ def test_anisotropic_levels_and_c_override_run():
         ({"build": "magic"}, "build"),
         ({"mu": 40}, "mu"),
         ({"tile": 48}, "tile"),
-        ({"c": 200.0}, "c must"),
+        ({"c": 200.0}, "c = 200 out of range"),
         ({"level": -1}, "level"),
         ({"subdivision": 0}, "subdivision"),
         ({"depth_range": "guess"}, "depth_range"),

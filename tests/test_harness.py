@@ -7,13 +7,13 @@ import json
 import numpy as np
 import pytest
 
-from bench import harness
+from wsoft.bench import harness
 
 
 @pytest.fixture
 def tiny(monkeypatch, tmp_path):
     """A two-row sweep on box_plane so the test is quick; references cached in tmp."""
-    import bench.foundation as fnd
+    import wsoft.bench.foundation as fnd
 
     monkeypatch.setenv("WSOFT_CACHE_DIR", str(tmp_path / "cache"))
     calls = []

@@ -45,7 +45,9 @@ def test_light_selection_culls_other_lights(device):
 def test_render_stats_list_passes_that_ran(device):
     scene = wsoft.load_scene(scene_path("box_plane.usda"))
     f = wsoft.render(scene, "reference", width=16, height=12, device=device, samples=4)
-    assert f.stats["passes"] == ["upload_scene", "gbuffer", "reference[Light]", "shade", "resolve"]
+    assert f.stats["passes"] == ["upload_scene", "gbuffer", "reference[Light]", "gbuffer_channels", "shade", "resolve"]
+    assert f.stats["pass_kinds"] == {"upload_scene": "scene", "gbuffer": "gbuffer", "reference[Light]": "reference",
+                                     "gbuffer_channels": "resolve", "shade": "shade", "resolve": "resolve"}
     assert set(f.stats["timings_ms"]) == set(f.stats["passes"]) | {"total"}
 
 
@@ -53,11 +55,11 @@ def test_device_copy_is_reused_until_changed(device):
     scene = wsoft.load_scene(scene_path("box_plane.usda"))
     a = wsoft.render(scene, "hard", width=16, height=12, device=device)
     b = wsoft.render(scene, "hard", width=16, height=12, device=device)
-    assert a.stats["counters"]["scene_upload_cached"] is False
-    assert b.stats["counters"]["scene_upload_cached"] is True
+    assert a.stats["counters"]["frame"]["scene_upload_cached"] is False
+    assert b.stats["counters"]["frame"]["scene_upload_cached"] is True
     assert (a.V == b.V).all()
     scene.points[:, 2] += 1.0  # lift everything: the camera now sees the scene from closer
     scene.changed()
     c = wsoft.render(scene, "hard", width=16, height=12, device=device)
-    assert c.stats["counters"]["scene_upload_cached"] is False
+    assert c.stats["counters"]["frame"]["scene_upload_cached"] is False
     assert not (c["P.Z"] == a["P.Z"]).all()

@@ -60,7 +60,7 @@ def test_far_bound_stops_the_shadow_on_the_bridge(device):
     assert np.all(bound.V[below] == 1.0)  # with it, the shadow stops on the deck
     on_deck = cov & (np.abs(ref["P.Z"] - 3.0) < 1e-3) & (ref.V == 0.0)  # the deck top, in the character's umbra
     assert on_deck.sum() > 5 and np.mean(bound.V[on_deck] < 0.5) > 0.9  # and is still there, on the deck
-    assert bound.stats["counters"]["salzman[Sun].casters"] == "dynamic"
+    assert bound.counters("Sun")["casters"] == "dynamic"
 
 
 def test_8_and_32_bits_agree_within_the_measured_bound(device):
@@ -76,9 +76,9 @@ def test_8_and_32_bits_agree_within_the_measured_bound(device):
 def test_grid_limits_the_blur_without_changing_the_result(device):
     scene, full = _bridge(device, grid=0)
     _, grid = _bridge(device, grid=32)
-    c = grid.stats["counters"]
-    assert c["salzman[Sun].fraction_blurred"] < 0.1 and c["salzman[Sun].grid_rectangles"] >= 1
-    assert c["salzman[Sun].receivers_rejected_by_grid"] > 0.5
+    c = grid.counters("Sun")
+    assert c["fraction_blurred"] < 0.1 and c["grid_rectangles"] >= 1
+    assert c["receivers_rejected_by_grid"] > 0.5
     assert np.allclose(full.V, grid.V, atol=1e-6)
 
 
@@ -88,16 +88,15 @@ def test_finite_in_range_and_casters_auto(device, file):
     f = wsoft.render(scene, "salzman", width=48, height=36, device=device)
     assert np.all(np.isfinite(f.V)) and f.V.min() >= 0 and f.V.max() <= 1
     assert f.V[f["A"] > 0].min() < 0.5
-    label = f.stats["light"].split("/")[-1]
     # auto: the dynamic casters where the scene marks any (the test scenes mark their occluders), else every prim
-    assert f.stats["counters"][f"salzman[{label}].casters"] == ("dynamic" if scene.dynamic_prims() else "all")
+    assert f.counters()["casters"] == ("dynamic" if scene.dynamic_prims() else "all")
 
 
 def test_receiver_between_two_casters_escapes(device):
     """Known failure (pinned): a receiver (a shelf) between two casters along the light's rays.
     Inside the upper caster's shadow, near its edge, the blur averages its depth with the lower
     caster's; the reconstructed depth falls behind the shelf, and the shelf escapes the shadow."""
-    from bench.failures import salzman_receiver_between_casters
+    from wsoft.bench.failures import salzman_receiver_between_casters
 
     both = wsoft.load_scene(salzman_receiver_between_casters())
     upper = wsoft.load_scene(salzman_receiver_between_casters(lower=False))
@@ -118,7 +117,7 @@ def test_exact_on_parallel_rectangles_and_transparency(device):
     from conftest import parallel_rect_exact
     from pxr import Sdf, UsdShade
 
-    from bench.failures import _stage, camera, quad, rect_light
+    from wsoft.bench.stages import add_camera, add_quad, add_rect_light, make_stage
 
     scene = wsoft.load_scene(scene_path("box_plane.usda"))
     f = wsoft.render(scene, "salzman", width=128, height=96, device=device, radius=16)
@@ -127,17 +126,17 @@ def test_exact_on_parallel_rectangles_and_transparency(device):
     err = np.abs(f.V - exact)[g]
     pen = ((exact > 0.01) & (exact < 0.99))[g]
     assert err.mean() < 0.003 and err[pen].mean() < 0.06  # measured: 0.0011 and 0.042 (a Gaussian, not the exact ramp)
-    st = _stage()
-    quad(st, "/World/G", (0, 0, 0), 4)
-    glass = quad(st, "/World/Glass", (0, 0, 1), 1, dynamic=True)
+    st = make_stage()
+    add_quad(st, "/World/G", (0, 0, 0), 4)
+    glass = add_quad(st, "/World/Glass", (0, 0, 1), 1, dynamic=True)
     mat = UsdShade.Material.Define(st, "/World/Looks/Glass")
     sh = UsdShade.Shader.Define(st, "/World/Looks/Glass/S")
     sh.CreateIdAttr("UsdPreviewSurface")
     sh.CreateInput("opacity", Sdf.ValueTypeNames.Float).Set(0.5)
     mat.CreateSurfaceOutput().ConnectToSource(sh.ConnectableAPI(), "surface")
     UsdShade.MaterialBindingAPI.Apply(glass.GetPrim()).Bind(mat)
-    rect_light(st, "/World/L", (0, 0, 3), 0.2, 0.2)
-    camera(st, "/World/Cam", (0, -4, 0.4), (0, 0, 0), focal=20)  # low: sees the ground under the glass
+    add_rect_light(st, "/World/L", (0, 0, 3), 0.2, 0.2)
+    add_camera(st, "/World/Cam", (0, -4, 0.4), (0, 0, 0), focal=20)  # low: sees the ground under the glass
     s = wsoft.load_scene(st)
     assert any("opaque for every technique but salzman" in w for w in s.warnings)
     kw = dict(width=64, height=64, device=device, radius=2)

@@ -136,7 +136,7 @@ def cmd_compare(args) -> int:
 
 
 def cmd_bench(args) -> int:
-    from bench.harness import run_sweep
+    from wsoft.bench.harness import run_sweep
 
     return run_sweep(args.sweep, quick=args.quick, device=args.device, out_dir=args.out_dir, fresh=args.fresh)
 

@@ -1,15 +1,20 @@
-"""``wsoft.render``: build a frame graph for a technique and a scene, run what is needed.
+"""``wsoft.render``: build one frame graph for one or several techniques on a scene, run what is needed.
 
-Follow a render from here: :func:`render` makes a :class:`RenderContext`, the technique adds
-its passes per shadow-casting light (asking the context for the G-buffer, depth maps or the
-scene's arrays, which register their own passes), ``shade`` (a Warp kernel,
-:mod:`wsoft.raster.shade`) lights every G-buffer sample with the visibilities, and ``resolve``
-turns per-sample results into per-pixel channels. Only passes feeding those run.
+Follow a render from here: :func:`render` makes a :class:`RenderContext`; each technique adds
+its passes per shadow-casting light it supports, through a :class:`TechniqueContext` (which
+asks the render context for the G-buffer, depth maps or the scene's arrays; those register
+their own passes once, so techniques that need the same depth map share it); ``shade`` (a
+Warp kernel, :mod:`wsoft.raster.shade`) lights every G-buffer sample with a technique's
+visibilities, and ``resolve`` turns its per-sample results into per-pixel channels. Only passes
+feeding the requested channels run; the stats say which ran, of what kind, and which several
+techniques shared.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -17,17 +22,21 @@ import numpy as np
 import warp as wp
 
 from wsoft.errors import ParameterError, SceneError
-from wsoft.graph import FrameGraph, Pass, buffer_bytes
+from wsoft.graph import FrameGraph, Key, Pass, Resources, buffer_bytes
+from wsoft.lightspace.light import light_gpu
+from wsoft.lightspace.view import fit_light_view
 from wsoft.parallel import cpu_threads, resolve_device
 from wsoft.raster.camera import camera_gpu, fit_aspect
 from wsoft.raster.gbuffer import GBuffer, render_gbuffer
-from wsoft.lightspace.light import light_gpu
-from wsoft.lightspace.view import fit_light_view
 from wsoft.raster.rasterizer import rasterize
 from wsoft.raster.shade import shade as shade_samples
 from wsoft.scene.device import upload_scene
 from wsoft.scene.types import Camera, Light, Scene
 from wsoft.scene.usd import auto_camera, load_scene
+
+SCENE = Key("scene")
+GBUFFER = Key("gbuffer")
+GBUFFER_CHANNELS = Key("gbuffer_channels")
 
 
 @dataclass
@@ -45,7 +54,7 @@ class Visibility:
 
 
 class RenderContext:
-    """What a technique builds its passes with; providers register the shared passes once."""
+    """What techniques build their passes with; providers register the shared passes once."""
 
     def __init__(self, scene: Scene, camera: Camera, width: int, height: int, device: str, pixel_samples: int = 1):
         self.scene = scene
@@ -55,58 +64,81 @@ class RenderContext:
         self.device = device
         self.pixel_samples = pixel_samples
         self.graph = FrameGraph()
-        self.counters: dict[str, Any] = {}
+        self.counters: dict[str, Any] = {"frame": {}, "passes": {}, "techniques": {}}
         names = [l.name for l in scene.lights]
         self._labels = {l.path: (l.name if names.count(l.name) == 1 else l.path) for l in scene.lights}
 
-    # -- naming ------------------------------------------------------------------
+    # -- naming ------------------------------------------------------------------------------------
     def label(self, light: Light) -> str:
         return self._labels.get(light.path, light.name)
-
-    def visibility_key(self, light: Light) -> str:
-        return f"visibility[{self.label(light)}]"
-
-    def visibility(self, vis: wp.array, stderr: wp.array | None = None) -> Visibility:
-        return Visibility(vis, stderr)
 
     def light_gpu(self, light: Light):
         return light_gpu(light, self.scene.diagonal)
 
-    def add_pass(self, name: str, inputs, outputs, run, kind: str = "technique") -> str:
-        self.graph.add(Pass(name, tuple(inputs), tuple(outputs), run, kind))
-        return outputs[0]
+    def pass_counters(self, name: str) -> dict:
+        """The counters of a pass (``stats["counters"]["passes"][name]``)."""
+        return self.counters["passes"].setdefault(name, {})
 
-    # -- providers ---------------------------------------------------------------
-    def scene_arrays(self) -> str:
+    def add(self, p: Pass) -> Key:
+        self.graph.add(p)
+        return p.outputs[0]
+
+    # -- providers -----------------------------------------------------------------------------------
+    def scene_arrays(self) -> Key:
         """Resource ``scene``: a :class:`DeviceScene` (BVH, triangles, cutouts, textures)."""
-        key = "scene"
 
         def run(res):
             ds, cached = self.scene.device_copy(self.device, upload_scene)
-            self.counters["scene_upload_cached"] = cached
-            return {key: ds}
+            self.counters["frame"]["scene_upload_cached"] = cached
+            return {SCENE: ds}
 
-        self.graph.add(Pass("upload_scene", (), (key,), run))
-        return key
+        return self.add(Pass("upload_scene", (), (SCENE,), run, kind="scene"))
 
-    def gbuffer(self) -> str:
+    def gbuffer(self) -> Key:
         """Resource ``gbuffer``: a :class:`GBuffer` (alpha-tested variant only if the scene has cutouts)."""
         sk = self.scene_arrays()
         alpha = self.scene.has_cutouts
         cam = camera_gpu(self.camera)
 
         def run(res):
-            return {"gbuffer": render_gbuffer(res[sk], cam, self.width, self.height, self.pixel_samples, alpha)}
+            return {GBUFFER: render_gbuffer(res[sk], cam, self.width, self.height, self.pixel_samples, alpha)}
 
-        self.graph.add(Pass("gbuffer_alpha" if alpha else "gbuffer", (sk,), ("gbuffer",), run))
-        return "gbuffer"
+        return self.add(Pass("gbuffer_alpha" if alpha else "gbuffer", (sk,), (GBUFFER,), run, kind="gbuffer"))
 
-    def light_view(self, light: Light, size: int, soft: bool = False) -> str:
+    def gbuffer_channels(self) -> Key:
+        """Resource ``gbuffer_channels``: per-pixel P, N, Z, A (host float32 [H, W]) and the
+        coverage masks the resolves share."""
+        gk = self.gbuffer()
+
+        def run(res):
+            gb: GBuffer = res[gk]
+            prim = gb.host("prim")
+            hit = prim >= 0
+            nhit = hit.sum(axis=0)
+            if gb.spp == 1:
+                pos, nrm, dist = gb.host("pos")[0], gb.host("nrm")[0], gb.host("dist")[0]
+            else:
+                first = np.argmax(hit, axis=0)[None]  # first covered sample per pixel
+                pos = np.take_along_axis(gb.host("pos"), first[..., None], axis=0)[0]
+                nrm = np.take_along_axis(gb.host("nrm"), first[..., None], axis=0)[0]
+                dist = np.take_along_axis(gb.host("dist"), first, axis=0)[0]
+            ch: dict[str, np.ndarray] = {}
+            for i, axis in enumerate("XYZ"):  # the G-buffer writes zeros on background samples
+                ch[f"P.{axis}"] = np.ascontiguousarray(pos[..., i], dtype=np.float32)
+                ch[f"N.{axis}"] = np.ascontiguousarray(nrm[..., i], dtype=np.float32)
+            ch["Z"] = dist.astype(np.float32)
+            ch["A"] = (nhit / gb.spp).astype(np.float32)
+            return {GBUFFER_CHANNELS: {"channels": ch, "hit": hit, "nhit": nhit, "spp": gb.spp, "shape": (gb.height, gb.width)}}
+
+        return self.add(Pass("gbuffer_channels", (gk,), (GBUFFER_CHANNELS,), run, kind="resolve"))
+
+    def light_view(self, light: Light, size: int, soft: bool = False) -> Key:
         """Resource: a :class:`LightView` of ``light`` fitted to the receivers in view.
 
         ``soft``: widened so that casters blocking any part of the whole light are mapped."""
         gk = self.gbuffer()
-        key = f"light_view[{self.label(light)}]@{size}" + ("+soft" if soft else "")
+        key = Key("light_view", self.label(light), variant=f"@{size}" + ("+soft" if soft else ""))
+        name = f"fit_{key}"
 
         def run(res):
             gb: GBuffer = res[gk]
@@ -114,29 +146,119 @@ class RenderContext:
             rec = gb.pos.numpy()[prim >= 0]
             lo, hi = self.scene.bounds
             view = fit_light_view(light, rec, lo, hi, size, casters=self.scene.points if soft else None)
-            self.counters[f"receivers_outside_light_view[{self.label(light)}]"] = view.receivers_outside
+            self.pass_counters(name)["receivers_outside"] = view.receivers_outside
             return {key: view}
 
-        self.graph.add(Pass(f"fit_{key}", (gk,), (key,), run))
-        return key
+        return self.add(Pass(name, (gk,), (key,), run, kind="light_map", light=self.label(light)))
 
-    def light_depth(self, light: Light, size: int, conservative: bool = False, soft: bool = False) -> str:
-        """Resource: a :class:`DepthMap` (alpha-tested only if the scene has cutouts)."""
+    def light_depth(self, light: Light, size: int, conservative: bool = False, soft: bool = False) -> Key:
+        """Resource: a :class:`~wsoft.raster.rasterizer.DepthMap` (alpha-tested only if the scene has cutouts)."""
         sk = self.scene_arrays()
         vk = self.light_view(light, size, soft)
         alpha = self.scene.has_cutouts
-        name = "light_depth" + ("_alpha" if alpha else "") + ("_conservative" if conservative else "")
-        key = f"{name}[{self.label(light)}]@{size}" + ("+soft" if soft else "")
+        kind = "light_depth" + ("_alpha" if alpha else "") + ("_conservative" if conservative else "")
+        key = Key(kind, self.label(light), variant=f"@{size}" + ("+soft" if soft else ""))
+        name = str(key)
 
         def run(res):
             dm = rasterize(res[sk], res[vk], alpha_tested=alpha, conservative=conservative)
             if dm.private_maps:
-                self.counters[f"{key}.cpu_private_maps"] = dm.private_maps
-                self.counters[f"{key}.large_triangles"] = dm.big_triangles
+                c = self.pass_counters(name)
+                c["cpu_private_maps"] = dm.private_maps
+                c["large_triangles"] = dm.big_triangles
             return {key: dm}
 
-        self.graph.add(Pass(key, (sk, vk), (key,), run))
-        return key
+        return self.add(Pass(name, (sk, vk), (key,), run, kind="light_map", light=self.label(light)))
+
+    def provide(self, key: Key, value: Any, *, name: str | None = None, kind: str = "reference") -> Key:
+        """A resource computed outside the graph (a cached reference image): a pass that hands it over."""
+        return self.add(Pass(name or str(key), (), (key,), lambda res: {key: value}, kind=kind))
+
+    def technique(self, tech, label: str) -> "TechniqueContext":
+        return TechniqueContext(self, tech, label)
+
+
+class TechniqueContext:
+    """A :class:`RenderContext` seen by one technique instance (``label`` tells instances apart):
+    its keys, pass names and counters carry the label; the shared providers are the render
+    context's own."""
+
+    def __init__(self, ctx: RenderContext, tech, label: str):
+        self.ctx = ctx
+        self.tech = tech
+        self.label_ = label
+
+    # the render context's state and providers
+    scene = property(lambda self: self.ctx.scene)
+    device = property(lambda self: self.ctx.device)
+    width = property(lambda self: self.ctx.width)
+    height = property(lambda self: self.ctx.height)
+    pixel_samples = property(lambda self: self.ctx.pixel_samples)
+    camera = property(lambda self: self.ctx.camera)
+    graph = property(lambda self: self.ctx.graph)
+
+    def scene_arrays(self) -> Key:
+        return self.ctx.scene_arrays()
+
+    def gbuffer(self) -> Key:
+        return self.ctx.gbuffer()
+
+    def light_view(self, light: Light, size: int, soft: bool = False) -> Key:
+        return self.ctx.light_view(light, size, soft)
+
+    def light_depth(self, light: Light, size: int, conservative: bool = False, soft: bool = False) -> Key:
+        return self.ctx.light_depth(light, size, conservative, soft)
+
+    def label(self, light: Light) -> str:
+        return self.ctx.label(light)
+
+    def light_gpu(self, light: Light):
+        return self.ctx.light_gpu(light)
+
+    @property
+    def technique_label(self) -> str:
+        return self.label_
+
+    # -- keys and names ------------------------------------------------------------------------------
+    def visibility_key(self, light: Light) -> Key:
+        return Key("visibility", self.label(light), technique=self.label_)
+
+    def key(self, kind: str, light: Light, variant: str = "") -> Key:
+        """A resource of this technique instance alone."""
+        return Key(kind, self.label(light), technique=self.label_, variant=variant)
+
+    def shared_key(self, kind: str, light: Light, *params: str) -> Key:
+        """A resource any instance of this technique may share: it depends on the light, the map
+        size and the named parameters only (non-default values appear in the variant)."""
+        p = self.tech.params
+        d = self.tech.defaults()
+        extra = ",".join(f"{n}={getattr(p, n)}" for n in params if getattr(p, n) != d[n])
+        return Key(kind, self.label(light), variant=f"@{p.shadow_map_size}" + (f"{{{extra}}}" if extra else ""))
+
+    def pass_name(self, base: str, light: Light, suffix: str = "") -> str:
+        """``base[light]suffix``, or ``base[label:light]suffix`` for a labelled instance."""
+        inner = self.label(light) if self.label_ == self.tech.name else f"{self.label_}:{self.label(light)}"
+        return f"{base}[{inner}]{suffix}"
+
+    def visibility(self, vis: wp.array, stderr: wp.array | None = None) -> Visibility:
+        return Visibility(vis, stderr)
+
+    def counters(self, light: Light) -> dict:
+        """This technique's counters for ``light`` (``stats["counters"]["techniques"][label][light]``)."""
+        t = self.ctx.counters["techniques"].setdefault(self.label_, {})
+        return t.setdefault(self.label(light), {})
+
+    def add_pass(self, name: str, inputs, outputs, run, *, kind: str | None = None, stage: str = "", light: Light | None = None) -> Key:
+        """Register a pass of this technique; ``name`` from :meth:`pass_name`, ``kind`` defaults to
+        ``reference`` for the reference and ``technique`` otherwise."""
+        if kind is None:
+            kind = "reference" if self.tech.name == "reference" else "technique"
+        shared = all(not k.technique for k in outputs)
+        return self.ctx.add(Pass(name, tuple(inputs), tuple(outputs), run, kind=kind, stage=stage,
+                                 technique="" if shared else self.label_, light=self.label(light) if light is not None else ""))
+
+
+# --------------------------------------------------------------------------- frames
 
 
 @dataclass
@@ -153,6 +275,13 @@ class Frame:
     def V(self) -> np.ndarray:
         return self.channels["V"]
 
+    def counters(self, light: str | None = None) -> dict:
+        """The technique's counters for ``light`` (a label; default: the frame's first light)."""
+        t = next(iter(self.stats["counters"]["techniques"].values()), {})
+        if light is None:
+            light = self.stats["light_labels"][0]
+        return t.get(light, {})
+
     def write_exr(self, path: str) -> None:
         from wsoft.io import write_exr
 
@@ -162,6 +291,27 @@ class Frame:
         from wsoft.io import write_png
 
         write_png(path, self.channels)
+
+
+class FrameSet(Mapping):
+    """Several techniques rendered in one graph: technique label -> :class:`Frame`, and the
+    graph's own ``stats`` (every pass that ran, which techniques shared which)."""
+
+    def __init__(self, frames: dict[str, Frame], stats: dict[str, Any]):
+        self.frames = frames
+        self.stats = stats
+
+    def __getitem__(self, label: str) -> Frame:
+        return self.frames[label]
+
+    def __iter__(self):
+        return iter(self.frames)
+
+    def __len__(self) -> int:
+        return len(self.frames)
+
+
+# --------------------------------------------------------------------------- building the graph
 
 
 def _pick_camera(scene: Scene, camera, width: int, height: int) -> Camera:
@@ -176,8 +326,71 @@ def _pick_camera(scene: Scene, camera, width: int, height: int) -> Camera:
     return fit_aspect(cam, width, height)
 
 
-def build_graph(scene: Scene, technique, *, width: int, height: int, camera=None, light=None, device: str = "cpu", pixel_samples: int = 1):
-    """Register every pass for ``technique`` on ``scene``; returns (context, requested outputs, lights)."""
+def technique_labels(techs: list) -> list[str]:
+    """A label per technique instance: its name when it is the only one of its kind, else the name
+    with the parameters that differ from the defaults, ``pcss(filter_samples=100)``."""
+    names = [t.name for t in techs]
+    labels = []
+    for t in techs:
+        if names.count(t.name) == 1:
+            labels.append(t.name)
+            continue
+        ch = t.changed_params()
+        labels.append(t.name + "(" + ",".join(f"{k}={v}" for k, v in ch.items()) + ")" if ch else t.name)
+    dup = sorted({x for x in labels if labels.count(x) > 1})
+    if dup:
+        raise ParameterError(f"the same technique with the same parameters is asked for twice: {', '.join(dup)}")
+    return labels
+
+
+def as_techniques(technique, params: dict) -> list:
+    """``technique`` (a name, a (name, params) pair, a Technique, or a list of those) as Technique instances."""
+    from wsoft.techniques import Technique, create
+
+    def one(t, p):
+        if isinstance(t, Technique):
+            if p:
+                raise ParameterError("parameters go to the technique's create(), not render()")
+            return t
+        if isinstance(t, tuple) and len(t) == 2:
+            return create(t[0], t[1])
+        if isinstance(t, str):
+            return create(t, p)
+        raise ParameterError(f"not a technique: {t!r}")
+
+    if isinstance(technique, (list, tuple)) and not (isinstance(technique, tuple) and len(technique) == 2 and isinstance(technique[1], dict)):
+        if params:
+            raise ParameterError("with several techniques give each its parameters as (name, {key: value}), not as keywords")
+        if not technique:
+            raise ParameterError("no technique to render")
+        return [one(t, {}) for t in technique]
+    return [one(technique, params)]
+
+
+@dataclass
+class Built:
+    """A frame graph built for some techniques: the context, each technique's lights, outputs
+    and the lights it was not applicable to (with the reason)."""
+
+    ctx: RenderContext
+    labels: list[str]
+    techniques: list
+    lights: dict[str, list[Light]]
+    visibility: dict[str, list[Key]]
+    channels: dict[str, Key]
+    skipped: dict[str, list[tuple[Light, str]]]
+
+    @property
+    def requested(self) -> list[Key]:
+        return [self.channels[l] for l in self.labels]
+
+
+def build_graph(scene: Scene, technique, *, width: int, height: int, camera=None, light=None, device: str = "cpu",
+                pixel_samples: int = 1, params: dict | None = None, strict: bool = True) -> Built:
+    """Register every pass for ``technique`` (one or several, see :func:`render`) on ``scene``.
+
+    A technique that does not support a light skips it; with ``strict`` a technique left with no
+    light is an error naming the reason (``wsoft plan`` builds with ``strict=False`` to list it)."""
     if not scene.lights:
         why = ""
         if scene.unshadowed_lights:
@@ -185,68 +398,173 @@ def build_graph(scene: Scene, technique, *, width: int, height: int, camera=None
         elif scene.skipped_lights:
             why = f" (not handled: {', '.join(s.path + ' ' + s.kind for s in scene.skipped_lights)})"
         raise SceneError(f"no shadow-casting light{why}", file=scene.path)
+    techs = as_techniques(technique, params or {})
+    labels = technique_labels(techs)
     lights = [scene.find_light(str(light))] if light else list(scene.lights)
     cam = _pick_camera(scene, camera, width, height)
     ctx = RenderContext(scene, cam, width, height, device, pixel_samples)
-    vis_keys = [technique.add_passes(ctx, l) for l in lights]
-    gk = ctx.gbuffer()
-    labels = [ctx.label(l) for l in lights]
+    built = Built(ctx, labels, techs, {}, {}, {}, {})
+    for tech, label in zip(techs, labels):
+        tctx = ctx.technique(tech, label)
+        mine, skipped = [], []
+        for l in lights:
+            why = tech.supports(scene, l)
+            if why is None:
+                mine.append(l)
+            else:
+                skipped.append((l, why))
+        built.skipped[label] = skipped
+        if not mine:
+            if strict:
+                raise ParameterError(f"{label}: " + "; ".join(f"{l.path}: {why}" for l, why in skipped), file=scene.path)
+            built.lights[label] = []
+            continue
+        built.lights[label] = mine
+        built.visibility[label] = [tech.add_passes(tctx, l) for l in mine]
+        built.channels[label] = _add_resolve(ctx, tech, label, mine, built.visibility[label], single=len(techs) == 1)
+    return built
 
+
+def _add_resolve(ctx: RenderContext, tech, label: str, lights: list[Light], vis_keys: list[Key], single: bool) -> Key:
+    """Shade and resolve one technique's visibilities into per-pixel channels."""
+    gk = ctx.gbuffer()
     sk = ctx.scene_arrays()
+    ck = ctx.gbuffer_channels()
     light_structs = [ctx.light_gpu(l) for l in lights]
+    light_labels = [ctx.label(l) for l in lights]
+    rgb_key = Key("rgb_samples", technique=label)
+    out = Key("channels", technique=label)
 
     def shade_pass(res):
-        rgb = shade_samples(res[sk], res[gk], [(L, res[vk].vis) for L, vk in zip(light_structs, vis_keys)])
-        return {"rgb_samples": rgb}
-
-    ctx.graph.add(Pass("shade", (sk, gk, *vis_keys), ("rgb_samples",), shade_pass, kind="resolve"))
+        return {rgb_key: shade_samples(res[sk], res[gk], [(L, res[vk].vis) for L, vk in zip(light_structs, vis_keys)])}
 
     def resolve(res):
         """Per-sample results -> per-pixel channels (means over the pixel's covered samples)."""
-        gb: GBuffer = res[gk]
-        prim = gb.host("prim")
-        hit = prim >= 0
-        nhit = hit.sum(axis=0)
-        cov = nhit / gb.spp
-        rgb = res["rgb_samples"].numpy().reshape(gb.spp, gb.height, gb.width, 3)
-        if gb.spp == 1:
-            pos, nrm, dist = gb.host("pos")[0], gb.host("nrm")[0], gb.host("dist")[0]
-            rgb = rgb[0]
-        else:
-            first = np.argmax(hit, axis=0)[None]  # first covered sample per pixel
-            pos = np.take_along_axis(gb.host("pos"), first[..., None], axis=0)[0]
-            nrm = np.take_along_axis(gb.host("nrm"), first[..., None], axis=0)[0]
-            dist = np.take_along_axis(gb.host("dist"), first, axis=0)[0]
-            rgb = rgb.mean(axis=0)  # background samples are black: the mean is already coverage-weighted
+        g = res[ck]
+        hit, nhit, spp = g["hit"], g["nhit"], g["spp"]
+        h, w = g["shape"]
+        rgb = res[rgb_key].numpy().reshape(spp, h, w, 3)
+        rgb = rgb[0] if spp == 1 else rgb.mean(axis=0)  # background samples are black: the mean is already coverage-weighted
         ch: dict[str, np.ndarray] = {}
-        for label, vk in zip(labels, vis_keys):
-            v = res[vk].vis.numpy().reshape(gb.spp, gb.height, gb.width)
-            vv = v[0] if gb.spp == 1 else np.where(nhit > 0, (v * hit).sum(axis=0) / np.maximum(nhit, 1), 1.0)
-            ch[f"V.{label}"] = vv.astype(np.float32)
+        for ll, vk in zip(light_labels, vis_keys):
+            v = res[vk].vis.numpy().reshape(spp, h, w)
+            vv = v[0] if spp == 1 else np.where(nhit > 0, (v * hit).sum(axis=0) / np.maximum(nhit, 1), 1.0)
+            ch[f"V.{ll}"] = vv.astype(np.float32)
             if res[vk].stderr is not None:
-                e = res[vk].stderr.numpy().reshape(gb.spp, gb.height, gb.width)
+                e = res[vk].stderr.numpy().reshape(spp, h, w)
                 ee = np.sqrt((e * e * hit).sum(axis=0)) / np.maximum(nhit, 1)
-                ch[f"V_stderr.{label}"] = ee.astype(np.float32)
-        ch["V"] = ch[f"V.{labels[0]}"]
-        if f"V_stderr.{labels[0]}" in ch:
-            ch["V_stderr"] = ch[f"V_stderr.{labels[0]}"]
-        for i, axis in enumerate("XYZ"):  # the G-buffer writes zeros on background samples
-            ch[f"P.{axis}"] = np.ascontiguousarray(pos[..., i], dtype=np.float32)
-            ch[f"N.{axis}"] = np.ascontiguousarray(nrm[..., i], dtype=np.float32)
-        ch["Z"] = dist.astype(np.float32)
-        ch["A"] = cov.astype(np.float32)
+                ch[f"V_stderr.{ll}"] = ee.astype(np.float32)
+        ch["V"] = ch[f"V.{light_labels[0]}"]
+        if f"V_stderr.{light_labels[0]}" in ch:
+            ch["V_stderr"] = ch[f"V_stderr.{light_labels[0]}"]
+        ch.update(g["channels"])
         for i, c in enumerate("RGB"):
             ch[c] = np.ascontiguousarray(rgb[..., i], dtype=np.float32)
-        return {"channels": ch}
+        return {out: ch}
 
-    ctx.graph.add(Pass("resolve", (gk, *vis_keys, "rgb_samples"), ("channels",), resolve, kind="resolve"))
-    return ctx, ["channels"], lights
+    sname, rname = ("shade", "resolve") if single else (f"shade[{label}]", f"resolve[{label}]")
+    ctx.add(Pass(sname, (sk, gk, *vis_keys), (rgb_key,), shade_pass, kind="shade", technique=label))
+    ctx.add(Pass(rname, (ck, *vis_keys, rgb_key), (out,), resolve, kind="resolve", technique=label))
+    return out
 
+
+# --------------------------------------------------------------------------- render
+
+
+def _check_sizes(width: int, height: int, pixel_samples: int) -> None:
+    if width < 1 or height < 1 or width * height > 64 * 1024 * 1024:
+        raise ParameterError(f"bad image size {width}x{height}")
+    if not 1 <= pixel_samples <= 64:
+        raise ParameterError(f"pixel_samples {pixel_samples} out of range [1, 64]")
+
+
+def execute(built: Built, device: str, *, extra: list[Key] | None = None, check_immutable: bool = False) -> tuple[Resources, list[dict], float]:
+    """Run a built graph for its techniques' channels (and ``extra`` resources); (resources, records, ms)."""
+    t0 = time.perf_counter()
+    with wp.ScopedDevice(device):
+        res, records = built.ctx.graph.execute(built.requested + list(extra or []), device, check_immutable=check_immutable)
+    return res, records, 1e3 * (time.perf_counter() - t0)
+
+
+def frames_of(built: Built, res: Resources, records: list[dict], total_ms: float) -> FrameSet:
+    """One :class:`Frame` per technique with its own stats; the set's stats cover the whole graph."""
+    ctx, scene = built.ctx, built.ctx.scene
+    graph = ctx.graph
+    by_name = {r["name"]: r for r in records}
+    closures = {label: graph.closure([built.channels[label]]) for label in built.labels if label in built.channels}
+    users: dict[str, list[str]] = {}
+    for label, names in closures.items():
+        for n in names:
+            users.setdefault(n, []).append(label)
+    shared = {n: ls for n, ls in users.items() if len(ls) > 1}
+    memory: dict[str, int] = {}
+    for r in records:
+        memory.update(r["bytes"])
+    base = {
+        "device": ctx.device,
+        "threads": cpu_threads() if ctx.device == "cpu" else None,
+        "scene": {"path": scene.path, "triangles": scene.triangle_count, "time": scene.time, "up_axis": scene.up_axis,
+                  "meters_per_unit": scene.meters_per_unit},
+        "width": ctx.width,
+        "height": ctx.height,
+        "pixel_samples": ctx.pixel_samples,
+        "camera": ctx.camera.path,
+        "warnings": list(scene.warnings),
+    }
+    frame_counters = {**ctx.counters["frame"], "triangles": scene.triangle_count, "pixels": ctx.width * ctx.height,
+                      "gbuffer_samples": ctx.width * ctx.height * ctx.pixel_samples}
+    frames = {}
+    single = len(built.labels) == 1
+    for tech, label in zip(built.techniques, built.labels):
+        if label not in built.channels:
+            continue
+        mine = [r for r in records if r["name"] in closures[label]]
+        timings = {r["name"]: round(r["ms"], 3) for r in mine}
+        kinds: dict[str, float] = {}
+        for r in mine:
+            kinds[r["kind"]] = round(kinds.get(r["kind"], 0.0) + r["ms"], 3)
+        warnings = list(base["warnings"]) + [f"{label}: light {l.path} skipped: {why}" for l, why in built.skipped[label]]
+        lights = built.lights[label]
+        stats = {
+            **base,
+            "technique": tech.name,
+            "label": label,
+            "params": dataclasses.asdict(tech.params),
+            "lights": [l.path for l in lights],
+            "light": lights[0].path,
+            "light_labels": [ctx.label(l) for l in lights],
+            "timings_ms": {**timings, "total": round(total_ms if single else sum(r["ms"] for r in mine), 3)},
+            "timings_by_kind_ms": kinds,
+            "cpu_ms": {r["name"]: round(r["cpu_ms"], 3) for r in mine},
+            "memory_bytes": {k: v for r in mine for k, v in r["bytes"].items()},
+            "counters": {"frame": frame_counters,
+                         "passes": {n: c for n, c in ctx.counters["passes"].items() if n in closures[label]},
+                         "techniques": {label: ctx.counters["techniques"].get(label, {})}},
+            "passes": [r["name"] for r in mine],
+            "pass_kinds": {r["name"]: r["kind"] for r in mine},
+            "pass_stages": {r["name"]: r["stage"] for r in mine if r["stage"]},
+            "shared_passes": {n: [x for x in shared[n] if x != label] for n in timings if n in shared},
+            "warnings": warnings,
+        }
+        frames[label] = Frame(channels=res[built.channels[label]], stats=stats)
+    stats = {
+        **base,
+        "techniques": list(frames),
+        "timings_ms": {**{r["name"]: round(r["ms"], 3) for r in records}, "total": round(total_ms, 3)},
+        "cpu_ms": {r["name"]: round(r["cpu_ms"], 3) for r in records},
+        "memory_bytes": memory,
+        "counters": {"frame": frame_counters, **{k: v for k, v in ctx.counters.items() if k != "frame"}},
+        "passes": [r["name"] for r in records],
+        "pass_kinds": {r["name"]: r["kind"] for r in records},
+        "shared_passes": shared,
+        "skipped": {label: [{"light": l.path, "reason": why} for l, why in sk] for label, sk in built.skipped.items() if sk},
+    }
+    return FrameSet(frames, stats)
 
 
 def render(
     scene,
-    technique: str,
+    technique,
     *,
     width: int = 640,
     height: int = 480,
@@ -256,62 +574,37 @@ def render(
     pixel_samples: int = 1,
     time_code: float | None = None,
     **params,
-) -> Frame:
-    """Render ``technique`` on ``scene`` (a :class:`Scene` or a USD path) and return a :class:`Frame`.
+) -> Frame | FrameSet:
+    """Render on ``scene`` (a :class:`Scene` or a USD path) and return a :class:`Frame`, or a
+    :class:`FrameSet` when ``technique`` is a list.
 
+    ``technique``: a name with its parameters as keywords (``render(scene, "pcss",
+    filter_samples=64)``), or a list of names, ``(name, {params})`` pairs and
+    :class:`~wsoft.techniques.Technique` instances, rendered in one graph that shares the passes
+    they have in common (``render(scene, ["pcss", ("essm", {"H": 2}), "reference"])``).
     ``camera``: a camera prim path (default: the stage's first camera, else an automatic one).
-    ``light``: a light path or name for ``V`` (default: every shadow-casting light, ``V`` = the
-    first). ``params``: the technique's parameters (see ``wsoft techniques``).
+    ``light``: a light path or name (default: every shadow-casting light; ``V`` = the first a
+    technique supports). A light a technique does not support is skipped with a warning.
     """
-    from wsoft.techniques import create
-
     if not isinstance(scene, Scene):
         scene = load_scene(scene, time=time_code)
-    if width < 1 or height < 1 or width * height > 64 * 1024 * 1024:
-        raise ParameterError(f"bad image size {width}x{height}")
-    if not 1 <= pixel_samples <= 64:
-        raise ParameterError(f"pixel_samples {pixel_samples} out of range [1, 64]")
-    tech = create(technique, params)
+    _check_sizes(width, height, pixel_samples)
+    several = isinstance(technique, list) or (isinstance(technique, tuple) and not (len(technique) == 2 and isinstance(technique[1], dict)))
     dev = resolve_device(device)
     t0 = time.perf_counter()
-    ctx, requested, lights = build_graph(scene, tech, width=width, height=height, camera=camera, light=light, device=dev, pixel_samples=pixel_samples)
-    with wp.ScopedDevice(dev):
-        res, records = ctx.graph.execute(requested, dev)
-    total = 1e3 * (time.perf_counter() - t0)
-    channels = res["channels"]
-    import dataclasses
-
-    stats = {
-        "technique": tech.name,
-        "params": dataclasses.asdict(tech.params),
-        "device": dev,
-        "threads": cpu_threads() if dev == "cpu" else None,
-        "scene": {
-            "path": scene.path,
-            "triangles": scene.triangle_count,
-            "time": scene.time,
-            "up_axis": scene.up_axis,
-            "meters_per_unit": scene.meters_per_unit,
-        },
-        "width": width,
-        "height": height,
-        "pixel_samples": pixel_samples,
-        "camera": ctx.camera.path,
-        "lights": [l.path for l in lights],
-        "light": lights[0].path,
-        "timings_ms": {**{r["name"]: round(r["ms"], 3) for r in records}, "total": round(total, 3)},
-        "cpu_ms": {r["name"]: round(r["cpu_ms"], 3) for r in records},
-        "memory_bytes": buffer_bytes({k: v for k, v in res.items() if k != "channels"}),
-        "counters": {**ctx.counters, "triangles": scene.triangle_count, "pixels": width * height, "gbuffer_samples": width * height * pixel_samples},
-        "passes": [r["name"] for r in records],
-        "warnings": list(scene.warnings),
-    }
-    return Frame(channels=channels, stats=stats)
+    built = build_graph(scene, technique, width=width, height=height, camera=camera, light=light, device=dev,
+                        pixel_samples=pixel_samples, params=params)
+    res, records, _ = execute(built, dev)
+    fs = frames_of(built, res, records, 1e3 * (time.perf_counter() - t0))
+    if several:
+        return fs
+    return fs[built.labels[0]]
 
 
 def plan(scene: Scene, techniques: list[str] | None = None, *, width: int = 640, height: int = 480, light=None) -> dict:
-    """What would run: shadow-casting lights, skipped lights, cutout materials, passes per technique."""
-    from wsoft.techniques import TECHNIQUES, create
+    """What would run: shadow-casting lights, skipped lights, cutout materials, and per technique
+    the passes (with their kinds) or why it is not applicable to a light."""
+    from wsoft.techniques import TECHNIQUES
 
     out = {
         "scene": scene.path,
@@ -327,11 +620,16 @@ def plan(scene: Scene, techniques: list[str] | None = None, *, width: int = 640,
         "cameras": [c.path for c in scene.cameras],
         "warnings": list(scene.warnings),
         "techniques": {},
+        "not_applicable": {},
     }
     if not scene.lights:
         return out
     for name in techniques or sorted(TECHNIQUES):
-        tech = create(name, {})
-        ctx, requested, _ = build_graph(scene, tech, width=width, height=height, light=light, device="cpu")
-        out["techniques"][name] = [p.name for p in ctx.graph.schedule(requested)]
+        built = build_graph(scene, name, width=width, height=height, light=light, device="cpu", strict=False)
+        label = built.labels[0]
+        if built.skipped[label]:
+            out["not_applicable"][name] = [{"light": l.path, "reason": why} for l, why in built.skipped[label]]
+        if label in built.channels:
+            out["techniques"][name] = [p.name for p in built.ctx.graph.schedule([built.channels[label]])]
+            out.setdefault("pass_kinds", {}).update({p.name: p.kind for p in built.ctx.graph.schedule([built.channels[label]])})
     return out

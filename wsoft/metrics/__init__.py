@@ -1,29 +1,61 @@
-"""Error of a visibility image against the reference, on the same (covered) pixels."""
+"""Error of a visibility image against the reference, on the same (covered) pixels, as a pass of
+the frame graph.
+
+:func:`visibility_error` is the arithmetic: MAE, RMSE, max, the MAE in the penumbra (reference
+strictly between 0.01 and 0.99), the share of pixels further than 3 reference standard errors,
+and the same split into receivers that face the light's centre and those that do not (the
+answer there is 0: filtered techniques that leak light show it). A NaN in the image is counted,
+warned about and scored as an error of 1, never dropped.
+
+:func:`add_error_pass` registers that computation as a ``metric`` pass comparing a technique's
+channels with the reference's (another technique of the same graph, or a :class:`GroundTruth`
+computed earlier and handed in); :func:`compare` renders techniques and the reference in one
+graph and returns the frames with ``stats["errors"]``.
+"""
 
 from __future__ import annotations
 
+import warnings
+from dataclasses import dataclass
+
 import numpy as np
+
+from wsoft.graph import Key, Pass
+from wsoft.scene.types import LIGHT_DISTANT, Light
 
 PENUMBRA_LO = 0.01
 PENUMBRA_HI = 0.99
 
 
-def visibility_error(v: np.ndarray, ref: np.ndarray, ref_stderr: np.ndarray | None = None, coverage: np.ndarray | None = None) -> dict:
-    """MAE, RMSE, max, MAE in the penumbra and the fraction of pixels outside 3 reference stderr.
+def _summary(d: np.ndarray, pen: np.ndarray) -> dict:
+    if d.size == 0:
+        return {"pixels": 0, "mae": 0.0, "mae_penumbra": 0.0, "penumbra_pixels": 0}
+    return {"pixels": int(d.size), "mae": float(d.mean()), "mae_penumbra": float(d[pen].mean()) if pen.any() else 0.0,
+            "penumbra_pixels": int(pen.sum())}
 
-    Pixels count where ``coverage > 0`` (background is excluded). The penumbra is where the
-    reference is strictly between 0.01 and 0.99.
-    """
+
+def visibility_error(v: np.ndarray, ref: np.ndarray, ref_stderr: np.ndarray | None = None, coverage: np.ndarray | None = None,
+                     facing: np.ndarray | None = None) -> dict:
+    """MAE, RMSE, max, MAE in the penumbra, the fraction of pixels outside 3 reference stderr, the
+    non-finite pixels of ``v`` (each scored 1), and with ``facing`` (bool [H, W]) the same for the
+    pixels that face the light and those that do not. Pixels count where ``coverage > 0``."""
     v = np.asarray(v, np.float64)
     ref = np.asarray(ref, np.float64)
     if v.shape != ref.shape:
         raise ValueError(f"image {v.shape} and reference {ref.shape} differ in size")
     mask = np.ones(v.shape, bool) if coverage is None else np.asarray(coverage) > 0
     n = int(mask.sum())
+    bad = ~np.isfinite(v) & mask
+    nan_pixels = int(bad.sum())
+    if nan_pixels:
+        warnings.warn(f"{nan_pixels} pixels of the image are not finite; each counts as an error of 1", RuntimeWarning, stacklevel=2)
     if n == 0:
-        return {"pixels": 0, "mae": 0.0, "rmse": 0.0, "max": 0.0, "mae_penumbra": 0.0, "penumbra_pixels": 0, "frac_outside_3se": 0.0}
-    d = np.abs(v - ref)[mask]
-    pen = ((ref > PENUMBRA_LO) & (ref < PENUMBRA_HI))[mask]
+        return {"pixels": 0, "mae": 0.0, "rmse": 0.0, "max": 0.0, "mae_penumbra": 0.0, "penumbra_pixels": 0, "frac_outside_3se": 0.0,
+                "nan_pixels": 0}
+    diff = np.where(np.isfinite(v), np.abs(v - ref), 1.0)
+    d = diff[mask]
+    pen_img = (ref > PENUMBRA_LO) & (ref < PENUMBRA_HI)
+    pen = pen_img[mask]
     out = {
         "pixels": n,
         "mae": float(d.mean()),
@@ -31,8 +63,106 @@ def visibility_error(v: np.ndarray, ref: np.ndarray, ref_stderr: np.ndarray | No
         "max": float(d.max()),
         "mae_penumbra": float(d[pen].mean()) if pen.any() else 0.0,
         "penumbra_pixels": int(pen.sum()),
+        "nan_pixels": nan_pixels,
     }
     if ref_stderr is not None:
         se = np.asarray(ref_stderr, np.float64)[mask]
         out["frac_outside_3se"] = float(np.mean(d > 3.0 * se))
+    if facing is not None:
+        f = np.asarray(facing, bool)
+        out["facing"] = _summary(diff[mask & f], pen_img[mask & f])
+        out["not_facing"] = _summary(diff[mask & ~f], pen_img[mask & ~f])
     return out
+
+
+def facing_light(channels: dict, light: Light) -> np.ndarray:
+    """Pixels whose (camera-facing) normal faces the light's centre (a distant light: its direction)."""
+    n = np.stack([channels["N.X"], channels["N.Y"], channels["N.Z"]], -1)
+    if light.kind == LIGHT_DISTANT:
+        return n @ light.frame[:, 2] > 0.0
+    p = np.stack([channels["P.X"], channels["P.Y"], channels["P.Z"]], -1)
+    return np.einsum("...i,...i->...", n, np.asarray(light.position) - p) > 0.0
+
+
+@dataclass
+class GroundTruth:
+    """A reference computed earlier (a cached one): per light label, its ``V``, ``V_stderr`` and ``A``."""
+
+    lights: dict[str, dict[str, np.ndarray]]
+    samples: int
+
+    def channels(self, label: str) -> dict[str, np.ndarray]:
+        g = self.lights[label]
+        return {f"V.{label}": g["V"], f"V_stderr.{label}": g["V_stderr"], "A": g["A"]}
+
+
+def ground_truth_key(ctx, truth: GroundTruth, light: Light) -> Key:
+    """Hand a :class:`GroundTruth` to the graph (a ``reference`` pass that does no work)."""
+    label = ctx.label(light)
+    key = Key("ground_truth", label, variant=f"@{truth.samples}")
+    return ctx.provide(key, truth.channels(label), name=f"ground_truth[{label}]@{truth.samples}", kind="reference")
+
+
+def add_error_pass(ctx, technique_label: str, channels: Key, reference: Key, light: Light) -> Key:
+    """A ``metric`` pass: the error of a technique's ``V.<light>`` (from its ``channels``) against
+    the reference's (``reference``: a technique's channels or a ground-truth key)."""
+    label = ctx.label(light)
+    key = Key("error", label, technique=technique_label)
+
+    def run(res):
+        ch, ref = res[channels], res[reference]
+        return {key: visibility_error(ch[f"V.{label}"], ref[f"V.{label}"], ref.get(f"V_stderr.{label}"), ref["A"],
+                                      facing=facing_light(ch, light))}
+
+    return ctx.add(Pass(f"error[{technique_label}:{label}]", (channels, reference), (key,), run, kind="metric", technique=technique_label,
+                        light=label))
+
+
+def compare(scene, techniques, *, samples: int = 256, ground_truth: GroundTruth | None = None, width: int = 640, height: int = 480,
+            camera=None, light=None, device: str | None = None, pixel_samples: int = 1, time_code: float | None = None):
+    """Render ``techniques`` (as :func:`wsoft.render` takes a list) and the reference in one graph,
+    and measure each technique's error against the reference on the same pixels.
+
+    The reference is ``reference`` with ``samples`` light samples (added unless the list holds a
+    reference already), or ``ground_truth`` computed earlier. Returns the
+    :class:`~wsoft.render.FrameSet`; each technique's ``stats["errors"]`` maps light label ->
+    error, ``stats["error"]`` is the first light's."""
+    import time
+
+    from wsoft.parallel import resolve_device
+    from wsoft.render import Scene, _check_sizes, as_techniques, build_graph, execute, frames_of
+    from wsoft.scene.usd import load_scene
+    from wsoft.techniques import create
+
+    if not isinstance(scene, Scene):
+        scene = load_scene(scene, time=time_code)
+    _check_sizes(width, height, pixel_samples)
+    techs = as_techniques(list(techniques) if isinstance(techniques, (list, tuple)) and not isinstance(techniques, str) else [techniques], {})
+    ref_label = None
+    if ground_truth is None:
+        refs = [t for t in techs if t.name == "reference"]
+        if not refs:
+            techs.append(create("reference", {"samples": samples}))
+    dev = resolve_device(device)
+    t0 = time.perf_counter()
+    built = build_graph(scene, techs, width=width, height=height, camera=camera, light=light, device=dev, pixel_samples=pixel_samples)
+    ctx = built.ctx
+    if ground_truth is None:
+        ref_label = next(label for t, label in zip(built.techniques, built.labels) if t.name == "reference")
+    errors: dict[str, dict[str, Key]] = {}
+    for tech, label in zip(built.techniques, built.labels):
+        if label == ref_label or label not in built.channels:
+            continue
+        for l in built.lights[label]:
+            ref_key = built.channels[ref_label] if ground_truth is None else ground_truth_key(ctx, ground_truth, l)
+            errors.setdefault(label, {})[ctx.label(l)] = add_error_pass(ctx, label, built.channels[label], ref_key, l)
+    extra = [k for m in errors.values() for k in m.values()]
+    res, records, _ = execute(built, dev, extra=extra)
+    fs = frames_of(built, res, records, 1e3 * (time.perf_counter() - t0))
+    for label, m in errors.items():
+        st = fs[label].stats
+        st["errors"] = {ll: res[k] for ll, k in m.items()}
+        st["error"] = st["errors"][st["light_labels"][0]]
+        st["error_against"] = f"reference ({ground_truth.samples if ground_truth else built.techniques[built.labels.index(ref_label)].params.samples} samples)"
+    fs.stats["reference"] = ref_label
+    return fs

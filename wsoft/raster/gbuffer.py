@@ -4,6 +4,11 @@ Primary visibility is resolved by casting one camera ray per sample against the 
 BVH (alpha-tested through cutouts; back faces of single-sided meshes culled, as
 ``doubleSided = false`` allows), which gives exact positions for the shadow passes.
 ``k`` samples per pixel use a fixed MSAA-like pattern.
+
+Samples are stored sample-major: ``k * H * W`` entries, layer ``s`` (the ``s``-th sample of
+every pixel) after layer ``s - 1``. Kernels take the G-buffer as one :class:`GBufferGPU` struct
+and find their way with :func:`gb_pixel`, :func:`gb_layer`, :func:`gb_index` and
+:func:`gb_neighbour` (never by decoding flat indices by hand).
 """
 
 from __future__ import annotations
@@ -121,6 +126,58 @@ def trace_gbuffer(
         bary[idx] = wp.vec2(0.0)
 
 
+@wp.struct
+class GBufferGPU:
+    """The G-buffer on the device (see :class:`GBuffer` for the fields)."""
+
+    width: int
+    height: int
+    spp: int
+    pos: wp.array[wp.vec3]
+    nrm: wp.array[wp.vec3]
+    dist: wp.array[float]
+    prim: wp.array[wp.int32]
+    uv: wp.array[wp.vec2]
+    bary: wp.array[wp.vec2]
+
+
+@wp.func
+def gb_covered(gb: GBufferGPU, i: int) -> bool:
+    """Does sample ``i`` lie on a surface (not the background)?"""
+    return gb.prim[i] >= 0
+
+
+@wp.func
+def gb_layer(gb: GBufferGPU, i: int) -> int:
+    """Which of its pixel's samples ``i`` is (0 .. spp-1)."""
+    return i / (gb.width * gb.height)
+
+
+@wp.func
+def gb_pixel(gb: GBufferGPU, i: int) -> wp.vec2i:
+    """The pixel (x, y) of sample ``i``; y = 0 is the top row."""
+    p = i - gb_layer(gb, i) * gb.width * gb.height
+    y = p / gb.width
+    return wp.vec2i(p - y * gb.width, y)
+
+
+@wp.func
+def gb_index(gb: GBufferGPU, x: int, y: int, layer: int) -> int:
+    """The sample of pixel (x, y) in ``layer``."""
+    return (layer * gb.height + y) * gb.width + x
+
+
+@wp.func
+def gb_neighbour(gb: GBufferGPU, i: int, dx: int, dy: int) -> int:
+    """The sample in ``i``'s layer at the pixel (dx, dy) away, or -1 outside the image."""
+    p = gb_pixel(gb, i)
+    x = p[0] + dx
+    y = p[1] + dy
+    if x < 0 or y < 0 or x >= gb.width or y >= gb.height:
+        return -1
+    return gb_index(gb, x, y, gb_layer(gb, i))
+
+
 @dataclass
 class GBuffer:
     """Eye-view samples, flat arrays of length ``spp*height*width`` (sample-major).
@@ -146,6 +203,12 @@ class GBuffer:
 
     def arrays(self) -> dict[str, wp.array]:
         return {"pos": self.pos, "nrm": self.nrm, "dist": self.dist, "prim": self.prim, "uv": self.uv, "bary": self.bary}
+
+    def gpu(self) -> GBufferGPU:
+        g = GBufferGPU()
+        g.width, g.height, g.spp = self.width, self.height, self.spp
+        g.pos, g.nrm, g.dist, g.prim, g.uv, g.bary = self.pos, self.nrm, self.dist, self.prim, self.uv, self.bary
+        return g
 
     def host(self, name: str) -> np.ndarray:
         """A field as numpy, shape [spp, H, W(, C)]."""

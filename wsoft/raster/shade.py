@@ -10,6 +10,7 @@ from __future__ import annotations
 import warp as wp
 
 from wsoft.parallel import launch_chunked
+from wsoft.raster.gbuffer import GBufferGPU, gb_covered
 from wsoft.lightspace.light import LightGPU, light_center_dir
 
 AMBIENT = 0.12  # share of the light that is unshadowed ambient
@@ -19,9 +20,7 @@ AMBIENT = 0.12  # share of the light that is unshadowed ambient
 def accumulate_light(
     offset: int,
     L: LightGPU,
-    pos: wp.array[wp.vec3],
-    nrm: wp.array[wp.vec3],
-    prim: wp.array[wp.int32],
+    gb: GBufferGPU,
     vis: wp.array[float],
     weight: float,
     # outputs
@@ -30,18 +29,17 @@ def accumulate_light(
 ):
     """lum += weight * V * max(0, N . L) per sample, L toward the light's centre; vmean += weight * V."""
     i = wp.tid() + offset
-    if prim[i] < 0:
+    if not gb_covered(gb, i):
         return
-    d = light_center_dir(L, pos[i])
-    lum[i] = lum[i] + weight * vis[i] * wp.max(wp.dot(nrm[i], wp.vec3(d[0], d[1], d[2])), 0.0)
+    d = light_center_dir(L, gb.pos[i])
+    lum[i] = lum[i] + weight * vis[i] * wp.max(wp.dot(gb.nrm[i], wp.vec3(d[0], d[1], d[2])), 0.0)
     vmean[i] = vmean[i] + weight * vis[i]
 
 
 @wp.kernel
 def finish_shading(
     offset: int,
-    prim: wp.array[wp.int32],
-    bary: wp.array[wp.vec2],
+    gb: GBufferGPU,
     tri_albedo: wp.array[wp.vec3],
     tri_baked: wp.array[wp.vec3],
     tri_has_baked: wp.array[wp.int32],
@@ -52,13 +50,13 @@ def finish_shading(
     rgb: wp.array[wp.vec3],
 ):
     i = wp.tid() + offset
-    f = prim[i]
+    f = gb.prim[i]
     if f < 0:
         rgb[i] = wp.vec3(0.0)
         return
     c = tri_albedo[f] * (ambient + (1.0 - ambient) * lum[i])
     if tri_has_baked[f] != 0:
-        b = bary[i]
+        b = gb.bary[i]
         light = tri_baked[3 * f] * b[0] + tri_baked[3 * f + 1] * b[1] + tri_baked[3 * f + 2] * (1.0 - b[0] - b[1])
         c = wp.cw_mul(tri_albedo[f], light) * vmean[i]
     rgb[i] = wp.vec3(wp.clamp(c[0], 0.0, 1.0), wp.clamp(c[1], 0.0, 1.0), wp.clamp(c[2], 0.0, 1.0))
@@ -67,14 +65,15 @@ def finish_shading(
 def shade(ds, gb, lights_and_vis: list[tuple[LightGPU, wp.array]]) -> wp.array:
     """RGB per G-buffer sample (vec3, background black): albedo x (ambient + mean over lights of V cos)."""
     n = gb.count
+    g = gb.gpu()
     lum = wp.zeros(n, dtype=float, device=ds.device)
     vmean = wp.zeros(n, dtype=float, device=ds.device)
     w = 1.0 / max(len(lights_and_vis), 1)
     for L, vis in lights_and_vis:
-        launch_chunked(accumulate_light, n, inputs=[L, gb.pos, gb.nrm, gb.prim, vis, w], outputs=[lum, vmean], device=ds.device, min_chunk=1 << 14)
+        launch_chunked(accumulate_light, n, inputs=[L, g, vis, w], outputs=[lum, vmean], device=ds.device, min_chunk=1 << 14)
     rgb = wp.empty(n, dtype=wp.vec3, device=ds.device)
     launch_chunked(
-        finish_shading, n, inputs=[gb.prim, gb.bary, ds.tri_albedo, ds.tri_baked, ds.tri_has_baked, lum, vmean, AMBIENT],
+        finish_shading, n, inputs=[g, ds.tri_albedo, ds.tri_baked, ds.tri_has_baked, lum, vmean, AMBIENT],
         outputs=[rgb], device=ds.device, min_chunk=1 << 14,
     )
     return rgb

@@ -21,6 +21,7 @@ import warp as wp
 from wsoft.lightspace.light import LightGPU, light_point
 from wsoft.lightspace.samples import LightSamples, SamplePattern, sample_coords, sampling_begin
 from wsoft.parallel import launch_chunked
+from wsoft.raster.gbuffer import GBufferGPU, gb_covered, gb_pixel
 from wsoft.scene.device import DeviceScene, Surfaces, occluded
 
 
@@ -41,25 +42,21 @@ def trace_visibility(
     has_cutouts: int,
     light: LightGPU,
     ls: LightSamples,
-    pos: wp.array[wp.vec3],
-    nrm: wp.array[wp.vec3],
-    prim: wp.array[wp.int32],
-    width: int,
-    height: int,
+    gb: GBufferGPU,
     eps: float,
     # outputs
     vis: wp.array[float],
     stderr: wp.array[float],
 ):
     i = wp.tid() + offset
-    if prim[i] < 0:
+    if not gb_covered(gb, i):
         vis[i] = 1.0
         stderr[i] = 0.0
         return
-    p = pos[i]
-    n = nrm[i]
-    pix = i % (width * height)
-    state, base, rot = sampling_begin(ls, i, pix % width, pix / width)
+    p = gb.pos[i]
+    n = gb.nrm[i]
+    xy = gb_pixel(gb, i)
+    state, base, rot = sampling_begin(ls, i, xy[0], xy[1])
     visible = int(0)
     samples = ls.count
     for s in range(samples):
@@ -88,7 +85,7 @@ def trace_reference(ds: DeviceScene, light: LightGPU, gb, pattern: SamplePattern
     launch_chunked(
         trace_visibility,
         n,
-        inputs=[ds.mesh.id, ds.cutouts, ds.has_cutouts, light, pattern.on(ds.device, disk), gb.pos, gb.nrm, gb.prim, gb.width, gb.height, ray_epsilon(ds)],
+        inputs=[ds.mesh.id, ds.cutouts, ds.has_cutouts, light, pattern.on(ds.device, disk), gb.gpu(), ray_epsilon(ds)],
         outputs=[vis, err],
         device=ds.device,
         min_chunk=256,
@@ -109,11 +106,8 @@ def generate_shadow_rays(
     offset: int,
     light: LightGPU,
     ls: LightSamples,
-    pos: wp.array[wp.vec3],
-    nrm: wp.array[wp.vec3],
+    gb: GBufferGPU,
     pix: wp.array[wp.int32],
-    width: int,
-    height: int,
     eps: float,
     # outputs
     origin: wp.array[wp.vec3],
@@ -122,10 +116,10 @@ def generate_shadow_rays(
 ):
     k = wp.tid() + offset
     i = pix[k]
-    p = pos[i]
-    n = nrm[i]
-    q = i % (width * height)
-    state, base, rot = sampling_begin(ls, i, q % width, q / width)
+    p = gb.pos[i]
+    n = gb.nrm[i]
+    xy = gb_pixel(gb, i)
+    state, base, rot = sampling_begin(ls, i, xy[0], xy[1])
     samples = ls.count
     for s in range(samples):
         c, state = sample_coords(ls, state, base, rot, s)
@@ -166,7 +160,7 @@ def shadow_rays(ds: DeviceScene, light: LightGPU, gb, pattern: SamplePattern, di
     o = wp.empty(n, dtype=wp.vec3, device=ds.device)
     d = wp.empty(n, dtype=wp.vec3, device=ds.device)
     t = wp.empty(n, dtype=float, device=ds.device)
-    launch_chunked(generate_shadow_rays, len(covered), inputs=[light, pattern.on(ds.device, disk), gb.pos, gb.nrm, pix, gb.width, gb.height, ray_epsilon(ds)],
+    launch_chunked(generate_shadow_rays, len(covered), inputs=[light, pattern.on(ds.device, disk), gb.gpu(), pix, ray_epsilon(ds)],
                    outputs=[o, d, t], device=ds.device, min_chunk=256)
     return o, d, t
 

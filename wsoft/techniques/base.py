@@ -1,24 +1,47 @@
-"""What every technique is: parameters (a frozen dataclass), what it reads, what it writes,
-and the passes it adds to a frame graph for one light.
+"""What every technique is: parameters (a frozen dataclass), what it reads and writes, what it
+supports, how it trades quality for time, and the passes it adds to a frame graph for one light.
 
-Copy ``techniques/hard.py`` to add a technique: declare ``Params``, ``reads``/``writes``,
-and implement :meth:`Technique.add_passes`, which registers passes through the
-:class:`~wsoft.render.RenderContext` (scene arrays, G-buffer, light depth maps, the
-scene's triangles and textures) and returns the key of the visibility it writes.
+Copy ``techniques/hard.py`` to add a technique: declare ``Params`` (fields made with
+:func:`~wsoft.params.param`, ranges for every number), ``reads``/``writes``, ``quality`` (the
+knobs a sweep should turn), ``tolerance`` (how close it comes to the exact parallel-rectangle
+answer), and implement :meth:`Technique.add_passes`, which registers passes through the
+:class:`~wsoft.render.TechniqueContext` it is given (scene arrays, G-buffer, light depth maps)
+and returns the key of the visibility it writes. Override :meth:`Technique.supports` when some
+lights or scenes are out of the technique's reach: ``wsoft plan`` lists the reason, ``render``
+skips the light (or stops with the reason when nothing is left).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
 import typing
+from dataclasses import dataclass
 from typing import Any, ClassVar
 
 from wsoft.errors import ParameterError
+from wsoft.params import check, param, range_text
+
+__all__ = ["Quality", "Technique", "Tolerance", "check", "param"]
 
 
-def param(default, help: str, **kw):
-    """A parameter field with its meaning (shown by ``wsoft techniques``)."""
-    return dataclasses.field(default=default, metadata={"help": help, **kw})
+@dataclass(frozen=True)
+class Quality:
+    """A parameter that trades accuracy for time and the values a sweep should try (cheapest first)."""
+
+    param: str
+    values: tuple
+    note: str = ""
+
+
+@dataclass(frozen=True)
+class Tolerance:
+    """How close the technique must come to the exact answer of ``box_plane`` (a square occluder
+    parallel to a square light and the ground) at its default parameters: MAE over the ground and
+    MAE over the exact penumbra."""
+
+    mae: float
+    mae_penumbra: float
 
 
 def _convert(name: str, typ, value, technique: str):
@@ -58,10 +81,13 @@ class Technique:
     Params: ClassVar[type]
     reads: ClassVar[tuple[str, ...]] = ()
     writes: ClassVar[tuple[str, ...]] = ("visibility",)
+    quality: ClassVar[tuple[Quality, ...]] = ()
+    tolerance: ClassVar[Tolerance | None] = None
 
     def __init__(self, params):
         self.params = params
 
+    # -- parameters ------------------------------------------------------------------------------
     @classmethod
     def make_params(cls, values: dict[str, Any] | None = None):
         """Build ``Params`` from a dict (strings from the CLI are converted); unknown keys are errors."""
@@ -75,10 +101,40 @@ class Technique:
         hints = typing.get_type_hints(cls.Params)
         conv = {k: _convert(k, hints.get(k, fields[k].type), v, cls.name) for k, v in values.items()}
         try:
-            return cls.Params(**conv)
+            p = cls.Params(**conv)
         except ValueError as exc:
             raise ParameterError(f"{cls.name}: {exc}") from None
+        return p
 
+    @classmethod
+    def defaults(cls) -> dict[str, Any]:
+        return {f.name: f.default for f in dataclasses.fields(cls.Params)}
+
+    def changed_params(self) -> dict[str, Any]:
+        """The parameters that differ from their defaults (in declaration order)."""
+        d = self.defaults()
+        return {k: v for k, v in dataclasses.asdict(self.params).items() if v != d[k] and not (isinstance(v, float) and math.isnan(v))}
+
+    # -- what it supports ------------------------------------------------------------------------
+    def supports(self, scene, light) -> str | None:
+        """``None`` when the technique can render ``light`` of ``scene``, else the reason it cannot."""
+        return None
+
+    # -- quality ---------------------------------------------------------------------------------
+    @classmethod
+    def quality_settings(cls) -> list[dict[str, Any]]:
+        """Parameter sets a sweep should try: the defaults, then each quality knob's values one at a
+        time from the defaults (deduplicated, in declaration order)."""
+        out: list[dict[str, Any]] = [{}]
+        d = cls.defaults()
+        for q in cls.quality:
+            for v in q.values:
+                s = {} if v == d[q.param] else {q.param: v}
+                if s not in out:
+                    out.append(s)
+        return out
+
+    # -- the manual ------------------------------------------------------------------------------
     @classmethod
     def describe(cls) -> dict:
         hints = typing.get_type_hints(cls.Params)
@@ -88,16 +144,13 @@ class Technique:
             "reads": list(cls.reads),
             "writes": list(cls.writes),
             "parameters": [
-                {"name": f.name, "type": getattr(hints.get(f.name), "__name__", str(f.type)), "default": f.default, "meaning": f.metadata.get("help", "")}
+                {"name": f.name, "type": getattr(hints.get(f.name), "__name__", str(f.type)), "default": f.default,
+                 "range": range_text(f), "meaning": f.metadata.get("help", "")}
                 for f in dataclasses.fields(cls.Params)
             ],
+            "quality": [{"param": q.param, "values": list(q.values), "note": q.note} for q in cls.quality],
+            "tolerance": dataclasses.asdict(cls.tolerance) if cls.tolerance else None,
         }
 
-    def add_passes(self, ctx, light) -> str:  # pragma: no cover - interface
+    def add_passes(self, ctx, light):  # pragma: no cover - interface
         raise NotImplementedError
-
-
-def check(cond: bool, msg: str):
-    """Validation helper for ``Params.__post_init__``: raises ValueError (reported as a parameter error)."""
-    if not cond:
-        raise ValueError(msg)

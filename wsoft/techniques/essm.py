@@ -32,25 +32,6 @@ Optimal exponent (§7): c = R / (z_max − z_min) in depth units, i.e. R on the 
 where R is the largest exponent the storage holds: μ ln 2 for integer storage (the basis spans
 e^R = 2^μ, so e^{c z_min} is still one integer unit) and ln(FLT_MAX) − ln(N²) − ln 2 for a
 float32 SAT (its corner sum of e^{cz} cannot overflow). ``c`` overrides it.
-
-| parameter | type | default | meaning |
-|---|---|---|---|
-| shadow_map_size | int | 1024 | texels per side (power of two, 256..8192) |
-| sat | str | tiles | tiles, uint32 or float32 |
-| build | str | doubling | doubling (recursive doubling) or scan |
-| reads | int | 8 | texels read per recursive-doubling pass (X) |
-| mu | int | 20 | precision bits of the integer SATs (μ) |
-| tile | int | 0 | tile size in texels (0: from the pyramid test) |
-| c | float | 0 | exponent on the normalised depth (0: the optimal R) |
-| depth_range | str | pyramid | pyramid (min/max of the map) or bounds (scene bounds) |
-| H | float | 5 | rectangle height of the ellipse rasterization, texels |
-| level | int | 0 | rasterization level X (0: Level0) |
-| subdivision | int | 3 | micro-subdivision n (n x n; 1: off) |
-| epsilon | float | 0.02 | non-planarity threshold: ESM value > 1 + ε |
-| anisotropic | bool | true | add the pixel footprint to the kernel (§5.1) |
-| bias | float | 0.002 | depth bias on the normalised depth |
-| min_radius | float | 0.5 | smallest penumbra half-width, texels |
-| max_radius | float | 512 | largest search / penumbra half-width, texels |
 """
 
 from __future__ import annotations
@@ -76,40 +57,38 @@ from wsoft.lightspace.view import (
     view_of,
 )
 from wsoft.parallel import launch_chunked
-from wsoft.techniques.base import Technique, check, param
+from wsoft.raster.gbuffer import GBufferGPU, gb_covered, gb_neighbour
+from wsoft.params import check_ranges
+from wsoft.techniques.base import Quality, Technique, Tolerance, check, param
 
 FLT_MAX_LOG = math.log(np.finfo(np.float32).max)
 
 
 @dataclass(frozen=True)
 class ESSMParams:
-    shadow_map_size: int = param(1024, "texels per side of the light depth map (a power of two, 256..8192)")
+    shadow_map_size: int = param(1024, "texels per side of the light depth map (a power of two)", range=(256, 8192))
     sat: str = param("tiles", "summed-area table: tiles (uint32 tile grid), uint32 (full) or float32 (full)")
     build: str = param("doubling", "SAT build: doubling (recursive doubling, counted passes) or scan (row/column scans)")
-    reads: int = param(8, "texels read per recursive-doubling pass (X in the paper)")
-    mu: int = param(20, "precision bits of the integer SATs (mu)")
-    tile: int = param(0, "SAT tile size in texels, a power of two (0: from the mip-pyramid overflow test)")
-    c: float = param(0.0, "exponent on the normalised depth (0: the optimal R of the storage)")
+    reads: int = param(8, "texels read per recursive-doubling pass (X in the paper)", range=(2, 64))
+    mu: int = param(20, "precision bits of the integer SATs (mu)", range=(8, 31))
+    tile: int = param(0, "SAT tile size in texels, a power of two (0: from the mip-pyramid overflow test)", range=(0, 8192))
+    c: float = param(0.0, "exponent on the normalised depth (0: the optimal R of the storage)", range=(0.0, 87.0))
     depth_range: str = param("pyramid", "effective depth range: pyramid (min/max of the map) or bounds (scene bounds)")
-    H: float = param(5.0, "height of the rectangles the ellipse kernel is cut into, in texels")
-    level: int = param(0, "ellipse rasterization level X (0: Level0)")
-    subdivision: int = param(3, "micro-subdivision n x n of non-planar kernels (1: off, values clamped)")
-    epsilon: float = param(0.02, "non-planarity threshold: an ESM value above 1 + epsilon")
+    H: float = param(5.0, "height of the rectangles the ellipse kernel is cut into, in texels", range=(0.25, 256.0))
+    level: int = param(0, "ellipse rasterization level X (0: Level0)", range=(0, 5))
+    subdivision: int = param(3, "micro-subdivision n x n of non-planar kernels (1: off, values clamped)", range=(1, 8))
+    epsilon: float = param(0.02, "non-planarity threshold: an ESM value above 1 + epsilon", range=(0.0, 1.0))
     anisotropic: bool = param(True, "convolve the penumbra kernel with the pixel footprint on the map")
-    bias: float = param(0.002, "depth bias on the normalised depth [0, 1]")
-    min_radius: float = param(0.5, "smallest penumbra half-width in texels")
-    max_radius: float = param(512.0, "largest search and penumbra half-width in texels")
+    bias: float = param(0.002, "depth bias on the normalised depth [0, 1]", range=(0.0, 0.5))
+    min_radius: float = param(0.5, "smallest penumbra half-width in texels", range=(0.01, 4096.0))
+    max_radius: float = param(512.0, "largest search and penumbra half-width in texels", range=(0.01, 4096.0))
 
     def __post_init__(self):
+        check_ranges(self)
         check_sat_params(self)
         n = self.shadow_map_size
-        check(2 <= self.reads <= 64, "reads must be in [2, 64]")
         check(self.tile == 0 or (1 <= self.tile <= n and self.tile & (self.tile - 1) == 0), f"tile {self.tile} must be 0 or a power of two <= shadow_map_size")
-        check(0.0 <= self.c <= 87.0, "c must be in [0, 87] (0: optimal)")
         check(self.depth_range in ("pyramid", "bounds"), f"depth_range {self.depth_range!r} is not pyramid or bounds")
-        check(0.25 <= self.H <= 256.0, "H must be in [0.25, 256] texels")
-        check(0 <= self.level <= 5, "level must be in [0, 5]")
-        check(0.0 <= self.epsilon <= 1.0, "epsilon must be in [0, 1]")
 
 
 def optimal_exponent(storage: str, mu: int, n: int) -> float:
@@ -277,20 +256,21 @@ def ellipse_span(sxx: float, sxy: float, syy: float, det: float, y: float) -> wp
 
 
 @wp.func
-def footprint_axis(pos: wp.array[wp.vec3], nrm: wp.array[wp.vec3], prim: wp.array[wp.int32], i: int, fwd: int, bwd: int,
-                   ok_f: int, ok_b: int) -> wp.vec3:
-    """World-space step to the neighbouring pixel on the same surface plane (forward, else
-    backward, negated), or zero."""
-    p = pos[i]
-    nn = nrm[i]
-    if ok_f != 0:
-        if prim[fwd] >= 0:
-            dp = pos[fwd] - p
+def footprint_axis(gb: GBufferGPU, i: int, dx: int, dy: int) -> wp.vec3:
+    """World-space step from sample ``i`` to the neighbouring pixel (dx, dy) on the same surface
+    plane (forward, else backward, negated), or zero."""
+    p = gb.pos[i]
+    nn = gb.nrm[i]
+    fwd = gb_neighbour(gb, i, dx, dy)
+    if fwd >= 0:
+        if gb_covered(gb, fwd):
+            dp = gb.pos[fwd] - p
             if wp.abs(wp.dot(dp, nn)) <= 0.05 * wp.length(dp):
                 return dp
-    if ok_b != 0:
-        if prim[bwd] >= 0:
-            dp = p - pos[bwd]
+    bwd = gb_neighbour(gb, i, -dx, -dy)
+    if bwd >= 0:
+        if gb_covered(gb, bwd):
+            dp = p - gb.pos[bwd]
             if wp.abs(wp.dot(dp, nn)) <= 0.05 * wp.length(dp):
                 return dp
     return wp.vec3(0.0, 0.0, 0.0)
@@ -304,11 +284,7 @@ def essm_shade(
     q: ESSMConsts,
     data: wp.array3d(dtype=Any),
     depth: wp.array2d[float],
-    pos: wp.array[wp.vec3],
-    nrm: wp.array[wp.vec3],
-    prim: wp.array[wp.int32],
-    width: int,
-    height: int,
+    gb: GBufferGPU,
     # outputs
     vis: wp.array[float],
     looks: wp.array[wp.int32],
@@ -318,17 +294,17 @@ def essm_shade(
     looks[i] = 0
     fallbacks[i] = 0
     vis[i] = 1.0
-    if prim[i] < 0:
+    if not gb_covered(gb, i):
         return
-    rt = receiver_texel(lv, pos[i])
+    rt = receiver_texel(lv, gb.pos[i])
     if rt[3] == 0.0:
         return
     tc = wp.vec2(rt[0], rt[1])
-    pv = view_of(lv, pos[i])
+    pv = view_of(lv, gb.pos[i])
     d_lin = rt[2]
-    dn = wp.clamp((d_lin - q.zmin) / q.zrange, 0.0, 1.0) - q.bias
+    dn = normalised_depth(d_lin, q.zmin, q.zrange) - q.bias
     # the receiver's tangent plane in normalised depth per texel (receiver-plane depth)
-    nv = view_dir(lv, nrm[i])
+    nv = view_dir(lv, gb.nrm[i])
     m0 = map_coords(lv, pv)
     tu = 1.0 / lv.scale[0]
     tv = 1.0 / lv.scale[1]
@@ -361,14 +337,10 @@ def essm_shade(
     sxy = float(0.0)
     if q.aniso != 0:
         # the pixel's footprint on the map (a unit pixel box, variance 1/12 per screen axis)
-        npix = width * height
-        li = i - (i / npix) * npix
-        x = li - (li / width) * width
-        y = li / width
-        ex = footprint_axis(pos, nrm, prim, i, i + 1, i - 1, int(x + 1 < width), int(x > 0))
-        ey = footprint_axis(pos, nrm, prim, i, i + width, i - width, int(y + 1 < height), int(y > 0))
-        jx = texel_of(lv, view_of(lv, pos[i] + ex)) - tc
-        jy = texel_of(lv, view_of(lv, pos[i] + ey)) - tc
+        ex = footprint_axis(gb, i, 1, 0)
+        ey = footprint_axis(gb, i, 0, 1)
+        jx = texel_of(lv, view_of(lv, gb.pos[i] + ex)) - tc
+        jy = texel_of(lv, view_of(lv, gb.pos[i] + ey)) - tc
         f = 1.0 / 12.0
         sxx += f * (jx[0] * jx[0] + jy[0] * jy[0])
         syy += f * (jx[1] * jx[1] + jy[1] * jy[1])
@@ -537,30 +509,33 @@ class ESSM(Technique):
     Params = ESSMParams
     reads = ("gbuffer", "light_depth", "scene_bounds")
     writes = ("visibility", "essm_basis", "essm_sat")
+    quality = (
+        Quality("H", (10.0, 5.0, 2.0), "thinner rectangles: a closer fit of the elliptic kernel, more look-ups"),
+        Quality("subdivision", (1, 3, 5), "finer micro-subdivision of non-planar kernels: fewer wrong lit kernels, more look-ups"),
+        Quality("level", (0, 1, 2), "LevelX rasterization: the ellipse's sides cut finer, more look-ups"),
+    )
+    tolerance = Tolerance(mae=0.01, mae_penumbra=0.08)
 
-    def add_passes(self, ctx, light) -> str:
+    def add_passes(self, ctx, light):
         p = self.params
         gbuf = ctx.gbuffer()
         depth = ctx.light_depth(light, size=p.shadow_map_size, soft=True)
-        label = ctx.label(light)
         out = ctx.visibility_key(light)
-        bkey, skey = f"essm_basis[{label}]@{p.shadow_map_size}", f"essm_sat[{label}]@{p.shadow_map_size}"
+        # the basis and its SAT depend on the storage, not on how the kernel is shaded: instances
+        # that differ only in H, level, subdivision, epsilon or bias share them
+        bkey = ctx.shared_key("essm_basis", light, "sat", "mu", "c", "depth_range", "tile")
+        skey = ctx.shared_key("essm_sat", light, "sat", "mu", "c", "depth_range", "tile", "build", "reads")
         k = light_kernel(light)
 
         def run_basis(res):
             b = make_basis(res[depth], storage=p.sat, mu=p.mu, c=p.c, mode=p.depth_range, scene=ctx.scene, device=ctx.device,
                            pyramid=p.sat == "tiles" and p.tile == 0)
-            ctx.counters[f"essm[{label}].z_range"] = [b.zmin, b.zmax]
-            ctx.counters[f"essm[{label}].c_normalised"] = b.c
-            ctx.counters[f"essm[{label}].c_per_depth_unit"] = b.c / (b.zmax - b.zmin)
             return {bkey: b}
 
         def run_sat(res):
             b = res[bkey]
             sat = build_sat(b.basis, storage=p.sat, mu=p.mu, build=p.build, reads=p.reads, tile=p.tile or None, device=ctx.device,
                             pyramid=b.pyramid if len(b.pyramid) > 1 else None)
-            ctx.counters[f"essm[{label}].sat"] = {"storage": sat.storage, "tile": sat.tile, "tiles_per_side": sat.tiles_per_side,
-                                                  "build": sat.build, "passes": sat.passes, "bytes": sat.memory_bytes(), **sat.tile_test}
             return {skey: sat}
 
         def run_shadow(res):
@@ -569,16 +544,20 @@ class ESSM(Technique):
             vis = wp.empty(n, dtype=float, device=ctx.device)
             looks = wp.empty(n, dtype=wp.int32, device=ctx.device)
             fb = wp.empty(n, dtype=wp.int32, device=ctx.device)
-            launch_chunked(essm_shade, n,
-                           inputs=[dm.view.gpu(), k, consts_for(b, sat, p), sat.data, dm.depth, gb.pos, gb.nrm, gb.prim, gb.width, gb.height],
+            launch_chunked(essm_shade, n, inputs=[dm.view.gpu(), k, consts_for(b, sat, p), sat.data, dm.depth, gb.gpu()],
                            outputs=[vis, looks, fb], device=ctx.device, min_chunk=64)
             lk = looks.numpy()
             hit = gb.prim.numpy() >= 0
-            ctx.counters[f"essm[{label}].lookups_per_sample"] = float(lk[hit].mean()) if hit.any() else 0.0
-            ctx.counters[f"essm[{label}].pcf_fallbacks"] = int(fb.numpy().sum())
+            c = ctx.counters(light)
+            c["z_range"] = [b.zmin, b.zmax]
+            c["c_normalised"] = b.c
+            c["c_per_depth_unit"] = b.c / (b.zmax - b.zmin)
+            c["sat"] = {"storage": sat.storage, "tile": sat.tile, "tiles_per_side": sat.tiles_per_side, "build": sat.build,
+                        "passes": sat.passes, "bytes": sat.memory_bytes(), **sat.tile_test}
+            c["lookups_per_sample"] = float(lk[hit].mean()) if hit.any() else 0.0
+            c["pcf_fallbacks"] = int(fb.numpy().sum())
             return {out: ctx.visibility(vis)}
 
-        ctx.add_pass(bkey, inputs=(depth,), outputs=(bkey,), run=run_basis)
-        ctx.add_pass(skey, inputs=(bkey,), outputs=(skey,), run=run_sat)
-        ctx.add_pass(f"essm_shadow[{label}]", inputs=(gbuf, depth, bkey, skey), outputs=(out,), run=run_shadow)
-        return out
+        ctx.add_pass(str(bkey), inputs=(depth,), outputs=(bkey,), run=run_basis, stage="basis", light=light)
+        ctx.add_pass(str(skey), inputs=(bkey,), outputs=(skey,), run=run_sat, stage="sat", light=light)
+        return ctx.add_pass(ctx.pass_name("essm_shadow", light), inputs=(gbuf, depth, bkey, skey), outputs=(out,), run=run_shadow, stage="shadow", light=light)

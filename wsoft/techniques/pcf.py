@@ -6,16 +6,6 @@ fraction of taps where the sample is not behind the stored depth. With ``receive
 sample's depth at each tap is that of its tangent plane at the tap's texel centre (the
 receiver-plane depth bias), so wide kernels do not shadow sloped receivers; otherwise a
 slope-scaled bias as in ``hard`` is used.
-
-| parameter | type | default | meaning |
-|---|---|---|---|
-| shadow_map_size | int | 1024 | texels per side of the depth map |
-| radius | float | 2.0 | kernel half-width in texels |
-| taps | int | 16 | depth comparisons per sample (a perfect square for the grid pattern) |
-| pattern | str | grid | grid (square kernel) or poisson (disk kernel) |
-| bias | float | 1e-4 | constant depth bias, fraction of the scene's bounding diagonal |
-| receiver_plane | bool | true | receiver-plane depth at each tap (else slope-scaled bias) |
-| slope_bias | float | 1.5 | slope-scaled bias in texels when ``receiver_plane`` is off |
 """
 
 from __future__ import annotations
@@ -29,26 +19,26 @@ from wsoft.accel.filters import pcf_visibility, taps_on
 from wsoft.lightspace.light import LightGPU, receiver_bias
 from wsoft.lightspace.view import ViewGPU, in_front_of_light, map_coords, texel_size, view_dir, view_of
 from wsoft.parallel import launch_chunked
-from wsoft.techniques.base import Technique, check, param
+from wsoft.raster.gbuffer import GBufferGPU, gb_covered
+from wsoft.params import check_ranges
+from wsoft.techniques.base import Quality, Technique, Tolerance, check, param
 
 
 @dataclass(frozen=True)
 class PCFParams:
-    shadow_map_size: int = param(1024, "texels per side of the light depth map (256..8192)")
-    radius: float = param(2.0, "kernel half-width in texels")
-    taps: int = param(16, "depth comparisons per sample (a perfect square for the grid pattern)")
+    shadow_map_size: int = param(1024, "texels per side of the light depth map", range=(256, 8192))
+    radius: float = param(2.0, "kernel half-width in texels", range=(0.0, 512.0))
+    taps: int = param(16, "depth comparisons per sample (a perfect square for the grid pattern)", range=(1, 1024))
     pattern: str = param("grid", "tap pattern: grid (square kernel) or poisson (disk kernel)")
-    bias: float = param(1e-4, "constant depth bias as a fraction of the scene's bounding diagonal")
+    bias: float = param(1e-4, "constant depth bias as a fraction of the scene's bounding diagonal", range=(0.0, 0.1))
     receiver_plane: bool = param(True, "compare against the receiver's tangent plane at each tap (receiver-plane bias)")
-    slope_bias: float = param(1.5, "slope-scaled bias in texels, used when receiver_plane is off")
+    slope_bias: float = param(1.5, "slope-scaled bias in texels, used when receiver_plane is off", range=(0.0, 64.0))
 
     def __post_init__(self):
+        check_ranges(self)
         check(256 <= self.shadow_map_size <= 8192, f"shadow_map_size {self.shadow_map_size} out of range [256, 8192]")
-        check(0.0 <= self.radius <= 512.0, "radius must be in [0, 512] texels")
-        check(1 <= self.taps <= 1024, "taps must be in [1, 1024]")
         check(self.pattern in ("grid", "poisson"), f"pattern {self.pattern!r} is not grid or poisson")
         check(self.pattern != "grid" or math.isqrt(self.taps) ** 2 == self.taps, f"the grid pattern needs a square tap count, not {self.taps}")
-        check(self.bias >= 0.0 and self.slope_bias >= 0.0, "biases must be >= 0")
 
 
 @wp.kernel
@@ -57,9 +47,7 @@ def shade_pcf(
     lv: ViewGPU,
     L: LightGPU,
     depth: wp.array2d[float],
-    pos: wp.array[wp.vec3],
-    nrm: wp.array[wp.vec3],
-    prim: wp.array[wp.int32],
+    gb: GBufferGPU,
     taps: wp.array[wp.vec2],
     ntaps: int,
     disk: int,
@@ -71,19 +59,19 @@ def shade_pcf(
     vis: wp.array[float],
 ):
     i = wp.tid() + offset
-    if prim[i] < 0:
+    if not gb_covered(gb, i):
         vis[i] = 1.0
         return
-    p = pos[i]
+    p = gb.pos[i]
     pv = view_of(lv, p)
     if not in_front_of_light(lv, pv):
         vis[i] = 1.0
         return
     b = bias
     if use_plane == 0:
-        b = receiver_bias(lv, L, p, nrm[i], pv[2], bias, slope_texels)
+        b = receiver_bias(lv, L, p, gb.nrm[i], pv[2], bias, slope_texels)
     half = texel_size(lv) * radius
-    vis[i] = pcf_visibility(lv, depth, pv, view_dir(lv, nrm[i]), map_coords(lv, pv), half, disk, taps, ntaps, b, use_plane)
+    vis[i] = pcf_visibility(lv, depth, pv, view_dir(lv, gb.nrm[i]), map_coords(lv, pv), half, disk, taps, ntaps, b, use_plane)
 
 
 class PCF(Technique):
@@ -94,8 +82,11 @@ class PCF(Technique):
     Params = PCFParams
     reads = ("gbuffer", "light_depth")
     writes = ("visibility",)
+    quality = (Quality("taps", (4, 16, 64), "more taps: a smoother filter, linearly more time"),)
+    # a fixed 2-texel kernel: nearly as hard as `hard`
+    tolerance = Tolerance(mae=0.06, mae_penumbra=0.35)
 
-    def add_passes(self, ctx, light) -> str:
+    def add_passes(self, ctx, light):
         p = self.params
         gbuf = ctx.gbuffer()
         depth = ctx.light_depth(light, size=p.shadow_map_size)
@@ -109,11 +100,10 @@ class PCF(Technique):
             vis = wp.empty(gb.count, dtype=float, device=ctx.device)
             launch_chunked(
                 shade_pcf, gb.count,
-                inputs=[dm.view.gpu(), L, dm.depth, gb.pos, gb.nrm, gb.prim, taps.array, taps.count, int(p.pattern == "poisson"),
+                inputs=[dm.view.gpu(), L, dm.depth, gb.gpu(), taps.array, taps.count, int(p.pattern == "poisson"),
                         p.radius, bias, int(p.receiver_plane), p.slope_bias],
                 outputs=[vis], device=ctx.device, min_chunk=256,
             )
             return {out: ctx.visibility(vis)}
 
-        ctx.add_pass(f"pcf[{ctx.label(light)}]", inputs=(gbuf, depth), outputs=(out,), run=run)
-        return out
+        return ctx.add_pass(ctx.pass_name("pcf", light), inputs=(gbuf, depth), outputs=(out,), run=run, light=light)

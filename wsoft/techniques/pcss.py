@@ -13,16 +13,6 @@
 Exact for a planar occluder parallel to a planar receiver and light (the test scene
 ``box_plane``); it underestimates the umbra when blockers at different depths overlap (the
 average depth is too near), which a test pins.
-
-| parameter | type | default | meaning |
-|---|---|---|---|
-| shadow_map_size | int | 1024 | texels per side of the depth map |
-| blocker_samples | int | 16 | taps of the blocker search |
-| filter_samples | int | 36 | taps of the filter |
-| pattern | str | grid | grid or poisson |
-| bias | float | 1e-4 | constant depth bias, fraction of the scene's bounding diagonal |
-| min_radius | float | 1.0 | smallest filter half-width in texels |
-| max_radius | float | 256.0 | largest search/filter half-width in texels |
 """
 
 from __future__ import annotations
@@ -49,28 +39,29 @@ from wsoft.lightspace.view import (
     view_of,
 )
 from wsoft.parallel import launch_chunked
-from wsoft.techniques.base import Technique, check, param
+from wsoft.raster.gbuffer import GBufferGPU, gb_covered
+from wsoft.params import check_ranges
+from wsoft.techniques.base import Quality, Technique, Tolerance, check, param
 
 
 @dataclass(frozen=True)
 class PCSSParams:
-    shadow_map_size: int = param(1024, "texels per side of the light depth map (256..8192)")
-    blocker_samples: int = param(16, "taps of the blocker search")
-    filter_samples: int = param(36, "taps of the percentage-closer filter")
+    shadow_map_size: int = param(1024, "texels per side of the light depth map", range=(256, 8192))
+    blocker_samples: int = param(16, "taps of the blocker search", range=(1, 1024))
+    filter_samples: int = param(36, "taps of the percentage-closer filter", range=(1, 4096))
     pattern: str = param("grid", "tap pattern: grid (perfect-square counts) or poisson")
-    bias: float = param(1e-4, "constant depth bias as a fraction of the scene's bounding diagonal")
-    min_radius: float = param(1.0, "smallest filter half-width in texels")
-    max_radius: float = param(256.0, "largest blocker-search and filter half-width in texels")
+    bias: float = param(1e-4, "constant depth bias as a fraction of the scene's bounding diagonal", range=(0.0, 0.1))
+    min_radius: float = param(1.0, "smallest filter half-width in texels", range=(0.0, 512.0))
+    max_radius: float = param(256.0, "largest blocker-search and filter half-width in texels", range=(0.0, 4096.0))
 
     def __post_init__(self):
+        check_ranges(self)
         check(256 <= self.shadow_map_size <= 8192, f"shadow_map_size {self.shadow_map_size} out of range [256, 8192]")
-        check(1 <= self.blocker_samples <= 1024 and 1 <= self.filter_samples <= 4096, "sample counts out of range")
         check(self.pattern in ("grid", "poisson"), f"pattern {self.pattern!r} is not grid or poisson")
         if self.pattern == "grid":
             for n in (self.blocker_samples, self.filter_samples):
                 check(math.isqrt(n) ** 2 == n, f"the grid pattern needs square sample counts, not {n}")
-        check(self.bias >= 0.0, "bias must be >= 0")
-        check(0.0 <= self.min_radius <= self.max_radius, "need 0 <= min_radius <= max_radius")
+        check(self.min_radius <= self.max_radius, "need min_radius <= max_radius")
 
 
 @wp.func
@@ -85,9 +76,7 @@ def shade_pcss(
     lv: ViewGPU,
     k: LightKernel,
     depth: wp.array2d[float],
-    pos: wp.array[wp.vec3],
-    nrm: wp.array[wp.vec3],
-    prim: wp.array[wp.int32],
+    gb: GBufferGPU,
     btaps: wp.array[wp.vec2],
     nb: int,
     ftaps: wp.array[wp.vec2],
@@ -102,14 +91,14 @@ def shade_pcss(
 ):
     i = wp.tid() + offset
     blockers[i] = 0.0
-    if prim[i] < 0:
+    if not gb_covered(gb, i):
         vis[i] = 1.0
         return
-    pv = view_of(lv, pos[i])
+    pv = view_of(lv, gb.pos[i])
     if not in_front_of_light(lv, pv):
         vis[i] = 1.0
         return
-    nv = view_dir(lv, nrm[i])
+    nv = view_dir(lv, gb.nrm[i])
     m0 = map_coords(lv, pv)
     # 1. blocker search over the region where any caster could cover part of the light
     search = clamp_half(lv, spread(lv, k, z_caster_min, pv[2]), 1.0, max_radius)
@@ -145,33 +134,34 @@ class PCSS(Technique):
     reads = ("gbuffer", "light_depth")
     writes = ("visibility",)
 
-    def add_passes(self, ctx, light) -> str:
+    quality = (Quality("filter_samples", (16, 36, 100), "more filter taps: smoother penumbrae, linearly more time"),)
+    tolerance = Tolerance(mae=0.003, mae_penumbra=0.06)
+
+    def add_passes(self, ctx, light):
         p = self.params
         gbuf = ctx.gbuffer()
         depth = ctx.light_depth(light, size=p.shadow_map_size, soft=True)
         out = ctx.visibility_key(light)
         k = light_kernel(light)
         bias = p.bias * ctx.scene.diagonal
-        label = ctx.label(light)
 
         def run(res):
             gb, dm = res[gbuf], res[depth]
             d = dm.depth.numpy()
             covered = d[d < DEPTH_CLEAR]
             z_min = float(covered.min()) if covered.size else float(dm.view.far)
-            ctx.counters[f"pcss[{label}].nearest_caster_depth"] = z_min
+            ctx.counters(light)["nearest_caster_depth"] = z_min
             bt = taps_on(ctx.device, p.pattern, p.blocker_samples)
             ft = taps_on(ctx.device, p.pattern, p.filter_samples)
             vis = wp.empty(gb.count, dtype=float, device=ctx.device)
             blk = wp.empty(gb.count, dtype=float, device=ctx.device)
             launch_chunked(
                 shade_pcss, gb.count,
-                inputs=[dm.view.gpu(), k, dm.depth, gb.pos, gb.nrm, gb.prim, bt.array, bt.count, ft.array, ft.count,
+                inputs=[dm.view.gpu(), k, dm.depth, gb.gpu(), bt.array, bt.count, ft.array, ft.count,
                         z_min, bias, p.min_radius, p.max_radius],
                 outputs=[vis, blk], device=ctx.device, min_chunk=256,
             )
-            ctx.counters[f"pcss[{label}].samples_with_blockers"] = int(np.count_nonzero(blk.numpy()))
+            ctx.counters(light)["samples_with_blockers"] = int(np.count_nonzero(blk.numpy()))
             return {out: ctx.visibility(vis)}
 
-        ctx.add_pass(f"pcss[{label}]", inputs=(gbuf, depth), outputs=(out,), run=run)
-        return out
+        return ctx.add_pass(ctx.pass_name("pcss", light), inputs=(gbuf, depth), outputs=(out,), run=run, light=light)

@@ -19,18 +19,6 @@ in 8 bits per component, as the paper suggests is feasible.
 
 Known failure (pinned by a test): a receiver between two casters along a light ray gets a
 reconstructed depth averaged behind it and escapes the shadow.
-
-| parameter | type | default | meaning |
-|---|---|---|---|
-| shadow_map_size | int | 1024 | texels per side of the map |
-| filter | str | gaussian | box or gaussian |
-| radius | int | 4 | blur radius in texels |
-| far_bound | bool | true | stop shadows at the first receiver behind the casters |
-| transparency | bool | true | shadow with the casters' opacity instead of the mask |
-| bits | int | 32 | storage of the filtered map: 32 (float) or 8 |
-| grid | int | 32 | cells per side of the caster grid (0: blur the whole map, no receiver rejection) |
-| casters | str | auto | dynamic, all, or auto (dynamic if the scene has any) |
-| bias | float | 1e-4 | depth bias, fraction of the scene's bounding diagonal (8 bits: at least 1.5 steps) |
 """
 
 from __future__ import annotations
@@ -44,30 +32,31 @@ from wsoft.accel.blur import blur_vec4_within
 from wsoft.accel.grid import build_grid
 from wsoft.lightspace.view import DEPTH_CLEAR, ViewGPU, bilinear, in_front_of_light, inside_map, map_coords, normalised_depth, view_of, window_to_texel
 from wsoft.parallel import launch_chunked
+from wsoft.raster.gbuffer import GBufferGPU, gb_covered
 from wsoft.raster.rasterizer import rasterize
-from wsoft.techniques.base import Technique, check, param
+from wsoft.params import check_ranges
+from wsoft.techniques.base import Quality, Technique, Tolerance, check, param
 
 
 @dataclass(frozen=True)
 class SalzmanParams:
-    shadow_map_size: int = param(1024, "texels per side of the map (256..8192)")
+    shadow_map_size: int = param(1024, "texels per side of the map", range=(256, 8192))
     filter: str = param("gaussian", "blur: box or gaussian")
-    radius: int = param(4, "blur radius in texels")
+    radius: int = param(4, "blur radius in texels", range=(0, 64))
     far_bound: bool = param(True, "stop the shadow at the first receiver behind the casters")
     transparency: bool = param(True, "shadow with the casters' opacity instead of the mask")
-    bits: int = param(32, "storage of the filtered map: 32 (float) or 8 bits per component")
-    grid: int = param(32, "cells per side of the caster grid (0: blur everything, no rejection)")
+    bits: int = param(32, "storage of the filtered map: 32 (float) or 8 bits per component", range=(8, 32))
+    grid: int = param(32, "cells per side of the caster grid (0: blur everything, no rejection)", range=(0, 1024))
     casters: str = param("auto", "which prims cast: dynamic, all, or auto (dynamic if any)")
-    bias: float = param(1e-4, "depth bias as a fraction of the scene's bounding diagonal")
+    bias: float = param(1e-4, "depth bias as a fraction of the scene's bounding diagonal", range=(0.0, 0.1))
 
     def __post_init__(self):
+        check_ranges(self)
         check(256 <= self.shadow_map_size <= 8192, f"shadow_map_size {self.shadow_map_size} out of range [256, 8192]")
         check(self.filter in ("box", "gaussian"), f"filter {self.filter!r} is not box or gaussian")
-        check(0 <= self.radius <= 64, "radius must be in [0, 64] texels")
         check(self.bits in (8, 32), "bits must be 8 or 32")
         check(self.grid == 0 or 2 <= self.grid <= 1024, "grid must be 0 or in [2, 1024]")
         check(self.casters in ("auto", "dynamic", "all"), f"casters {self.casters!r} is not auto, dynamic or all")
-        check(self.bias >= 0.0, "bias must be >= 0")
 
 
 @wp.func
@@ -133,8 +122,7 @@ def shade_salzman(
     gsize: int,
     znear: float,
     zfar: float,
-    pos: wp.array[wp.vec3],
-    prim: wp.array[wp.int32],
+    gb: GBufferGPU,
     bias: float,
     far_bound: int,
     transparency: int,
@@ -145,9 +133,9 @@ def shade_salzman(
     i = wp.tid() + offset
     vis[i] = 1.0
     rejected[i] = 0
-    if prim[i] < 0:
+    if not gb_covered(gb, i):
         return
-    pv = view_of(lv, pos[i])
+    pv = view_of(lv, gb.pos[i])
     if not in_front_of_light(lv, pv):
         return
     m = map_coords(lv, pv)
@@ -172,6 +160,14 @@ class Salzman(Technique):
     Params = SalzmanParams
     reads = ("gbuffer", "scene.triangles", "light_view")
     writes = ("visibility",)
+    quality = (Quality("radius", (2, 4, 8), "a wider blur: wider (uniform) penumbrae, more time"),)
+    # one blur width for every penumbra: the parallel-rectangle penumbra is matched only roughly
+    tolerance = Tolerance(mae=0.06, mae_penumbra=0.35)
+
+    def supports(self, scene, light) -> str | None:
+        if self.params.casters == "dynamic" and (scene.tri_dynamic is None or not scene.tri_dynamic.any()):
+            return "casters=dynamic but the scene has no dynamic prims (nothing would cast a shadow)"
+        return None
 
     def caster_triangles(self, scene) -> tuple[np.ndarray, str]:
         dyn = scene.tri_dynamic if scene.tri_dynamic is not None else np.zeros(scene.triangle_count, bool)
@@ -181,14 +177,14 @@ class Salzman(Technique):
         sel = dyn if mode == "dynamic" else np.ones(scene.triangle_count, bool)
         return np.flatnonzero(sel).astype(np.int32), mode
 
-    def add_passes(self, ctx, light) -> str:
+    def add_passes(self, ctx, light):
         p = self.params
         scene = ctx.scene
         gbuf = ctx.gbuffer()
         sk = ctx.scene_arrays()
         view_key = ctx.light_view(light, p.shadow_map_size, soft=True)
-        label = ctx.label(light)
-        map_key = f"salzman_map[{label}]@{p.shadow_map_size}"
+        map_key = ctx.key("salzman_map", light, variant=f"@{p.shadow_map_size}")
+        counters = ctx.counters(light)
         out = ctx.visibility_key(light)
         casters, mode = self.caster_triangles(scene)
         receivers = np.setdiff1d(np.arange(scene.triangle_count, dtype=np.int32), casters) if mode == "dynamic" else np.arange(scene.triangle_count, dtype=np.int32)
@@ -234,13 +230,13 @@ class Salzman(Technique):
                 grid = build_grid(squares, view.width, view.height, gsize)
                 texels = grid.texels(view.width, view.height)
                 cells = grid.marked().astype(np.int32).ravel()
-                ctx.counters[f"salzman[{label}].grid_rectangles"] = len(grid.rects)
+                counters["grid_rectangles"] = len(grid.rects)
             else:
                 texels = np.arange(n, dtype=np.int32)
                 cells = np.ones(1, np.int32)
-            ctx.counters[f"salzman[{label}].fraction_blurred"] = len(texels) / n
-            ctx.counters[f"salzman[{label}].casters"] = mode
-            ctx.counters[f"salzman[{label}].caster_triangles"] = int(len(casters))
+            counters["fraction_blurred"] = len(texels) / n
+            counters["casters"] = mode
+            counters["caster_triangles"] = int(len(casters))
             blurred = blur_vec4_within(smap, texels, p.filter, p.radius)
             if p.bits == 8:
                 launch_chunked(quantize8, n, inputs=[], outputs=[blurred.reshape(-1)], device=dev, min_chunk=1 << 15)
@@ -255,16 +251,15 @@ class Salzman(Technique):
             rej = wp.empty(gb.count, dtype=wp.int32, device=ctx.device)
             launch_chunked(
                 shade_salzman, gb.count,
-                inputs=[view.gpu(), sm.map, sm.cells, sm.grid, sm.znear, sm.zfar, gb.pos, gb.prim, bias, int(p.far_bound), int(p.transparency)],
+                inputs=[view.gpu(), sm.map, sm.cells, sm.grid, sm.znear, sm.zfar, gb.gpu(), bias, int(p.far_bound), int(p.transparency)],
                 outputs=[vis, rej], device=ctx.device,
             )
             covered = int((gb.prim.numpy() >= 0).sum())
-            ctx.counters[f"salzman[{label}].receivers_rejected_by_grid"] = int(rej.numpy().sum()) / max(covered, 1)
+            counters["receivers_rejected_by_grid"] = int(rej.numpy().sum()) / max(covered, 1)
             return {out: ctx.visibility(vis)}
 
-        ctx.add_pass(map_key, inputs=(sk, view_key), outputs=(map_key,), run=build)
-        ctx.add_pass(f"salzman[{label}]", inputs=(gbuf, view_key, map_key), outputs=(out,), run=run)
-        return out
+        ctx.add_pass(ctx.pass_name("salzman_map", light, f"@{p.shadow_map_size}"), inputs=(sk, view_key), outputs=(map_key,), run=build, stage="map", light=light)
+        return ctx.add_pass(ctx.pass_name("salzman", light), inputs=(gbuf, view_key, map_key), outputs=(out,), run=run, stage="shadow", light=light)
 
 
 @dataclass

@@ -8,15 +8,6 @@ light-bleeding reduction maps p through ``(p - amount) / (1 - amount)``, clamped
 
 Known failure (pinned by a test): with two occluders stacked over a receiver, the variance
 of their two depths lets light "bleed" into the lower occluder's umbra.
-
-| parameter | type | default | meaning |
-|---|---|---|---|
-| shadow_map_size | int | 1024 | texels per side of the depth map |
-| filter | str | gaussian | box or gaussian prefilter |
-| radius | int | 2 | prefilter radius in texels (0: no prefilter) |
-| min_variance | float | 1e-6 | smallest variance, in normalised depth squared |
-| bleed_reduction | float | 0.2 | light-bleeding reduction amount in [0, 1) |
-| bias | float | 1e-4 | depth bias, fraction of the scene's bounding diagonal |
 """
 
 from __future__ import annotations
@@ -28,25 +19,24 @@ import warp as wp
 from wsoft.accel.blur import blur_moments
 from wsoft.lightspace.view import ViewGPU, bilinear, in_front_of_light, inside_map, map_coords, normalised_depth, view_of, window_to_texel
 from wsoft.parallel import launch_chunked
-from wsoft.techniques.base import Technique, check, param
+from wsoft.raster.gbuffer import GBufferGPU, gb_covered
+from wsoft.params import check_ranges
+from wsoft.techniques.base import Quality, Technique, Tolerance, check, param
 
 
 @dataclass(frozen=True)
 class VSMParams:
-    shadow_map_size: int = param(1024, "texels per side of the light depth map (256..8192)")
+    shadow_map_size: int = param(1024, "texels per side of the light depth map", range=(256, 8192))
     filter: str = param("gaussian", "prefilter: box or gaussian")
-    radius: int = param(2, "prefilter radius in texels (0: none)")
-    min_variance: float = param(1e-6, "smallest variance, in normalised depth squared")
-    bleed_reduction: float = param(0.2, "light-bleeding reduction amount in [0, 1)")
-    bias: float = param(1e-4, "depth bias as a fraction of the scene's bounding diagonal")
+    radius: int = param(2, "prefilter radius in texels (0: none)", range=(0, 64))
+    min_variance: float = param(1e-6, "smallest variance, in normalised depth squared", range=(0.0, 0.25))
+    bleed_reduction: float = param(0.2, "light-bleeding reduction amount", range=(0.0, 0.99))
+    bias: float = param(1e-4, "depth bias as a fraction of the scene's bounding diagonal", range=(0.0, 0.1))
 
     def __post_init__(self):
+        check_ranges(self)
         check(256 <= self.shadow_map_size <= 8192, f"shadow_map_size {self.shadow_map_size} out of range [256, 8192]")
         check(self.filter in ("box", "gaussian"), f"filter {self.filter!r} is not box or gaussian")
-        check(0 <= self.radius <= 64, "radius must be in [0, 64] texels")
-        check(self.min_variance >= 0.0, "min_variance must be >= 0")
-        check(0.0 <= self.bleed_reduction < 1.0, "bleed_reduction must be in [0, 1)")
-        check(self.bias >= 0.0, "bias must be >= 0")
 
 
 @wp.kernel
@@ -68,8 +58,7 @@ def shade_vsm(
     offset: int,
     lv: ViewGPU,
     mom: wp.array2d[wp.vec2],
-    pos: wp.array[wp.vec3],
-    prim: wp.array[wp.int32],
+    gb: GBufferGPU,
     bias: float,
     min_variance: float,
     bleed: float,
@@ -77,10 +66,10 @@ def shade_vsm(
     vis: wp.array[float],
 ):
     i = wp.tid() + offset
-    if prim[i] < 0:
+    if not gb_covered(gb, i):
         vis[i] = 1.0
         return
-    pv = view_of(lv, pos[i])
+    pv = view_of(lv, gb.pos[i])
     if not in_front_of_light(lv, pv):
         vis[i] = 1.0
         return
@@ -109,12 +98,14 @@ class VSM(Technique):
     reads = ("gbuffer", "light_depth")
     writes = ("visibility",)
 
-    def add_passes(self, ctx, light) -> str:
+    quality = (Quality("radius", (1, 2, 4), "a wider prefilter: softer edges (not wider penumbrae), a little more time"),)
+    tolerance = Tolerance(mae=0.06, mae_penumbra=0.35)
+
+    def add_passes(self, ctx, light):
         p = self.params
         gbuf = ctx.gbuffer()
         depth = ctx.light_depth(light, size=p.shadow_map_size, soft=True)
-        label = ctx.label(light)
-        moments = f"vsm_moments[{label}]@{p.shadow_map_size}"
+        moments = ctx.shared_key("vsm_moments", light, "filter", "radius")
         out = ctx.visibility_key(light)
 
         def build(res):
@@ -128,9 +119,8 @@ class VSM(Technique):
             gb, dm = res[gbuf], res[depth]
             bias = p.bias * ctx.scene.diagonal / max(dm.view.far - dm.view.near, 1e-12)
             vis = wp.empty(gb.count, dtype=float, device=ctx.device)
-            launch_chunked(shade_vsm, gb.count, inputs=[dm.view.gpu(), res[moments], gb.pos, gb.prim, bias, p.min_variance, p.bleed_reduction], outputs=[vis], device=ctx.device)
+            launch_chunked(shade_vsm, gb.count, inputs=[dm.view.gpu(), res[moments], gb.gpu(), bias, p.min_variance, p.bleed_reduction], outputs=[vis], device=ctx.device)
             return {out: ctx.visibility(vis)}
 
-        ctx.add_pass(moments, inputs=(depth,), outputs=(moments,), run=build)
-        ctx.add_pass(f"vsm[{label}]", inputs=(gbuf, depth, moments), outputs=(out,), run=run)
-        return out
+        ctx.add_pass(str(moments), inputs=(depth,), outputs=(moments,), run=build, stage="moments", light=light)
+        return ctx.add_pass(ctx.pass_name("vsm", light), inputs=(gbuf, depth, moments), outputs=(out,), run=run, stage="shadow", light=light)

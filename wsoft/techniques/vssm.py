@@ -15,19 +15,6 @@ and its depth range (the map's min/max pyramid).
    by their occluded fractions.
 
 Known failure: light bleeding with stacked occluders (``bleed`` reduces it).
-
-| parameter | type | default | meaning |
-|---|---|---|---|
-| shadow_map_size | int | 1024 | texels per side (power of two, 256..8192) |
-| sat | str | float32 | float32, uint32 or tiles |
-| build | str | doubling | doubling or scan |
-| mu | int | 20 | precision bits of the integer SATs |
-| subdivision | int | 5 | n x n subdivision of non-planar kernels (1: off) |
-| min_variance | float | 1e-6 | variance floor (normalised depth²) |
-| bleed | float | 0.0 | light-bleeding reduction: p -> clamp((p − b)/(1 − b)) |
-| bias | float | 0.002 | depth bias on the normalised depth |
-| min_radius | float | 0.5 | smallest penumbra half-width, texels |
-| max_radius | float | 512 | largest search / penumbra half-width, texels |
 """
 
 from __future__ import annotations
@@ -41,27 +28,28 @@ from wsoft.accel.pyramid import effective_depth_range
 from wsoft.accel.sat import box_area, build_sat, check_sat_params, mean_pyramid, sat_box
 from wsoft.lightspace.light import LightKernel, light_kernel, spread_texels
 from wsoft.lightspace.view import ViewGPU, normalised_depth, receiver_texel
+from wsoft.params import check_ranges
 from wsoft.parallel import launch_chunked
-from wsoft.techniques.base import Technique, check, param
+from wsoft.raster.gbuffer import GBufferGPU, gb_covered
+from wsoft.techniques.base import Quality, Technique, Tolerance, check, param
 
 
 @dataclass(frozen=True)
 class VSSMParams:
-    shadow_map_size: int = param(1024, "texels per side of the light depth map (a power of two, 256..8192)")
+    shadow_map_size: int = param(1024, "texels per side of the light depth map (a power of two)", range=(256, 8192))
     sat: str = param("float32", "summed-area table: float32 (full), uint32 (full) or tiles (uint32 tile grid)")
     build: str = param("doubling", "SAT build: doubling or scan")
-    mu: int = param(20, "precision bits of the integer SATs")
-    subdivision: int = param(5, "n x n subdivision of non-planar kernels (1: off)")
-    min_variance: float = param(1e-6, "variance floor on the normalised depth")
-    bleed: float = param(0.0, "light-bleeding reduction amount in [0, 1)")
-    bias: float = param(0.002, "depth bias on the normalised depth [0, 1]")
-    min_radius: float = param(0.5, "smallest penumbra half-width in texels")
-    max_radius: float = param(512.0, "largest search and penumbra half-width in texels")
+    mu: int = param(20, "precision bits of the integer SATs", range=(8, 31))
+    subdivision: int = param(5, "n x n subdivision of non-planar kernels (1: off)", range=(1, 8))
+    min_variance: float = param(1e-6, "variance floor on the normalised depth", range=(0.0, 0.25))
+    bleed: float = param(0.0, "light-bleeding reduction amount", range=(0.0, 0.99))
+    bias: float = param(0.002, "depth bias on the normalised depth [0, 1]", range=(0.0, 0.5))
+    min_radius: float = param(0.5, "smallest penumbra half-width in texels", range=(0.01, 4096.0))
+    max_radius: float = param(512.0, "largest search and penumbra half-width in texels", range=(0.01, 4096.0))
 
     def __post_init__(self):
+        check_ranges(self)
         check_sat_params(self)
-        check(self.min_variance >= 0.0, "min_variance must be >= 0")
-        check(0.0 <= self.bleed < 1.0, "bleed must be in [0, 1)")
 
 
 @wp.struct
@@ -150,8 +138,7 @@ def vssm_shade(
     k: LightKernel,
     q: VSSMConsts,
     data: wp.array3d(dtype=Any),
-    pos: wp.array[wp.vec3],
-    prim: wp.array[wp.int32],
+    gb: GBufferGPU,
     # outputs
     vis: wp.array[float],
     looks: wp.array[wp.int32],
@@ -159,14 +146,14 @@ def vssm_shade(
     i = wp.tid() + offset
     vis[i] = 1.0
     looks[i] = 0
-    if prim[i] < 0:
+    if not gb_covered(gb, i):
         return
-    rt = receiver_texel(lv, pos[i])
+    rt = receiver_texel(lv, gb.pos[i])
     if rt[3] == 0.0:
         return
     tc = wp.vec2(rt[0], rt[1])
     d_lin = rt[2]
-    d = wp.clamp((d_lin - q.zmin) / q.zrange, 0.0, 1.0) - q.bias
+    d = normalised_depth(d_lin, q.zmin, q.zrange) - q.bias
     sh = spread_texels(lv, k, q.zmin, d_lin, 0.5, q.max_r)
     r = vregion(q, data, tc[0] - sh[0], tc[0] + sh[0], tc[1] - sh[1], tc[1] + sh[1], d)
     nl = r[2]
@@ -204,14 +191,16 @@ class VSSM(Technique):
     Params = VSSMParams
     reads = ("gbuffer", "light_depth")
     writes = ("visibility", "vssm_moments", "vssm_sat")
+    quality = (Quality("subdivision", (1, 3, 5), "finer subdivision of non-planar kernels: less light leaking, more look-ups"),)
+    tolerance = Tolerance(mae=0.01, mae_penumbra=0.08)
 
-    def add_passes(self, ctx, light) -> str:
+    def add_passes(self, ctx, light):
         p = self.params
         gbuf = ctx.gbuffer()
         depth = ctx.light_depth(light, size=p.shadow_map_size, soft=True)
-        label = ctx.label(light)
         out = ctx.visibility_key(light)
-        mkey, skey = f"vssm_moments[{label}]@{p.shadow_map_size}", f"vssm_sat[{label}]@{p.shadow_map_size}"
+        mkey = ctx.shared_key("vssm_moments", light, "sat")
+        skey = ctx.shared_key("vssm_sat", light, "sat", "mu", "build")
         k = light_kernel(light)
 
         def run_moments(res):
@@ -221,13 +210,11 @@ class VSSM(Technique):
             basis = wp.empty((2, n, n), dtype=float, device=ctx.device)
             launch_chunked(vssm_basis_kernel, n * n, inputs=[dm.depth, n, zmin, rng], outputs=[basis], device=ctx.device, min_chunk=4096)
             pyr = mean_pyramid(basis, ctx.device) if p.sat == "tiles" else [basis]
-            ctx.counters[f"vssm[{label}].z_range"] = [zmin, zmin + rng]
             return {mkey: Moments(basis, pyr, zmin, zmin + rng)}
 
         def run_sat(res):
             m = res[mkey]
             sat = build_sat(m.basis, storage=p.sat, mu=p.mu, build=p.build, device=ctx.device, pyramid=m.pyramid if len(m.pyramid) > 1 else None)
-            ctx.counters[f"vssm[{label}].sat"] = {"storage": sat.storage, "tile": sat.tile, "build": sat.build, "passes": sat.passes, "bytes": sat.memory_bytes()}
             return {skey: sat}
 
         def run_shadow(res):
@@ -239,13 +226,15 @@ class VSSM(Technique):
             q.min_r, q.max_r = p.min_radius, p.max_radius
             vis = wp.empty(gb.count, dtype=float, device=ctx.device)
             looks = wp.empty(gb.count, dtype=wp.int32, device=ctx.device)
-            launch_chunked(vssm_shade, gb.count, inputs=[dm.view.gpu(), k, q, sat.data, gb.pos, gb.prim], outputs=[vis, looks],
+            launch_chunked(vssm_shade, gb.count, inputs=[dm.view.gpu(), k, q, sat.data, gb.gpu()], outputs=[vis, looks],
                            device=ctx.device, min_chunk=64)
             hit = gb.prim.numpy() >= 0
-            ctx.counters[f"vssm[{label}].lookups_per_sample"] = float(looks.numpy()[hit].mean()) if hit.any() else 0.0
+            c = ctx.counters(light)
+            c["z_range"] = [m.zmin, m.zmax]
+            c["sat"] = {"storage": sat.storage, "tile": sat.tile, "build": sat.build, "passes": sat.passes, "bytes": sat.memory_bytes()}
+            c["lookups_per_sample"] = float(looks.numpy()[hit].mean()) if hit.any() else 0.0
             return {out: ctx.visibility(vis)}
 
-        ctx.add_pass(mkey, inputs=(depth,), outputs=(mkey,), run=run_moments)
-        ctx.add_pass(skey, inputs=(mkey,), outputs=(skey,), run=run_sat)
-        ctx.add_pass(f"vssm_shadow[{label}]", inputs=(gbuf, depth, mkey, skey), outputs=(out,), run=run_shadow)
-        return out
+        ctx.add_pass(str(mkey), inputs=(depth,), outputs=(mkey,), run=run_moments, stage="moments", light=light)
+        ctx.add_pass(str(skey), inputs=(mkey,), outputs=(skey,), run=run_sat, stage="sat", light=light)
+        return ctx.add_pass(ctx.pass_name("vssm_shadow", light), inputs=(gbuf, depth, mkey, skey), outputs=(out,), run=run_shadow, stage="shadow", light=light)

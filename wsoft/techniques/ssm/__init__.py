@@ -43,29 +43,6 @@ receivers), ``umbra_fraction``, ``lit_fraction``, ``occluders_mean`` and ``occlu
 ``levels_used`` (histogram: receivers per level, a blended receiver counts at both),
 ``structure_build_ms``, ``microrect_build_ms`` and ``memory_bytes`` per structure.
 
-| parameter | type | default | meaning |
-|---|---|---|---|
-| shadow_map_size | int | 1024 | texels per side (a power of two, 256..8192) |
-| occluder | str | micropatch | micropatch, microquad or microrect |
-| visibility | str | bitmask | bitmask (occlusion bitmask over light samples) or area (clamped sum) |
-| bitmask_size | int | 16 | light samples per side of the bitmask (8, 16 or 32) |
-| pattern | str | jittered | bitmask samples: regular, jittered or random |
-| structure | str | ysm | hsm, mssm or ysm |
-| ysm_size | int | 256 | texels per side of the YSM's MSSM part |
-| budget | float | 16 | b_mo, micro-occluders per axis (``inf``: level 0) |
-| budget_map | str | "" | "" (uniform), ``radial``, or an EXR of per-pixel b_mo |
-| budget_min | float | 5 | b_mo at the left/right borders with ``radial`` |
-| blend | bool | true | smooth LOQ and blend levels (false: ceil(l) alone) |
-| smooth_radius | int | 5 | half-width of the LOQ smoothing (5: 11 x 11; 0: off) |
-| depth_threshold | float | 0.05 | camera-depth jump (relative) that stops the smoothing |
-| refine | int | 4 | search-area refinement iterations |
-| overprecision | bool | true | grow the query region to the level's micro-occluder support |
-| gap_fill | bool | true | micropatches extended toward their left/bottom neighbours |
-| msaa | str | interpolate | interpolate, single or per_sample (with pixel_samples > 1) |
-| tau | float | 0.01 | camera-depth difference (relative) below which samples share the pixel's visibility |
-| bias | float | 2e-4 | depth bias against the receiver's tangent plane, fraction of the scene diagonal |
-| seed | int | 7 | seed of the jittered / random bitmask samples |
-
 Example::
 
     frame = wsoft.render(scene, "ssm", width=640, height=480, occluder="microrect",
@@ -94,7 +71,8 @@ from wsoft.lightspace.light import light_kernel
 from wsoft.lightspace.samples import SamplePattern
 from wsoft.parallel import launch_chunked
 from wsoft.scene.types import LIGHT_DISTANT, LIGHT_POINT, LIGHT_RECT
-from wsoft.techniques.base import Technique, check, param
+from wsoft.params import check_ranges
+from wsoft.techniques.base import Quality, Technique, Tolerance, check, param
 from wsoft.techniques.ssm.kernels import (
     OCC_MICROPATCH,
     OCC_MICROQUAD,
@@ -118,48 +96,43 @@ MSAA_MODES = ("interpolate", "single", "per_sample")
 
 @dataclass(frozen=True)
 class SSMParams:
-    shadow_map_size: int = param(1024, "texels per side of the light depth map (a power of two, 256..8192)")
+    shadow_map_size: int = param(1024, "texels per side of the light depth map (a power of two)", range=(256, 8192))
     occluder: str = param("micropatch", "micro-occluders: micropatch, microquad or microrect")
     visibility: str = param("bitmask", "light visibility: area (clamped sum of covered areas) or bitmask")
-    bitmask_size: int = param(16, "light samples per side of the occlusion bitmask: 8, 16 or 32")
+    bitmask_size: int = param(16, "light samples per side of the occlusion bitmask: 8, 16 or 32", range=(8, 32))
     pattern: str = param("jittered", "bitmask sample pattern: regular, jittered or random")
     structure: str = param("ysm", "search-area pruning: hsm, mssm or ysm")
-    ysm_size: int = param(256, "texels per side of the YSM's MSSM part (a power of two)")
-    budget: float = param(16.0, "b_mo: micro-occluders per axis (inf: always level 0)")
+    ysm_size: int = param(256, "texels per side of the YSM's MSSM part (a power of two)", range=(16, 8192))
+    budget: float = param(16.0, "b_mo: micro-occluders per axis (inf: always level 0)", range=(1.0, math.inf))
     budget_map: str = param("", "per-pixel b_mo: '' (uniform), radial, or an EXR file")
-    budget_min: float = param(5.0, "b_mo at the left and right borders with budget_map=radial")
+    budget_min: float = param(5.0, "b_mo at the left and right borders with budget_map=radial", range=(1.0, 1.0e6))
     blend: bool = param(True, "smooth the LOQ map and blend levels floor(l) and ceil(l) (false: ceil(l) alone)")
-    smooth_radius: int = param(5, "half-width of the LOQ smoothing in pixels (5: 11 x 11; 0: none)")
-    depth_threshold: float = param(0.05, "relative camera-depth jump at which the LOQ smoothing stops")
-    refine: int = param(4, "search-area refinement iterations")
+    smooth_radius: int = param(5, "half-width of the LOQ smoothing in pixels (5: 11 x 11; 0: none)", range=(0, 32))
+    depth_threshold: float = param(0.05, "relative camera-depth jump at which the LOQ smoothing stops", range=(1e-6, 100.0))
+    refine: int = param(4, "search-area refinement iterations", range=(0, 16))
     overprecision: bool = param(True, "grow the queried region to the support of the level's micro-occluders")
     gap_fill: bool = param(True, "extend micropatches toward their left and bottom neighbours")
     msaa: str = param("interpolate", "with pixel_samples > 1: interpolate, single or per_sample")
-    tau: float = param(0.01, "relative camera-depth difference below which a sample takes its pixel's visibility")
-    bias: float = param(2e-4, "depth bias against the receiver's tangent plane, fraction of the scene diagonal")
-    seed: int = param(7, "seed of the jittered and random bitmask samples")
+    tau: float = param(0.01, "relative camera-depth difference below which a sample takes its pixel's visibility", range=(0.0, 100.0))
+    bias: float = param(2e-4, "depth bias against the receiver's tangent plane, fraction of the scene diagonal", range=(0.0, 0.1))
+    seed: int = param(7, "seed of the jittered and random bitmask samples", range=(0, 2**31 - 1))
 
     def __post_init__(self):
+        check_ranges(self)
         n = self.shadow_map_size
-        check(256 <= n <= 8192 and n & (n - 1) == 0, f"shadow_map_size {n} must be a power of two in [256, 8192]")
+        check(n & (n - 1) == 0, f"shadow_map_size {n} must be a power of two in [256, 8192]")
         check(self.occluder in OCCLUDERS, f"occluder {self.occluder!r} is not one of {', '.join(OCCLUDERS)}")
         check(self.visibility in ("area", "bitmask"), f"visibility {self.visibility!r} is not area or bitmask")
         check(self.bitmask_size in (8, 16, 32), f"bitmask_size {self.bitmask_size} is not 8, 16 or 32")
         check(self.pattern in PATTERNS, f"pattern {self.pattern!r} is not one of {', '.join(PATTERNS)}")
         check(self.structure in ("hsm", "mssm", "ysm"), f"structure {self.structure!r} is not hsm, mssm or ysm")
         m = self.ysm_size
-        check(16 <= m <= 8192 and m & (m - 1) == 0, f"ysm_size {m} must be a power of two >= 16")
-        check(self.budget >= 1.0, f"budget {self.budget} must be >= 1 (or inf)")
+        check(m & (m - 1) == 0, f"ysm_size {m} must be a power of two >= 16")
         if self.budget_map == "radial":
-            check(1.0 <= self.budget_min <= self.budget, f"budget_min {self.budget_min} must be in [1, budget]")
+            check(self.budget_min <= self.budget, f"budget_min {self.budget_min} must be in [1, budget]")
         if self.budget_map not in ("", "radial"):
             check(os.path.isfile(self.budget_map), f"budget_map file {self.budget_map!r} not found")
-        check(0 <= self.smooth_radius <= 32, "smooth_radius must be in [0, 32]")
-        check(self.depth_threshold > 0.0, "depth_threshold must be > 0")
-        check(0 <= self.refine <= 16, "refine must be in [0, 16]")
         check(self.msaa in MSAA_MODES, f"msaa {self.msaa!r} is not one of {', '.join(MSAA_MODES)}")
-        check(self.tau >= 0.0, "tau must be >= 0")
-        check(self.bias >= 0.0, "bias must be >= 0")
 
 
 def light_samples(pattern: str, n: int, disk: bool, seed: int, device: str) -> tuple[wp.array, int]:
@@ -220,24 +193,28 @@ class SSMMaps:
 
 @dataclass
 class SSMSearch:
-    """Per receiver (``layers * H * W``): search area, status, raw and smoothed LOQ, camera depth,
-    receiver -> G-buffer sample, visibility and micro-occluders processed."""
+    """Per receiver (``layers * H * W``, laid out as the G-buffer's samples): search area, status,
+    raw LOQ, camera depth, receiver -> G-buffer sample."""
 
     layers: int
     rid: wp.array
     area: wp.array
     status: wp.array
     loq_raw: wp.array
-    loq: wp.array
     cam: wp.array
-    vis: wp.array | None = None
-    processed: wp.array | None = None
 
     def arrays(self) -> dict[str, wp.array]:
-        out = {"area": self.area, "status": self.status, "loq_raw": self.loq_raw, "loq": self.loq, "cam": self.cam, "rid": self.rid}
-        if self.vis is not None:
-            out |= {"vis": self.vis, "processed": self.processed}
-        return out
+        return {"area": self.area, "status": self.status, "loq_raw": self.loq_raw, "cam": self.cam, "rid": self.rid}
+
+
+@dataclass
+class SSMLoq:
+    """The smoothed LOQ map (per receiver; a copy of the raw one when nothing is smoothed)."""
+
+    loq: wp.array
+
+    def arrays(self) -> dict[str, wp.array]:
+        return {"loq": self.loq}
 
 
 def build_maps(depth: wp.array, p: SSMParams, device: str) -> SSMMaps:
@@ -257,17 +234,16 @@ def receivers(gb, msaa: str, device: str) -> tuple[wp.array, int]:
     if gb.spp == 1 or msaa == "per_sample":
         return wp.array(np.arange(gb.count, dtype=np.int32), dtype=wp.int32, device=device), gb.spp
     rid = wp.empty(npix, dtype=wp.int32, device=device)
-    launch_chunked(pick_receivers, npix, inputs=[gb.prim, npix, gb.spp], outputs=[rid], device=device)
+    launch_chunked(pick_receivers, npix, inputs=[gb.gpu()], outputs=[rid], device=device)
     return rid, 1
 
 
-def msaa_resolve(vis_pix: wp.array, rid: wp.array, dist: wp.array, prim: wp.array, width: int, height: int,
-                 tau: float, interpolate: bool, device: str) -> wp.array:
+def msaa_resolve(vis_pix: wp.array, rid: wp.array, gb, tau: float, interpolate: bool, device: str) -> wp.array:
     """Per-sample visibility (flat, sample-major) from per-pixel visibility (§7's custom resolve);
     ``rid[p]``: the G-buffer sample pixel ``p``'s visibility was computed on."""
-    n = dist.shape[0]
+    n = gb.count
     out = wp.empty(n, dtype=float, device=device)
-    launch_chunked(resolve_samples, n, inputs=[vis_pix, rid, dist, prim, width, height, float(tau), int(interpolate)], outputs=[out], device=device)
+    launch_chunked(resolve_samples, n, inputs=[vis_pix, rid, gb.gpu(), float(tau), int(interpolate)], outputs=[out], device=device)
     return out
 
 
@@ -278,59 +254,61 @@ def run_search(setup: SSMSetup, maps: SSMMaps, gb, p: SSMParams, budget: np.ndar
     b = np.broadcast_to(budget, (layers,) + budget.shape).ravel().astype(np.float32)
     s = SSMSearch(
         layers, rid, area=wp.empty(n, dtype=wp.vec4, device=device), status=wp.empty(n, dtype=wp.int32, device=device),
-        loq_raw=wp.empty(n, dtype=float, device=device), loq=wp.empty(n, dtype=float, device=device), cam=wp.empty(n, dtype=float, device=device),
+        loq_raw=wp.empty(n, dtype=float, device=device), cam=wp.empty(n, dtype=float, device=device),
     )
     g = maps.structure.gpu
     z_first = float(maps.occluders.pyr.numpy()[-1][0])  # the nearest depth of the whole map
-    launch_chunked(search_areas, n, inputs=[setup, g, gb.pos, gb.nrm, gb.prim, gb.dist, rid, wp.array(b, dtype=float, device=device), z_first],
+    launch_chunked(search_areas, n, inputs=[setup, g, gb.gpu(), rid, wp.array(b, dtype=float, device=device), z_first],
                    outputs=[s.area, s.status, s.loq_raw, s.cam], device=device, min_chunk=256)
     return s
 
 
-def run_smoothing(s: SSMSearch, gb, p: SSMParams, smooth: bool, device: str) -> wp.array:
-    """Kernel 2: the separable LOQ smoothing (into ``s.loq``; a copy of the raw LOQ without it)."""
+def run_smoothing(s: SSMSearch, gb, p: SSMParams, smooth: bool, device: str) -> SSMLoq:
+    """Kernel 2: the separable LOQ smoothing into a new array (a copy of the raw LOQ without it)."""
     n = s.rid.shape[0]
+    loq = wp.empty(n, dtype=float, device=device)
     if smooth and p.smooth_radius > 0:
         tmp = wp.empty(n, dtype=float, device=device)
-        for axis, src, dst in ((0, s.loq_raw, tmp), (1, tmp, s.loq)):
-            launch_chunked(smooth_loq, n, inputs=[src, s.status, s.cam, gb.width, gb.height, p.smooth_radius, axis, p.depth_threshold],
+        for axis, src, dst in ((0, s.loq_raw, tmp), (1, tmp, loq)):
+            launch_chunked(smooth_loq, n, inputs=[src, s.status, s.cam, gb.gpu(), p.smooth_radius, axis, p.depth_threshold],
                            outputs=[dst], device=device)
     else:
-        wp.copy(s.loq, s.loq_raw)
-    return s.loq
+        wp.copy(loq, s.loq_raw)
+    return SSMLoq(loq)
 
 
-def run_visibility(setup: SSMSetup, maps: SSMMaps, gb, s: SSMSearch, samples: wp.array, device: str) -> None:
-    """Kernel 3: backprojection (fills ``s.vis`` and ``s.processed``)."""
+def run_visibility(setup: SSMSetup, maps: SSMMaps, gb, s: SSMSearch, loq: SSMLoq, samples: wp.array, device: str) -> tuple[wp.array, wp.array]:
+    """Kernel 3: backprojection; (visibility, micro-occluders processed) per receiver."""
     n = s.rid.shape[0]
-    s.vis = wp.empty(n, dtype=float, device=device)
-    s.processed = wp.empty(n, dtype=wp.int32, device=device)
+    vis = wp.empty(n, dtype=float, device=device)
+    processed = wp.empty(n, dtype=wp.int32, device=device)
     mr = maps.microrects
     mr_ext = mr.ext if mr is not None else wp.empty(1, dtype=wp.vec4i, device=device)
     mr_dep = mr.dep if mr is not None else wp.empty(1, dtype=float, device=device)
     launch_chunked(
         backproject, n,
-        inputs=[setup, maps.occluders.gpu, mr_ext, mr_dep, samples, gb.pos, gb.nrm, s.rid, s.area, s.status, s.loq_raw, s.loq],
-        outputs=[s.vis, s.processed], device=device, min_chunk=64,
+        inputs=[setup, maps.occluders.gpu, mr_ext, mr_dep, samples, gb.gpu(), s.rid, s.area, s.status, s.loq_raw, loq.loq],
+        outputs=[vis, processed], device=device, min_chunk=64,
     )
+    return vis, processed
 
 
-def search_counters(s: SSMSearch, prefix: str) -> dict:
+def search_counters(s: SSMSearch, processed: wp.array | None = None) -> dict:
     status = s.status.numpy()
     covered = status != STATUS_BACKGROUND
     nc = max(int(covered.sum()), 1)
     pen = status == STATUS_PENUMBRA
     out = {
-        f"{prefix}.receivers": int(covered.sum()),
-        f"{prefix}.backprojecting_fraction": float(pen.sum() / nc),
-        f"{prefix}.umbra_fraction": float((status == STATUS_UMBRA).sum() / nc),
-        f"{prefix}.lit_fraction": float((status == STATUS_LIT).sum() / nc),
+        "receivers": int(covered.sum()),
+        "backprojecting_fraction": float(pen.sum() / nc),
+        "umbra_fraction": float((status == STATUS_UMBRA).sum() / nc),
+        "lit_fraction": float((status == STATUS_LIT).sum() / nc),
     }
-    if s.processed is not None:
-        cnt = s.processed.numpy()[pen].astype(np.float64)
-        out[f"{prefix}.occluders_mean"] = float(cnt.mean()) if cnt.size else 0.0
-        out[f"{prefix}.occluders_stdev"] = float(cnt.std()) if cnt.size else 0.0
-        out[f"{prefix}.occluders_total"] = int(cnt.sum())
+    if processed is not None:
+        cnt = processed.numpy()[pen].astype(np.float64)
+        out["occluders_mean"] = float(cnt.mean()) if cnt.size else 0.0
+        out["occluders_stdev"] = float(cnt.std()) if cnt.size else 0.0
+        out["occluders_total"] = int(cnt.sum())
     return out
 
 
@@ -342,25 +320,30 @@ class SSM(Technique):
     Params = SSMParams
     reads = ("gbuffer", "light_depth")
     writes = ("visibility",)
+    quality = (Quality("budget", (4.0, 8.0, 16.0, math.inf), "b_mo, micro-occluders per axis: more is closer to level 0 and slower"),)
+    tolerance = Tolerance(mae=0.01, mae_penumbra=0.08)
 
-    def add_passes(self, ctx, light) -> str:
-        p = self.params
-        label = ctx.label(light)
+    def supports(self, scene, light) -> str | None:
         if light.kind == LIGHT_POINT or (light.kind == LIGHT_DISTANT and light.angle_deg <= 0.0) or light.extent() <= 0.0:
-            raise ParameterError(f"ssm: light {light.path} has no area (point light or a sun of angle 0): no soft shadow to backproject")
+            return "the light has no area (a point light or a sun of angle 0): no soft shadow to backproject"
+        return None
+
+    def add_passes(self, ctx, light):
+        p = self.params
         gbuf = ctx.gbuffer()
         depth = ctx.light_depth(light, size=p.shadow_map_size, soft=True)
         k = light_kernel(light)
-        prefix = f"ssm[{label}]"
-        maps_key = f"ssm_maps[{label}]"
-        search_key = f"ssm_search[{label}]"
-        loq_key = f"ssm_loq[{label}]"
+        # the pruning structure and microrects depend on the map only: shared by every budget
+        maps_key = ctx.shared_key("ssm_maps", light, "structure", "ysm_size", "occluder")
+        search_key = ctx.key("ssm_search", light)
+        loq_key = ctx.key("ssm_loq", light)
         out = ctx.visibility_key(light)
         bias = p.bias * ctx.scene.diagonal
         dev = ctx.device
         disk = light.kind != LIGHT_RECT
         budget = budget_image(p, ctx.width, ctx.height)
         pts, code = light_samples(p.pattern, p.bitmask_size, disk, p.seed, dev)
+        counters = ctx.counters(light)
 
         def setup_of(dm) -> SSMSetup:
             st = SSMSetup()
@@ -378,47 +361,45 @@ class SSM(Technique):
             return st
 
         def build(res):
-            maps = build_maps(res[depth].depth, p, dev)
-            ctx.counters[f"{prefix}.structure_build_ms"] = round(maps.structure.build_ms, 3)
-            if maps.microrects is not None:
-                ctx.counters[f"{prefix}.microrect_build_ms"] = round(maps.microrects.build_ms, 3)
-            ctx.counters[f"{prefix}.memory_bytes"] = {k2: int(a.size * wp.types.type_size_in_bytes(a.dtype)) for k2, a in maps.arrays().items()}
-            return {maps_key: maps}
+            return {maps_key: build_maps(res[depth].depth, p, dev)}
 
         def search(res):
             gb, dm = res[gbuf], res[depth]
-            s = run_search(setup_of(dm), res[maps_key], gb, p, budget, dev)
-            return {search_key: s}
+            return {search_key: run_search(setup_of(dm), res[maps_key], gb, p, budget, dev)}
 
         def smooth(res):
             st = setup_of(res[depth])
             return {loq_key: run_smoothing(res[search_key], res[gbuf], p, bool(st.blend), dev)}
 
         def visibility(res):
-            gb, dm, s = res[gbuf], res[depth], res[search_key]
-            run_visibility(setup_of(dm), res[maps_key], gb, s, pts, dev)
-            ctx.counters.update(search_counters(s, prefix))
+            gb, dm, s, maps, lq = res[gbuf], res[depth], res[search_key], res[maps_key], res[loq_key]
+            vis_r, processed = run_visibility(setup_of(dm), maps, gb, s, lq, pts, dev)
+            counters["structure_build_ms"] = round(maps.structure.build_ms, 3)
+            if maps.microrects is not None:
+                counters["microrect_build_ms"] = round(maps.microrects.build_ms, 3)
+            counters["memory_bytes"] = {k2: int(a.size * wp.types.type_size_in_bytes(a.dtype)) for k2, a in maps.arrays().items()}
+            counters.update(search_counters(s, processed))
             status = s.status.numpy()
             pen = status == STATUS_PENUMBRA
-            loq = np.minimum(s.loq.numpy(), np.log2(p.shadow_map_size))
+            loq = np.minimum(lq.loq.numpy(), np.log2(p.shadow_map_size))
             if setup_of(dm).blend:
                 lo, frac = np.floor(loq[pen]).astype(int), loq[pen] - np.floor(loq[pen])
                 used = np.concatenate([lo, (lo + 1)[frac > 1e-4]])
             else:
                 used = np.ceil(s.loq_raw.numpy()[pen] - 1e-6).astype(int)
             hist = np.bincount(np.clip(used, 0, None), minlength=1) if used.size else np.zeros(1, int)
-            ctx.counters[f"{prefix}.levels_used"] = {str(i): int(c) for i, c in enumerate(hist) if c}
+            counters["levels_used"] = {str(i): int(c) for i, c in enumerate(hist) if c}
             if s.layers == gb.spp:  # one receiver per sample
-                vis = s.vis
+                vis = vis_r
             else:
-                vis = msaa_resolve(s.vis, s.rid, gb.dist, gb.prim, gb.width, gb.height, p.tau, p.msaa == "interpolate", dev)
+                vis = msaa_resolve(vis_r, s.rid, gb, p.tau, p.msaa == "interpolate", dev)
             return {out: ctx.visibility(vis)}
 
-        ctx.add_pass(f"ssm_structure[{label}]", inputs=(depth,), outputs=(maps_key,), run=build)
-        ctx.add_pass(f"ssm_search[{label}]", inputs=(gbuf, depth, maps_key), outputs=(search_key,), run=search)
-        ctx.add_pass(f"ssm_smooth[{label}]", inputs=(gbuf, depth, search_key), outputs=(loq_key,), run=smooth)
-        ctx.add_pass(f"ssm[{label}]", inputs=(gbuf, depth, maps_key, search_key, loq_key), outputs=(out,), run=visibility)
-        return out
+        ctx.add_pass(str(maps_key), inputs=(depth,), outputs=(maps_key,), run=build, stage="structure", light=light)
+        ctx.add_pass(ctx.pass_name("ssm_search", light), inputs=(gbuf, depth, maps_key), outputs=(search_key,), run=search, stage="search", light=light)
+        ctx.add_pass(ctx.pass_name("ssm_smooth", light), inputs=(gbuf, depth, search_key), outputs=(loq_key,), run=smooth, stage="smooth", light=light)
+        return ctx.add_pass(ctx.pass_name("ssm", light), inputs=(gbuf, depth, maps_key, search_key, loq_key), outputs=(out,), run=visibility,
+                            stage="backprojection", light=light)
 
 
 __all__ = ["SSM", "SSMParams"]

@@ -32,6 +32,7 @@ from __future__ import annotations
 import warp as wp
 
 from wsoft.accel.ssm_structures import DepthRanges, depth_range, pyr_at
+from wsoft.raster.gbuffer import GBufferGPU, gb_covered, gb_index, gb_neighbour, gb_pixel
 from wsoft.lightspace.bitmask import mask_quad, mask_rect, mask_t, mask_visibility
 from wsoft.lightspace.light import LightKernel, spread
 from wsoft.lightspace.view import (
@@ -114,10 +115,7 @@ def search_areas(
     offset: int,
     st: SSMSetup,
     acc: DepthRanges,
-    pos: wp.array[wp.vec3],
-    nrm: wp.array[wp.vec3],
-    prim: wp.array[wp.int32],
-    dist: wp.array[float],
+    gb: GBufferGPU,
     rid: wp.array[wp.int32],
     budget: wp.array[float],
     z_first: float,
@@ -132,17 +130,17 @@ def search_areas(
     s = rid[i]
     area[i] = wp.vec4(0.0)
     loq[i] = 0.0
-    cam[i] = dist[s]
-    if prim[s] < 0:
+    cam[i] = gb.dist[s]
+    if not gb_covered(gb, s):
         status[i] = STATUS_BACKGROUND
         return
     lv = st.lv
-    pv = view_of(lv, pos[s])
+    pv = view_of(lv, gb.pos[s])
     if not in_front_of_light(lv, pv):
         status[i] = STATUS_LIT
         return
     zr = pv[2]
-    nv = view_dir(lv, nrm[s])
+    nv = view_dir(lv, gb.nrm[s])
     tc = texel_of(lv, pv)
     n = lv.width
     b = budget[i]
@@ -196,8 +194,7 @@ def smooth_loq(
     src: wp.array[float],
     status: wp.array[wp.int32],
     cam: wp.array[float],
-    width: int,
-    height: int,
+    gb: GBufferGPU,
     radius: int,
     axis: int,
     threshold: float,
@@ -205,32 +202,22 @@ def smooth_loq(
     dst: wp.array[float],
 ):
     """One axis of the LOQ smoothing: the mean over the run of backprojecting receivers within
-    ``radius`` that is not cut by a camera-depth jump larger than ``threshold`` (relative)."""
+    ``radius`` that is not cut by a camera-depth jump larger than ``threshold`` (relative).
+    Receivers are laid out as the G-buffer's samples (one layer per pixel sample, or one layer)."""
     i = wp.tid() + offset
     v = src[i]
     dst[i] = v
     if status[i] != STATUS_PENUMBRA or radius <= 0:
         return
-    plane = width * height
-    layer = i // plane
-    p = i - layer * plane
-    y = p // width
-    x = p - y * width
     total = v
     count = float(1.0)
     for side in range(2):
         step = 1 - 2 * side
         prev = cam[i]
         for k in range(1, radius + 1):
-            xx = x
-            yy = y
-            if axis == 0:
-                xx = x + step * k
-            else:
-                yy = y + step * k
-            if xx < 0 or yy < 0 or xx >= width or yy >= height:
+            q = gb_neighbour(gb, i, step * k * (1 - axis), step * k * axis)
+            if q < 0:
                 break
-            q = layer * plane + yy * width + xx
             if status[q] != STATUS_PENUMBRA:
                 break
             if wp.abs(cam[q] - prev) > threshold * wp.max(prev, 1.0e-20):
@@ -481,8 +468,7 @@ def backproject(
     mr_ext: wp.array[wp.vec4i],
     mr_dep: wp.array[float],
     samples: wp.array[wp.vec2],
-    pos: wp.array[wp.vec3],
-    nrm: wp.array[wp.vec3],
+    gb: GBufferGPU,
     rid: wp.array[wp.int32],
     area: wp.array[wp.vec4],
     status: wp.array[wp.int32],
@@ -504,8 +490,8 @@ def backproject(
         vis[i] = 1.0
         return
     s = rid[i]
-    pv = view_of(st.lv, pos[s])
-    nv = light_facing(st.lv, pv, view_dir(st.lv, nrm[s]))
+    pv = view_of(st.lv, gb.pos[s])
+    nv = light_facing(st.lv, pv, view_dir(st.lv, gb.nrm[s]))
     a = area[i]
     top = occ.top
     if st.blend == 0:
@@ -531,18 +517,18 @@ def backproject(
 @wp.kernel
 def pick_receivers(
     offset: int,
-    prim: wp.array[wp.int32],
-    npix: int,
-    spp: int,
+    gb: GBufferGPU,
     # outputs
     rid: wp.array[wp.int32],
 ):
-    """One receiver per pixel: its first covered G-buffer sample (sample-major), else sample 0."""
-    p = wp.tid() + offset
+    """One receiver per pixel: its first covered G-buffer sample, else sample 0."""
+    p = wp.tid() + offset  # the pixel, as its sample in layer 0
     rid[p] = p
-    for s in range(spp):
-        if prim[s * npix + p] >= 0:
-            rid[p] = s * npix + p
+    xy = gb_pixel(gb, p)
+    for s in range(gb.spp):
+        q = gb_index(gb, xy[0], xy[1], s)
+        if gb_covered(gb, q):
+            rid[p] = q
             return
 
 
@@ -551,52 +537,48 @@ def resolve_samples(
     offset: int,
     vis_pix: wp.array[float],
     rid: wp.array[wp.int32],
-    dist: wp.array[float],
-    prim: wp.array[wp.int32],
-    width: int,
-    height: int,
+    gb: GBufferGPU,
     tau: float,
     interpolate: int,
     # outputs
     vis: wp.array[float],
 ):
-    """Visibility of G-buffer sample ``i`` (sample-major) from the per-pixel visibility (§7):
-    the pixel's own where the sample's camera depth is within ``tau`` (relative) of the pixel's
-    representative sample ``rid[p]``, else (with ``interpolate``) that of the pixel or
-    4-neighbour whose representative depth is closest to the sample's."""
+    """Visibility of G-buffer sample ``i`` from the per-pixel visibility (§7): the pixel's own
+    where the sample's camera depth is within ``tau`` (relative) of the pixel's representative
+    sample ``rid[p]``, else (with ``interpolate``) that of the pixel or 4-neighbour whose
+    representative depth is closest to the sample's. Pixel ``p`` is its sample in layer 0."""
     i = wp.tid() + offset
-    npix = width * height
-    p = i % npix
-    if prim[i] < 0:
+    if not gb_covered(gb, i):
         vis[i] = 1.0
         return
+    xy = gb_pixel(gb, i)
+    p = gb_index(gb, xy[0], xy[1], 0)
     v = vis_pix[p]
-    z = dist[i]
-    zp = dist[rid[p]]
+    z = gb.dist[i]
+    zp = gb.dist[rid[p]]
     if interpolate == 0 or wp.abs(z - zp) <= tau * zp:
         vis[i] = v
         return
-    y = p // width
-    x = p - y * width
     best = wp.abs(z - zp)
     for k in range(4):
-        xx = x
-        yy = y
+        dx = int(0)
+        dy = int(0)
         if k == 0:
-            xx = x - 1
+            dx = -1
         elif k == 1:
-            xx = x + 1
+            dx = 1
         elif k == 2:
-            yy = y - 1
+            dy = -1
         else:
-            yy = y + 1
-        if xx < 0 or yy < 0 or xx >= width or yy >= height:
+            dy = 1
+        pn = gb_neighbour(gb, p, dx, dy)
+        if pn < 0:
             continue
-        q = rid[yy * width + xx]
-        if prim[q] < 0:
+        q = rid[pn]
+        if not gb_covered(gb, q):
             continue
-        e = wp.abs(z - dist[q])
+        e = wp.abs(z - gb.dist[q])
         if e < best:
             best = e
-            v = vis_pix[yy * width + xx]
+            v = vis_pix[pn]
     vis[i] = v
