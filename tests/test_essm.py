@@ -46,7 +46,7 @@ def test_no_inf_or_nan_at_optimal_c_4096_contact():
         tech = create("essm", {"shadow_map_size": 4096, "sat": storage, "build": "scan"})
         built = build_graph(scene, tech, width=48, height=36, device="cpu")
         res, _ = built.ctx.graph.execute(built.requested, "cpu", keep=["essm_basis[Light]@4096" + ("" if storage == "tiles" else f"{{sat={storage}}}"),
-                                                                      "essm_sat[Light]@4096" + (f"{{build=scan}}" if storage == "tiles" else f"{{sat={storage},build=scan}}")])
+                                                                      "essm_sat[Light]@4096" + ("{build=scan}" if storage == "tiles" else f"{{sat={storage},build=scan}}")])
         basis = next(v for k, v in res.items() if k.kind == "essm_basis")
         sat = next(v for k, v in res.items() if k.kind == "essm_sat")
         assert basis.c == pytest.approx(optimal_exponent(storage, 20, 4096))

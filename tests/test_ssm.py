@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import warp as wp
-from conftest import box_plane_ground_error, parallel_rect_exact, scene_path
+from conftest import box_plane_ground_error, scene_path
 
 import wsoft
 from wsoft.accel.ssm_structures import build_microrects, build_structure, query

@@ -73,12 +73,18 @@ def cmd_plan(args) -> int:
         print(f"warning: {w}")
     for name, passes in p["techniques"].items():
         print(f"{name}: {' -> '.join(passes)}")
+    for name, why in p["not_applicable"].items():
+        for w in why:
+            print(f"{name}: not applicable to {w['light']}: {w['reason']}")
     return 0
 
 
 def cmd_techniques(args) -> int:
-    from wsoft.techniques import TECHNIQUES
+    from wsoft.techniques import TECHNIQUES, markdown_table
 
+    if args.markdown:
+        print(markdown_table())
+        return 0
     desc = [TECHNIQUES[n].describe() for n in sorted(TECHNIQUES)]
     if args.json:
         print(json.dumps(desc, indent=2, default=str))
@@ -87,58 +93,92 @@ def cmd_techniques(args) -> int:
         print(f"{d['name']}: {d['summary']}")
         print(f"  reads: {', '.join(d['reads'])}; writes: {', '.join(d['writes'])}")
         for p in d["parameters"]:
-            print(f"  {p['name']:<16} {p['type']:<6} default {p['default']!s:<8} {p['meaning']}")
+            rng = f" [{p['range']}]" if p["range"] else ""
+            print(f"  {p['name']:<16} {p['type']:<6} default {p['default']!s:<8} {p['meaning']}{rng}")
+        for q in d["quality"]:
+            print(f"  quality: {q['param']} over {', '.join(map(str, q['values']))} ({q['note']})")
     return 0
 
 
+def _technique_sets(names: list[str], sets: list[str] | None) -> list[tuple[str, dict]]:
+    """``-t`` names with their ``--set`` values: ``name.key=value`` for one of them, ``key=value``
+    for the only one."""
+    from wsoft.errors import ParameterError
+
+    params: dict[str, dict] = {n: {} for n in names}
+    for k, v in _parse_sets(sets).items():
+        if "." in k and k.split(".", 1)[0] in params:
+            t, key = k.split(".", 1)
+            params[t][key] = v
+        elif len(names) == 1:
+            params[names[0]][k] = v
+        else:
+            raise ParameterError(f"--set {k}={v}: with several techniques write TECHNIQUE.{k}={v}")
+    return [(n, params[n]) for n in names]
+
+
 def cmd_compare(args) -> int:
-    """Render a technique and the reference on the same view; write EXR/PNG of both and a stats table."""
+    """Render techniques and the reference in one graph; write EXR/PNG of each and a time / error table."""
     import wsoft
     from wsoft.io import write_gray_png
-    from wsoft.metrics import visibility_error
 
     scene = wsoft.load_scene(args.scene, time=args.time)
-    params = _parse_sets(args.set)
-    common = dict(width=args.width, height=args.height, camera=args.camera, light=args.light, device=args.device)
-    frame = wsoft.render(scene, args.technique, **common, **params)
-    ref = wsoft.render(scene, "reference", **common, samples=args.samples)
+    names = list(dict.fromkeys(args.technique or ["hard"]))
+    techs = _technique_sets(names, args.set)
+    fs = wsoft.compare(scene, techs, samples=args.samples, width=args.width, height=args.height, camera=args.camera, light=args.light,
+                       device=args.device)
     os.makedirs(args.out_dir, exist_ok=True)
     stem = os.path.splitext(os.path.basename(scene.path))[0]
-    out = {}
-    for name, fr in ((args.technique, frame), ("reference", ref)):
-        base = os.path.join(args.out_dir, f"{stem}-{name}")
+    written = []
+    for label, fr in fs.items():
+        base = os.path.join(args.out_dir, f"{stem}-{label}")
         fr.write_exr(base + ".exr")
         fr.write_png(base + ".png")
         write_gray_png(base + "-V.png", fr.V)
         with open(base + ".json", "w") as f:
             json.dump(fr.stats, f, indent=2, default=str)
-        out[name] = base
-    err = visibility_error(frame.V, ref.V, ref["V_stderr"], ref["A"])
-    rows = [("pass", args.technique, "reference")]
-    names = list(dict.fromkeys(frame.stats["passes"] + ref.stats["passes"])) + ["total"]
-    for n in names:
-        a = frame.stats["timings_ms"].get(n)
-        b = ref.stats["timings_ms"].get(n)
-        rows.append((n, f"{a:.1f}" if a is not None else "-", f"{b:.1f}" if b is not None else "-"))
+        written.append(base)
+    labels = list(fs)
+    gstats = fs.stats
+    shared = gstats["shared_passes"]
+    rows = [("pass", "kind", *labels)]
+    for n in gstats["passes"]:
+        cells = []
+        for label in labels:
+            ms = fs[label].stats["timings_ms"].get(n)
+            if ms is None and gstats["pass_kinds"][n] == "metric" and n.startswith(f"error[{label}:"):
+                ms = gstats["timings_ms"][n]
+            cells.append("-" if ms is None else f"{ms:.1f}" + (" (shared)" if n in shared and label in shared[n] else ""))
+        rows.append((n, gstats["pass_kinds"][n], *cells))
+    rows.append(("frame (its passes)", "", *[f"{fs[l].stats['timings_ms']['total']:.1f}" for l in labels]))
     table = ["| " + " | ".join(r) + " |" for r in rows]
-    table.insert(1, "|---|---:|---:|")
-    lines = [f"# {args.technique} vs reference on {stem} ({args.width}x{args.height}, {frame.stats['device']}, light {frame.stats['light']})", "",
-             f"Command: `wsoft compare {' '.join(sys.argv[2:]) if sys.argv[1:2] == ['compare'] else args.scene}`", "",
-             "## Time (ms)", "", *table, "", "## Error of V against the reference", "",
-             "| MAE | RMSE | max | MAE penumbra | penumbra pixels | >3 stderr |", "|---:|---:|---:|---:|---:|---:|",
-             f"| {err['mae']:.4f} | {err['rmse']:.4f} | {err['max']:.3f} | {err['mae_penumbra']:.4f} | {err['penumbra_pixels']} | {err.get('frac_outside_3se', 0):.3f} |"]
-    md = os.path.join(args.out_dir, f"{stem}-{args.technique}-vs-reference.md")
+    table.insert(1, "|---|---|" + "---:|" * len(labels))
+    err_rows = ["| technique | light | MAE | RMSE | max | MAE penumbra | penumbra pixels | MAE facing | MAE not facing | >3 stderr | NaN |",
+                "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for label in labels:
+        for light, e in fs[label].stats.get("errors", {}).items():
+            err_rows.append(f"| {label} | {light} | {e['mae']:.4f} | {e['rmse']:.4f} | {e['max']:.3f} | {e['mae_penumbra']:.4f} | {e['penumbra_pixels']} | "
+                            f"{e['facing']['mae']:.4f} | {e['not_facing']['mae']:.4f} | {e.get('frac_outside_3se', 0):.3f} | {e['nan_pixels']} |")
+    cmd = "wsoft " + " ".join(sys.argv[1:]) if sys.argv[1:2] == ["compare"] else f"wsoft compare {args.scene}"
+    ref = gstats["reference"]
+    lines = [f"# {', '.join(l for l in labels if l != ref)} vs {ref} on {stem} ({args.width}x{args.height}, {gstats['device']})", "",
+             f"Command: `{cmd}`", "",
+             "One frame graph: passes marked *shared* ran once for several techniques; a technique's frame time counts every pass it needs.", "",
+             "## Time (ms)", "", *table, "", f"## Error of V against `{ref}` (the metric pass, on the same pixels)", "", *err_rows]
+    md = os.path.join(args.out_dir, f"{stem}-compare.md")
     with open(md, "w") as f:
         f.write("\n".join(lines) + "\n")
     print("\n".join(lines))
-    print(f"\nwrote {out[args.technique]}.exr/.png/.json, {out['reference']}.exr/.png/.json, {md}")
+    for w in sorted({w for fr in fs.values() for w in fr.stats["warnings"]}):
+        print(f"warning: {w}", file=sys.stderr)
+    print(f"\nwrote {', '.join(b + '.exr/.png/.json' for b in written)}, {md}")
     return 0
 
 
 def cmd_bench(args) -> int:
     from wsoft.bench.harness import run_sweep
 
-    return run_sweep(args.sweep, quick=args.quick, device=args.device, out_dir=args.out_dir, fresh=args.fresh)
+    return run_sweep(args.sweep, quick=args.quick, device=args.device, out_dir=args.out_dir, fresh=args.fresh, scenes=args.scenes)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -161,10 +201,10 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--png", help="shaded PNG")
     r.set_defaults(fn=cmd_render)
 
-    c = sub.add_parser("compare", help="render a technique and the reference; EXR/PNG of both and a stats table")
+    c = sub.add_parser("compare", help="render techniques and the reference in one graph; EXR/PNG of each, a time and error table")
     c.add_argument("scene")
-    c.add_argument("--technique", "-t", default="hard")
-    c.add_argument("--set", action="append", metavar="KEY=VALUE")
+    c.add_argument("--technique", "-t", action="append", help="a technique (repeatable; default: hard)")
+    c.add_argument("--set", action="append", metavar="[TECHNIQUE.]KEY=VALUE", help="a parameter (TECHNIQUE.KEY with several techniques)")
     c.add_argument("--samples", type=int, default=256, help="reference light samples per pixel")
     c.add_argument("--width", type=int, default=640)
     c.add_argument("--height", type=int, default=480)
@@ -185,13 +225,15 @@ def main(argv: list[str] | None = None) -> int:
 
     t = sub.add_parser("techniques", help="techniques and their parameters")
     t.add_argument("--json", action="store_true")
+    t.add_argument("--markdown", action="store_true", help="the README's technique table")
     t.set_defaults(fn=cmd_techniques)
 
-    b = sub.add_parser("bench", help="run a benchmark sweep; rows go to reports/<sweep>.jsonl")
+    b = sub.add_parser("bench", help="run a benchmark sweep; rows go to <out-dir>/<sweep>.jsonl")
     b.add_argument("sweep")
     b.add_argument("--quick", action="store_true", help="the CI-sized version")
     b.add_argument("--device", action="append", help="device(s) to sweep (default: the default device)")
-    b.add_argument("--out-dir", default="reports")
+    b.add_argument("--out-dir", default="reports", help="where rows, reports and images go (default: ./reports)")
+    b.add_argument("--scenes", help="folder of the scenes (default: the stages installed with wsoft)")
     b.add_argument("--fresh", action="store_true", help="discard earlier rows instead of resuming")
     b.set_defaults(fn=cmd_bench)
 

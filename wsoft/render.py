@@ -22,7 +22,7 @@ import numpy as np
 import warp as wp
 
 from wsoft.errors import ParameterError, SceneError
-from wsoft.graph import FrameGraph, Key, Pass, Resources, buffer_bytes
+from wsoft.graph import FrameGraph, Key, Pass, Resources
 from wsoft.lightspace.light import light_gpu
 from wsoft.lightspace.view import fit_light_view
 from wsoft.parallel import cpu_threads, resolve_device
@@ -490,7 +490,6 @@ def frames_of(built: Built, res: Resources, records: list[dict], total_ms: float
     """One :class:`Frame` per technique with its own stats; the set's stats cover the whole graph."""
     ctx, scene = built.ctx, built.ctx.scene
     graph = ctx.graph
-    by_name = {r["name"]: r for r in records}
     closures = {label: graph.closure([built.channels[label]]) for label in built.labels if label in built.channels}
     users: dict[str, list[str]] = {}
     for label, names in closures.items():

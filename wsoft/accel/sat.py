@@ -24,7 +24,6 @@ so uint32 wrap-around cancels and float32 cancellation shows as it would on a GP
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass
 from typing import Any

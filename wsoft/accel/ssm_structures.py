@@ -28,7 +28,6 @@ x0, y0, x1, y1 inclusive) and depths are two textures with full mip chains, flat
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass
 

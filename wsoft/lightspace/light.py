@@ -9,7 +9,7 @@ import numpy as np
 import warp as wp
 
 from wsoft.lightspace.view import ViewGPU
-from wsoft.scene.types import LIGHT_DISK, LIGHT_DISTANT, LIGHT_POINT, LIGHT_RECT, LIGHT_SPHERE, Light  # noqa: F401
+from wsoft.scene.types import LIGHT_DISTANT, LIGHT_RECT, Light
 
 
 @wp.struct

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
+from wsoft.lightspace.view import ViewGPU, in_front_of_light, view_of
 from wsoft.parallel import launch_chunked
 from wsoft.raster.camera import CameraGPU
 from wsoft.scene.device import Surfaces, DeviceScene, surface_present
@@ -176,6 +177,18 @@ def gb_neighbour(gb: GBufferGPU, i: int, dx: int, dy: int) -> int:
     if x < 0 or y < 0 or x >= gb.width or y >= gb.height:
         return -1
     return gb_index(gb, x, y, gb_layer(gb, i))
+
+
+@wp.func
+def gb_receiver(lv: ViewGPU, gb: GBufferGPU, i: int) -> wp.vec4:
+    """Sample ``i`` seen from a light view: its view-space point (xyz) and w = 1, or w = 0 where
+    nothing mapped can shadow it (the background, or behind a perspective light's near plane)."""
+    if not gb_covered(gb, i):
+        return wp.vec4(0.0)
+    v = view_of(lv, gb.pos[i])
+    if not in_front_of_light(lv, v):
+        return wp.vec4(v[0], v[1], v[2], 0.0)
+    return wp.vec4(v[0], v[1], v[2], 1.0)
 
 
 @dataclass

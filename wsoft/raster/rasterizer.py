@@ -35,7 +35,6 @@ covered texel centres). Scheduling (:meth:`Rasterizer.run`):
   split into disjoint bands of rows. Any other fragment runs in disjoint bands of rows only.
 """
 
-import math
 from dataclasses import dataclass, field
 from typing import Callable
 

@@ -1,9 +1,12 @@
-"""Techniques by name. Each module declares its parameters, reads and writes."""
+"""Techniques by name. Each module declares its parameters, what it reads and writes, what it
+supports and its quality knobs; :func:`markdown_table` renders the README's table from them."""
 
 from __future__ import annotations
 
+import dataclasses
+
 from wsoft.errors import ParameterError
-from wsoft.techniques.base import Technique
+from wsoft.techniques.base import Quality, Technique, Tolerance
 from wsoft.techniques.esm import ESM
 from wsoft.techniques.essm import ESSM
 from wsoft.techniques.hard import Hard
@@ -31,4 +34,26 @@ def create(name: str, params: dict | None = None) -> Technique:
     return cls(cls.make_params(params))
 
 
-__all__ = ["TECHNIQUES", "Technique", "create", "get_technique"]
+def parameter_table(cls: type[Technique]) -> str:
+    """The technique's parameters as a markdown table (name, type, default, range, meaning)."""
+    rows = ["| parameter | type | default | range | meaning |", "|---|---|---|---|---|"]
+    for p in cls.describe()["parameters"]:
+        rows.append(f"| `{p['name']}` | {p['type']} | {p['default']!r} | {p['range']} | {p['meaning']} |")
+    return "\n".join(rows)
+
+
+def markdown_table() -> str:
+    """The README's technique table, from the code: name, summary, parameters with defaults, quality knobs."""
+    rows = ["| name | what | parameters (default) | quality knobs (sweep values) |", "|---|---|---|---|"]
+    for name in ["reference"] + sorted(n for n in TECHNIQUES if n != "reference"):
+        cls = TECHNIQUES[name]
+        params = ", ".join(f"`{f.name}` ({f.default!r})" for f in dataclasses.fields(cls.Params))
+        quality = "; ".join(f"`{q.param}`: {', '.join(f'{v:g}' if isinstance(v, float) else str(v) for v in q.values)}" for q in cls.quality) or "-"
+        rows.append(f"| `{name}` | {cls.summary} | {params} | {quality} |")
+    return "\n".join(rows)
+
+
+for _cls in TECHNIQUES.values():  # the class docstring is the manual: append the parameter table
+    _cls.__doc__ = (_cls.__doc__ or "").rstrip() + "\n\nParameters:\n\n" + parameter_table(_cls) + "\n"
+
+__all__ = ["TECHNIQUES", "Quality", "Technique", "Tolerance", "create", "get_technique", "markdown_table", "parameter_table"]

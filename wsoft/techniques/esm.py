@@ -16,9 +16,9 @@ from dataclasses import dataclass
 import warp as wp
 
 from wsoft.accel.blur import blur_log
-from wsoft.lightspace.view import ViewGPU, bilinear_cell, in_front_of_light, inside_map, map_coords, normalised_depth, view_of, window_to_texel
+from wsoft.lightspace.view import ViewGPU, bilinear_cell, inside_map, map_coords, normalised_depth, window_to_texel
 from wsoft.parallel import launch_chunked
-from wsoft.raster.gbuffer import GBufferGPU, gb_covered
+from wsoft.raster.gbuffer import GBufferGPU, gb_receiver
 from wsoft.params import check_ranges
 from wsoft.techniques.base import Quality, Technique, Tolerance, check, param
 
@@ -82,13 +82,11 @@ def shade_esm(
     vis: wp.array[float],
 ):
     i = wp.tid() + offset
-    if not gb_covered(gb, i):
+    r = gb_receiver(lv, gb, i)
+    if r[3] == 0.0:
         vis[i] = 1.0
         return
-    pv = view_of(lv, gb.pos[i])
-    if not in_front_of_light(lv, pv):
-        vis[i] = 1.0
-        return
+    pv = wp.vec3(r[0], r[1], r[2])
     m = map_coords(lv, pv)
     if not inside_map(lv, window_to_texel(lv, m)):
         vis[i] = 1.0
@@ -107,7 +105,7 @@ class ESM(Technique):
     writes = ("visibility",)
 
     quality = (Quality("c", (40.0, 80.0, 160.0), "a larger exponent: less light leaking near contacts, harder edges; same time"),)
-    tolerance = Tolerance(mae=0.06, mae_penumbra=0.35)
+    tolerance = Tolerance(mae=0.008, mae_penumbra=0.33)
 
     def add_passes(self, ctx, light):
         p = self.params

@@ -514,7 +514,7 @@ class ESSM(Technique):
         Quality("subdivision", (1, 3, 5), "finer micro-subdivision of non-planar kernels: fewer wrong lit kernels, more look-ups"),
         Quality("level", (0, 1, 2), "LevelX rasterization: the ellipse's sides cut finer, more look-ups"),
     )
-    tolerance = Tolerance(mae=0.01, mae_penumbra=0.08)
+    tolerance = Tolerance(mae=0.001, mae_penumbra=0.025)
 
     def add_passes(self, ctx, light):
         p = self.params

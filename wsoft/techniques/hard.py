@@ -17,9 +17,9 @@ from dataclasses import dataclass
 import warp as wp
 
 from wsoft.lightspace.light import LightGPU, receiver_bias
-from wsoft.lightspace.view import ViewGPU, in_front_of_light, inside_map, texel_of, view_of
+from wsoft.lightspace.view import ViewGPU, inside_map, texel_of
 from wsoft.parallel import launch_chunked
-from wsoft.raster.gbuffer import GBufferGPU, gb_covered
+from wsoft.raster.gbuffer import GBufferGPU, gb_receiver
 from wsoft.params import check_ranges
 from wsoft.techniques.base import Technique, Tolerance, check, param
 
@@ -49,14 +49,12 @@ def shade_hard(
     vis: wp.array[float],
 ):
     i = wp.tid() + offset
-    if not gb_covered(gb, i):
-        vis[i] = 1.0
+    r = gb_receiver(lv, gb, i)
+    if r[3] == 0.0:
+        vis[i] = 1.0  # background, or outside the light's view: nothing between it and the light was mapped
         return
     p = gb.pos[i]
-    v = view_of(lv, p)
-    if not in_front_of_light(lv, v):
-        vis[i] = 1.0  # outside the light's view: nothing between it and the light was mapped
-        return
+    v = wp.vec3(r[0], r[1], r[2])
     t = texel_of(lv, v)
     if not inside_map(lv, t):
         vis[i] = 1.0
@@ -80,7 +78,7 @@ class Hard(Technique):
     writes = ("visibility",)
     # a binary shadow of the light's centre: right in the umbra and the fully lit region, wrong by
     # up to 1 in the penumbra (about half of it on box_plane)
-    tolerance = Tolerance(mae=0.06, mae_penumbra=0.35)
+    tolerance = Tolerance(mae=0.009, mae_penumbra=0.36)
 
     def add_passes(self, ctx, light):
         p = self.params

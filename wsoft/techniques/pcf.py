@@ -17,9 +17,9 @@ import warp as wp
 
 from wsoft.accel.filters import pcf_visibility, taps_on
 from wsoft.lightspace.light import LightGPU, receiver_bias
-from wsoft.lightspace.view import ViewGPU, in_front_of_light, map_coords, texel_size, view_dir, view_of
+from wsoft.lightspace.view import ViewGPU, map_coords, texel_size, view_dir
 from wsoft.parallel import launch_chunked
-from wsoft.raster.gbuffer import GBufferGPU, gb_covered
+from wsoft.raster.gbuffer import GBufferGPU, gb_receiver
 from wsoft.params import check_ranges
 from wsoft.techniques.base import Quality, Technique, Tolerance, check, param
 
@@ -59,14 +59,12 @@ def shade_pcf(
     vis: wp.array[float],
 ):
     i = wp.tid() + offset
-    if not gb_covered(gb, i):
+    r = gb_receiver(lv, gb, i)
+    if r[3] == 0.0:
         vis[i] = 1.0
         return
     p = gb.pos[i]
-    pv = view_of(lv, p)
-    if not in_front_of_light(lv, pv):
-        vis[i] = 1.0
-        return
+    pv = wp.vec3(r[0], r[1], r[2])
     b = bias
     if use_plane == 0:
         b = receiver_bias(lv, L, p, gb.nrm[i], pv[2], bias, slope_texels)
@@ -84,7 +82,7 @@ class PCF(Technique):
     writes = ("visibility",)
     quality = (Quality("taps", (4, 16, 64), "more taps: a smoother filter, linearly more time"),)
     # a fixed 2-texel kernel: nearly as hard as `hard`
-    tolerance = Tolerance(mae=0.06, mae_penumbra=0.35)
+    tolerance = Tolerance(mae=0.0075, mae_penumbra=0.3)
 
     def add_passes(self, ctx, light):
         p = self.params

@@ -30,16 +30,14 @@ from wsoft.lightspace.view import (
     DEPTH_CLEAR,
     ViewGPU,
     depth_at,
-    in_front_of_light,
     map_coords,
     receiver_plane_depth_or,
     texel_center,
     texel_size,
     view_dir,
-    view_of,
 )
 from wsoft.parallel import launch_chunked
-from wsoft.raster.gbuffer import GBufferGPU, gb_covered
+from wsoft.raster.gbuffer import GBufferGPU, gb_receiver
 from wsoft.params import check_ranges
 from wsoft.techniques.base import Quality, Technique, Tolerance, check, param
 
@@ -91,13 +89,11 @@ def shade_pcss(
 ):
     i = wp.tid() + offset
     blockers[i] = 0.0
-    if not gb_covered(gb, i):
+    r = gb_receiver(lv, gb, i)
+    if r[3] == 0.0:
         vis[i] = 1.0
         return
-    pv = view_of(lv, gb.pos[i])
-    if not in_front_of_light(lv, pv):
-        vis[i] = 1.0
-        return
+    pv = wp.vec3(r[0], r[1], r[2])
     nv = view_dir(lv, gb.nrm[i])
     m0 = map_coords(lv, pv)
     # 1. blocker search over the region where any caster could cover part of the light
@@ -135,7 +131,7 @@ class PCSS(Technique):
     writes = ("visibility",)
 
     quality = (Quality("filter_samples", (16, 36, 100), "more filter taps: smoother penumbrae, linearly more time"),)
-    tolerance = Tolerance(mae=0.003, mae_penumbra=0.06)
+    tolerance = Tolerance(mae=0.0025, mae_penumbra=0.06)
 
     def add_passes(self, ctx, light):
         p = self.params

@@ -42,7 +42,7 @@ class Reference(Technique):
     reads = ("gbuffer", "scene.bvh", "scene.triangles", "scene.textures")
     writes = ("visibility", "V_stderr")
     quality = (Quality("samples", (1, 4, 16, 64, 256), "more light samples: error down as 1/sqrt(samples), time up linearly"),)
-    tolerance = Tolerance(mae=0.004, mae_penumbra=0.02)
+    tolerance = Tolerance(mae=0.0003, mae_penumbra=0.01)
 
     def supports(self, scene, light) -> str | None:
         if self.params.casters == "dynamic" and (scene.tri_dynamic is None or not scene.tri_dynamic.any()):

@@ -30,9 +30,9 @@ import warp as wp
 
 from wsoft.accel.blur import blur_vec4_within
 from wsoft.accel.grid import build_grid
-from wsoft.lightspace.view import DEPTH_CLEAR, ViewGPU, bilinear, in_front_of_light, inside_map, map_coords, normalised_depth, view_of, window_to_texel
+from wsoft.lightspace.view import DEPTH_CLEAR, ViewGPU, bilinear, inside_map, map_coords, normalised_depth, window_to_texel
 from wsoft.parallel import launch_chunked
-from wsoft.raster.gbuffer import GBufferGPU, gb_covered
+from wsoft.raster.gbuffer import GBufferGPU, gb_receiver
 from wsoft.raster.rasterizer import rasterize
 from wsoft.params import check_ranges
 from wsoft.techniques.base import Quality, Technique, Tolerance, check, param
@@ -133,11 +133,10 @@ def shade_salzman(
     i = wp.tid() + offset
     vis[i] = 1.0
     rejected[i] = 0
-    if not gb_covered(gb, i):
+    r = gb_receiver(lv, gb, i)
+    if r[3] == 0.0:
         return
-    pv = view_of(lv, gb.pos[i])
-    if not in_front_of_light(lv, pv):
-        return
+    pv = wp.vec3(r[0], r[1], r[2])
     m = map_coords(lv, pv)
     t = window_to_texel(lv, m)
     if not inside_map(lv, t):
@@ -162,7 +161,7 @@ class Salzman(Technique):
     writes = ("visibility",)
     quality = (Quality("radius", (2, 4, 8), "a wider blur: wider (uniform) penumbrae, more time"),)
     # one blur width for every penumbra: the parallel-rectangle penumbra is matched only roughly
-    tolerance = Tolerance(mae=0.06, mae_penumbra=0.35)
+    tolerance = Tolerance(mae=0.007, mae_penumbra=0.28)
 
     def supports(self, scene, light) -> str | None:
         if self.params.casters == "dynamic" and (scene.tri_dynamic is None or not scene.tri_dynamic.any()):

@@ -31,7 +31,7 @@ from wsoft.lightspace.view import ViewGPU, normalised_depth, receiver_texel
 from wsoft.params import check_ranges
 from wsoft.parallel import launch_chunked
 from wsoft.raster.gbuffer import GBufferGPU, gb_covered
-from wsoft.techniques.base import Quality, Technique, Tolerance, check, param
+from wsoft.techniques.base import Quality, Technique, Tolerance, param
 
 
 @dataclass(frozen=True)
@@ -192,7 +192,7 @@ class VSSM(Technique):
     reads = ("gbuffer", "light_depth")
     writes = ("visibility", "vssm_moments", "vssm_sat")
     quality = (Quality("subdivision", (1, 3, 5), "finer subdivision of non-planar kernels: less light leaking, more look-ups"),)
-    tolerance = Tolerance(mae=0.01, mae_penumbra=0.08)
+    tolerance = Tolerance(mae=0.0003, mae_penumbra=0.01)
 
     def add_passes(self, ctx, light):
         p = self.params

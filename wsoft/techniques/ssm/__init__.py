@@ -321,7 +321,7 @@ class SSM(Technique):
     reads = ("gbuffer", "light_depth")
     writes = ("visibility",)
     quality = (Quality("budget", (4.0, 8.0, 16.0, math.inf), "b_mo, micro-occluders per axis: more is closer to level 0 and slower"),)
-    tolerance = Tolerance(mae=0.01, mae_penumbra=0.08)
+    tolerance = Tolerance(mae=0.0005, mae_penumbra=0.012)
 
     def supports(self, scene, light) -> str | None:
         if light.kind == LIGHT_POINT or (light.kind == LIGHT_DISTANT and light.angle_deg <= 0.0) or light.extent() <= 0.0:

@@ -1,0 +1,170 @@
+"""The code's shape: dependencies point one way, every module imports on its own, kernel
+signatures put inputs first and outputs after a ``# outputs`` comment, launches name them."""
+
+from __future__ import annotations
+
+import ast
+import pathlib
+import subprocess
+import sys
+
+import pytest
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+WSOFT = ROOT / "wsoft"
+BENCH = ROOT / "bench"
+
+# lowest first: a module may import its own layer or lower ones, never a higher one
+LAYERS = [
+    ("core", ("wsoft.errors", "wsoft.params", "wsoft.parallel", "wsoft.graph", "wsoft.io")),
+    ("scene", ("wsoft.scene",)),
+    ("lightspace", ("wsoft.lightspace",)),
+    ("raster", ("wsoft.raster", "wsoft.reference")),
+    ("accel", ("wsoft.accel",)),
+    ("techniques", ("wsoft.techniques",)),
+    ("render", ("wsoft.render",)),
+    ("metrics", ("wsoft.metrics",)),
+    ("cli/bench", ("wsoft.cli", "wsoft.__main__", "wsoft.bench", "wsoft.usd_scenes", "wsoft")),
+]
+
+
+def module_name(path: pathlib.Path) -> str:
+    if path.is_relative_to(BENCH):
+        rel = path.relative_to(BENCH).with_suffix("")
+        parts = ["wsoft", "bench", *rel.parts]
+    else:
+        rel = path.relative_to(ROOT).with_suffix("")
+        parts = list(rel.parts)
+    if parts[-1] == "__init__":
+        parts = parts[:-1]
+    return ".".join(parts)
+
+
+def layer_of(mod: str) -> int:
+    best, best_len = None, -1
+    for i, (_, prefixes) in enumerate(LAYERS):
+        for p in prefixes:
+            if (mod == p or mod.startswith(p + ".")) and len(p) > best_len:
+                best, best_len = i, len(p)
+    if best is None:
+        raise AssertionError(f"module {mod} has no layer: add it to LAYERS")
+    return best
+
+
+def sources() -> list[pathlib.Path]:
+    return sorted(WSOFT.rglob("*.py")) + sorted(BENCH.glob("*.py"))
+
+
+def imports_of(path: pathlib.Path) -> list[tuple[str, int]]:
+    """Every wsoft module ``path`` imports (module level or inside functions), with the line."""
+    tree = ast.parse(path.read_text())
+    me = module_name(path)
+    out = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            out += [(a.name, node.lineno) for a in node.names if a.name.split(".")[0] in ("wsoft", "bench")]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = me.split(".")[: len(me.split(".")) - node.level + (1 if path.name == "__init__.py" else 0)]
+                mod = ".".join(base + ([node.module] if node.module else []))
+            else:
+                mod = node.module or ""
+            if mod.split(".")[0] in ("wsoft", "bench"):
+                out.append((mod, node.lineno))
+                # "from wsoft.x import y" may import the submodule wsoft.x.y
+                out += [(f"{mod}.{a.name}", node.lineno) for a in node.names if (ROOT / (mod + "." + a.name).replace(".", "/")).with_suffix(".py").exists()]
+    return out
+
+
+def test_every_module_has_a_layer():
+    for path in sources():
+        layer_of(module_name(path))
+
+
+def test_imports_point_down():
+    """scene -> light space -> raster -> accel -> techniques -> render -> metrics -> cli/bench."""
+    bad = []
+    for path in sources():
+        me = module_name(path)
+        mine = layer_of(me)
+        for mod, line in imports_of(path):
+            assert not mod.startswith("bench"), f"{path}:{line} imports the top-level bench (use wsoft.bench)"
+            theirs = layer_of(mod)
+            if theirs > mine:
+                bad.append(f"{path.relative_to(ROOT)}:{line}: {me} ({LAYERS[mine][0]}) imports {mod} ({LAYERS[theirs][0]})")
+    assert not bad, "imports pointing up:\n" + "\n".join(bad)
+
+
+def test_techniques_do_not_import_each_other():
+    names = {p.stem if p.name != "__init__.py" else p.parent.name for p in (WSOFT / "techniques").iterdir()
+             if (p.suffix == ".py" or p.is_dir()) and p.name not in ("__init__.py", "base.py", "__pycache__")}
+    bad = []
+    for path in (WSOFT / "techniques").rglob("*.py"):
+        me = module_name(path)
+        if me in ("wsoft.techniques", "wsoft.techniques.base"):
+            continue
+        own = me.split(".")[2]
+        for mod, line in imports_of(path):
+            parts = mod.split(".")
+            if parts[:2] == ["wsoft", "techniques"] and len(parts) > 2 and parts[2] in names and parts[2] != own:
+                bad.append(f"{path.relative_to(ROOT)}:{line} imports {mod}")
+    assert not bad, "\n".join(bad)
+
+
+def test_the_check_itself_sees_an_upward_import(tmp_path):
+    """The layer test would catch a lower module importing a higher one (a test that can fail)."""
+    fake = WSOFT / "accel" / "_layer_probe.py"
+    fake.write_text("from wsoft.techniques.hard import Hard\n")
+    try:
+        with pytest.raises(AssertionError, match="_layer_probe"):
+            test_imports_point_down()
+    finally:
+        fake.unlink()
+
+
+@pytest.mark.parametrize("mod", ["wsoft.techniques.ssm.kernels", "wsoft.accel.sat", "wsoft.accel.ssm_structures", "wsoft.lightspace.samples",
+                                 "wsoft.raster.rasterizer", "wsoft.techniques.essm", "wsoft.metrics", "wsoft.bench.pareto"])
+def test_module_imports_on_its_own(mod):
+    p = subprocess.run([sys.executable, "-c", f"import {mod}"], capture_output=True, text=True, timeout=300, cwd=str(ROOT))
+    assert p.returncode == 0, p.stderr
+
+
+def kernels() -> list[tuple[pathlib.Path, ast.FunctionDef]]:
+    out = []
+    for path in sources():
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.FunctionDef):
+                for d in node.decorator_list:
+                    src = ast.unparse(d)
+                    if src in ("wp.kernel", "wp.kernel()") or src.startswith("wp.kernel("):
+                        out.append((path, node))
+    return out
+
+
+def test_kernel_signatures_put_outputs_last():
+    """Every ``@wp.kernel`` lists its inputs, then a ``# outputs`` comment, then what it writes."""
+    bad = []
+    for path, node in kernels():
+        lines = path.read_text().splitlines()
+        body_start = node.body[0].lineno - 1
+        if isinstance(node.body[0], ast.Expr) and isinstance(node.body[0].value, ast.Constant):
+            body_start = node.body[0].lineno - 1
+        sig = "\n".join(lines[node.lineno - 1: body_start])
+        if "# outputs" not in sig:
+            bad.append(f"{path.relative_to(ROOT)}:{node.lineno} {node.name}")
+    assert not bad, "kernels without '# outputs' in their signature:\n" + "\n".join(bad)
+    assert len(kernels()) > 40  # the scan really found the kernels
+
+
+def test_launches_name_inputs_and_outputs():
+    """``wp.launch`` / ``launch_chunked`` calls spell out ``inputs=`` and ``outputs=``."""
+    bad = []
+    for path in sources():
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Call):
+                f = ast.unparse(node.func)
+                if f in ("wp.launch", "launch_chunked"):
+                    kw = {k.arg for k in node.keywords}
+                    if not {"inputs", "outputs"} <= kw:
+                        bad.append(f"{path.relative_to(ROOT)}:{node.lineno} {f}")
+    assert not bad, "launches without inputs=/outputs=:\n" + "\n".join(bad)
