@@ -63,7 +63,8 @@ def run_case(case: dict, ctx: dict) -> dict:
 def report(rows: list[dict], md: Path, ctx: dict) -> None:
     L = report_header("essm-table1", rows, md, ctx)
     L.append("Shen, Feng & Yang, Table 1, regenerated: ESSM's time per stage (ms), ours beside the paper's. Ours: this machine's")
-    L.append("CPU (Warp kernels, all cores), 640x480 eye samples, one rect light, the paper's defaults (μ = 20 tile grid from the")
+    res = ", ".join(sorted({f"{r['width']}x{r['height']}" for r in rows})) or "?"
+    L.append(f"CPU (Warp kernels, all cores), {res} eye samples, one rect light, the paper's defaults (μ = 20 tile grid from the")
     L.append("pyramid test, recursive doubling with 8 reads per pass, 3x3 micro-subdivision, H = 5, Level0). The paper: a GeForce")
     L.append("GTX 465 at 1280x960. Absolute times are not comparable across that gap; the *shares* of the stages are. EB here")
     L.append("includes fitting the light view and rasterizing the depth map (the paper's EB renders the basis textures).")

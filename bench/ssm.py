@@ -120,10 +120,13 @@ def coverage(maps, levels: range) -> dict:
 
 
 def mae(v: np.ndarray, ref: dict, mask: np.ndarray | None = None) -> float:
+    """MAE (the metric's arithmetic) over the covered pixels, or those of ``mask`` among them."""
+    from wsoft.metrics import visibility_error
+
     m = ref["A"] > 0
     if mask is not None:
         m = m & mask
-    return float(np.abs(v - ref["V"])[m].mean()) if m.any() else float("nan")
+    return visibility_error(v, ref["V"], coverage=m)["mae"] if m.any() else float("nan")
 
 
 def gray(v: np.ndarray, cov: np.ndarray) -> np.ndarray:

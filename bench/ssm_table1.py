@@ -8,6 +8,7 @@ content). Build time: median of 7 builds after a warm-up (kernels compiled), dev
 
 from __future__ import annotations
 
+import math
 import statistics
 import time
 from pathlib import Path
@@ -81,10 +82,12 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
     L.append(f"Produced by `{ctx['command']}` (rows: `{md.with_suffix('.jsonl').name}`; rerun resumes, `--fresh` starts over).")
     L.append(f"Machine: {m.get('cpu', '?')}, {m.get('threads', '?')} CPU threads for Warp launches, Python {m.get('python', '?')}.")
     L.append("")
-    L.append("Pruning structures of `ssm` built from `fig1_plant`'s light depth map (a 1024² or 2048² float32 map);")
+    sizes = " or ".join(f"{n}²" for n in sorted({r["size"] for r in rows})) or "?"
+    L.append(f"Pruning structures of `ssm` built from `{SCENE}`'s light depth map (a {sizes} float32 map);")
     L.append("ranges are vec2 of float32 (8 bytes a texel a level). HSM: min/max pyramid; MSSM: every texel's ranges of")
-    L.append("its 2^s neighbourhoods, s = 0..log2 N; YSM: the full HSM plus an MSSM (scales 1..8) over HSM level")
-    L.append("log2(N/256). Build: median of 7 after a warm-up. Paper: GeForce 8800 GTX (2008), our CPU runs are ")
+    m = rows[0]["case"]["ysm_size"] if rows else 256
+    L.append(f"its 2^s neighbourhoods, s = 0..log2 N; YSM: the full HSM plus an MSSM (scales 1..{int(math.log2(m))}) over HSM level")
+    L.append(f"log2(N/{m}). Build: median of 7 after a warm-up. Paper: GeForce 8800 GTX (2008), our CPU runs are ")
     L.append("Warp kernels on the threads below, so absolute times differ by the hardware; the ratios are the point.")
     L.append("")
     L.append("| structure | size | device | build ms | memory MB | paper build ms | paper memory MB |")

@@ -72,7 +72,8 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
     L.append("that backproject; `mean`/`stdev` = micro-occluders processed per backprojecting pixel (both levels when")
     L.append("blending). `frame ms` is the whole frame (G-buffer, light depth map, structures, search, backprojection,")
     L.append("shading); `ssm ms` only the technique's passes. Our scenes are analogues of the paper's (not its models), seen")
-    L.append("at 640×480 rather than 1024×768, and our times are CPU times (threads below), so compare the trends.")
+    res = ", ".join(sorted({f"{r['width']}×{r['height']}" for r in rows})) or "?"
+    L.append(f"at {res} rather than 1024×768, and our times are CPU times (threads below), so compare the trends.")
     L.append("")
     L.append("| scene | b_mo | device | frame ms | ssm ms | backprojecting | mean | stdev | levels used | MAE | MAE penumbra |")
     L.append("|---|---|---|---|---|---|---|---|---|---|---|")

@@ -121,3 +121,44 @@ def test_plan_text():
     assert "/World/Lights/Dome" in out and "shadow:enable = false" in out
     assert "cutout (perforated) materials: (none)" in out
     assert "hard: upload_scene -> gbuffer -> " in out
+
+
+def test_compare_several_techniques_in_one_graph(tmp_path):
+    out = tmp_path / "cmp"
+    p = run("compare", "box_plane", "-t", "pcss", "-t", "hard", "--set", "pcss.filter_samples=16", "--set", "hard.shadow_map_size=512",
+            "--samples", "16", "--width", "40", "--height", "30", "--device", "cpu", "--out-dir", str(out))
+    md = (out / "box_plane-compare.md").read_text()
+    assert "| gbuffer | gbuffer | " in md and "(shared)" in md
+    assert "| pcss | Light |" in md and "| hard | Light |" in md  # an error row per technique
+    for label in ("pcss", "hard", "reference"):
+        s = json.loads((out / f"box_plane-{label}.json").read_text())
+        assert s["label"] == label and (out / f"box_plane-{label}.exr").exists()
+    assert json.loads((out / "box_plane-pcss.json").read_text())["params"]["filter_samples"] == 16
+    assert json.loads((out / "box_plane-hard.json").read_text())["params"]["shadow_map_size"] == 512
+    assert "wrote" in p.stdout
+
+
+def test_compare_set_needs_a_technique_with_several(tmp_path):
+    p = run("compare", "box_plane", "-t", "pcss", "-t", "hard", "--set", "bias=0.1", "--width", "8", "--height", "8", "--device", "cpu",
+            "--out-dir", str(tmp_path), check=False)
+    assert p.returncode == 2 and "write TECHNIQUE.bias=0.1" in p.stderr and "Traceback" not in p.stderr
+
+
+def test_techniques_markdown_and_ranges():
+    md = run("techniques", "--markdown").stdout
+    assert md.startswith("| name | what |") and "| `ssm` |" in md
+    text = run("techniques").stdout
+    assert "shadow_map_size  int    default 1024     texels per side of the light depth map [256..8192]" in text
+    assert "quality: filter_samples over 16, 36, 100" in text
+
+
+def test_bench_with_a_missing_scene_folder_is_one_line(tmp_path):
+    p = run("bench", "foundation", "--quick", "--scenes", str(tmp_path / "nope"), "--out-dir", str(tmp_path / "r"), check=False)
+    assert p.returncode == 2 and "Traceback" not in p.stderr
+    assert "nope" in p.stderr.strip().splitlines()[-1]
+
+
+def test_out_of_range_value_is_one_line(tmp_path):
+    p = run("render", "box_plane", "-t", "pcss", "--set", "bias=nan", "--width", "8", "--height", "8", "--device", "cpu",
+            "--out", str(tmp_path / "o.exr"), check=False)
+    assert p.returncode == 2 and "bias is NaN" in p.stderr and "Traceback" not in p.stderr

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import numpy as np
+import pytest
 from conftest import scene_path
 
 import wsoft
@@ -63,3 +65,69 @@ def test_device_copy_is_reused_until_changed(device):
     c = wsoft.render(scene, "hard", width=16, height=12, device=device)
     assert c.stats["counters"]["frame"]["scene_upload_cached"] is False
     assert not (c["P.Z"] == a["P.Z"]).all()
+
+
+def test_several_techniques_share_one_graph(device):
+    """pcf and pcss used to collide on 'visibility[Light]'; now each visibility carries its technique,
+    the G-buffer runs once, hard and pcf share their depth map, and each frame equals its own render."""
+    scene = wsoft.load_scene(scene_path("box_plane.usda"))
+    kw = dict(width=48, height=36, device=device)
+    fs = wsoft.render(scene, ["hard", "pcf", "pcss", ("pcss", {"filter_samples": 16})], **kw)
+    assert list(fs) == ["hard", "pcf", "pcss", "pcss(filter_samples=16)"]
+    assert fs.stats["passes"].count("gbuffer") == 1
+    shared = fs.stats["shared_passes"]
+    assert set(shared["gbuffer"]) == set(fs) and set(shared["light_depth[Light]@1024"]) == {"hard", "pcf"}
+    assert set(shared["light_depth[Light]@1024+soft"]) == {"pcss", "pcss(filter_samples=16)"}
+    assert fs["pcf"].stats["shared_passes"]["light_depth[Light]@1024"] == ["hard"]
+    for label, tech in (("hard", ("hard", {})), ("pcss(filter_samples=16)", ("pcss", {"filter_samples": 16}))):
+        alone = wsoft.render(scene, tech[0], **kw, **tech[1])
+        assert np.array_equal(fs[label].V, alone.V)
+        own = {"pcss[Light]": "pcss[pcss(filter_samples=16):Light]"} if label != "hard" else {}  # a labelled instance's own pass
+        want = {own.get(n, n) for n in alone.stats["passes"]} - {"shade", "resolve"} | {f"shade[{label}]", f"resolve[{label}]"}
+        assert set(fs[label].stats["passes"]) == want
+    # a technique's frame time counts the passes it needs, shared ones included
+    st = fs["pcf"].stats
+    assert st["timings_ms"]["total"] == pytest.approx(sum(v for k, v in st["timings_ms"].items() if k != "total"), abs=0.01)
+
+
+def test_same_technique_twice_with_the_same_parameters_is_an_error():
+    scene = wsoft.load_scene(scene_path("box_plane.usda"))
+    with pytest.raises(wsoft.ParameterError, match="asked for twice: pcss"):
+        wsoft.render(scene, ["pcss", ("pcss", {})], width=8, height=8, device="cpu")
+    with pytest.raises(wsoft.ParameterError, match="as \\(name, \\{key: value\\}\\)"):
+        wsoft.render(scene, ["pcss", "hard"], width=8, height=8, device="cpu", shadow_map_size=512)
+
+
+def test_essm_instances_share_their_sat_across_shading_knobs():
+    """ESSM's basis and SAT depend on the storage, not on H or the subdivision: built once."""
+    scene = wsoft.load_scene(scene_path("box_plane.usda"))
+    fs = wsoft.render(scene, [("essm", {"H": 2.0}), ("essm", {"subdivision": 1}), ("essm", {"mu": 16})], width=32, height=24, device="cpu")
+    sat = [p for p in fs.stats["passes"] if p.startswith("essm_sat")]
+    assert sat == ["essm_sat[Light]@1024", "essm_sat[Light]@1024{mu=16}"]
+    assert set(fs.stats["shared_passes"]["essm_sat[Light]@1024"]) == {"essm(H=2.0)", "essm(subdivision=1)"}
+
+
+def test_metric_pass_matches_the_host_error():
+    """wsoft.compare's error comes from a metric pass: the same numbers as visibility_error on the frames."""
+    from wsoft.metrics import facing_light, visibility_error
+
+    scene = wsoft.load_scene(scene_path("contact.usda"))
+    fs = wsoft.compare(scene, ["pcss", "hard"], samples=16, width=40, height=30, device="cpu")
+    ref = fs["reference"]
+    assert fs.stats["reference"] == "reference" and "errors" not in ref.stats
+    for label in ("pcss", "hard"):
+        e = fs[label].stats["error"]
+        want = visibility_error(fs[label].V, ref.V, ref["V_stderr"], ref["A"], facing=facing_light(fs[label].channels, scene.lights[0]))
+        assert e == want and e["penumbra_pixels"] > 20 and e["facing"]["pixels"] + e["not_facing"]["pixels"] == e["pixels"]
+        assert fs[label].stats["pass_kinds"].get(f"error[{label}:Light]") is None  # the metric is not part of the frame's time
+    assert fs.stats["pass_kinds"]["error[pcss:Light]"] == "metric"
+
+
+def test_nan_in_an_image_is_counted_and_scored():
+    from wsoft.metrics import visibility_error
+
+    v = np.array([[np.nan, 0.5], [1.0, 1.0]])
+    ref = np.array([[0.0, 0.5], [1.0, 1.0]])
+    with pytest.warns(RuntimeWarning, match="1 pixels of the image are not finite"):
+        e = visibility_error(v, ref)
+    assert e["nan_pixels"] == 1 and e["max"] == 1.0 and e["mae"] == pytest.approx(0.25)

@@ -23,10 +23,20 @@ def _parse_sets(items: list[str] | None) -> dict[str, str]:
     return out
 
 
+def scene_arg(arg: str) -> str:
+    """A stage path, or the name of a bundled stage (``box_plane``) when no such file exists."""
+    if os.path.exists(arg):
+        return arg
+    from wsoft import usd_scenes
+
+    found = usd_scenes.path(arg)
+    return str(found) if found is not None else arg
+
+
 def cmd_render(args) -> int:
     import wsoft
 
-    scene = wsoft.load_scene(args.scene, time=args.time)
+    scene = wsoft.load_scene(scene_arg(args.scene), time=args.time)
     params = _parse_sets(args.set)
     frame = wsoft.render(
         scene, args.technique, width=args.width, height=args.height, camera=args.camera, light=args.light,
@@ -51,7 +61,7 @@ def cmd_render(args) -> int:
 def cmd_plan(args) -> int:
     import wsoft
 
-    scene = wsoft.load_scene(args.scene, time=args.time)
+    scene = wsoft.load_scene(scene_arg(args.scene), time=args.time)
     techs = args.technique or None
     p = wsoft.plan(scene, techs, light=args.light)
     if args.json:
@@ -122,7 +132,7 @@ def cmd_compare(args) -> int:
     import wsoft
     from wsoft.io import write_gray_png
 
-    scene = wsoft.load_scene(args.scene, time=args.time)
+    scene = wsoft.load_scene(scene_arg(args.scene), time=args.time)
     names = list(dict.fromkeys(args.technique or ["hard"]))
     techs = _technique_sets(names, args.set)
     fs = wsoft.compare(scene, techs, samples=args.samples, width=args.width, height=args.height, camera=args.camera, light=args.light,

@@ -486,6 +486,15 @@ def execute(built: Built, device: str, *, extra: list[Key] | None = None, check_
     return res, records, 1e3 * (time.perf_counter() - t0)
 
 
+def frame_ms(total_ms: float, records: list[dict], closure: set[str], single: bool) -> float:
+    """A technique's frame time: alone in its graph, the wall time of the render less the passes it
+    does not need (a metric pass, a ground truth handed in); beside others, the sum of the passes
+    it needs, shared ones included."""
+    if single:
+        return total_ms - sum(r["ms"] for r in records if r["name"] not in closure)
+    return sum(r["ms"] for r in records if r["name"] in closure)
+
+
 def frames_of(built: Built, res: Resources, records: list[dict], total_ms: float) -> FrameSet:
     """One :class:`Frame` per technique with its own stats; the set's stats cover the whole graph."""
     ctx, scene = built.ctx, built.ctx.scene
@@ -532,7 +541,7 @@ def frames_of(built: Built, res: Resources, records: list[dict], total_ms: float
             "lights": [l.path for l in lights],
             "light": lights[0].path,
             "light_labels": [ctx.label(l) for l in lights],
-            "timings_ms": {**timings, "total": round(total_ms if single else sum(r["ms"] for r in mine), 3)},
+            "timings_ms": {**timings, "total": round(frame_ms(total_ms, records, closures[label], single), 3)},
             "timings_by_kind_ms": kinds,
             "cpu_ms": {r["name"]: round(r["cpu_ms"], 3) for r in mine},
             "memory_bytes": {k: v for r in mine for k, v in r["bytes"].items()},

@@ -137,7 +137,9 @@ def compare(scene, techniques, *, samples: int = 256, ground_truth: GroundTruth 
     if not isinstance(scene, Scene):
         scene = load_scene(scene, time=time_code)
     _check_sizes(width, height, pixel_samples)
-    techs = as_techniques(list(techniques) if isinstance(techniques, (list, tuple)) and not isinstance(techniques, str) else [techniques], {})
+    if isinstance(techniques, str) or (isinstance(techniques, tuple) and len(techniques) == 2 and isinstance(techniques[1], dict)):
+        techniques = [techniques]
+    techs = as_techniques(list(techniques), {})
     ref_label = None
     if ground_truth is None:
         refs = [t for t in techs if t.name == "reference"]
