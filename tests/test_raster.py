@@ -141,3 +141,24 @@ def test_margin_widens_the_view_for_soft_techniques(light):
     tl, tr, tb, tt = tight.window
     wl, wr, wb, wt = wide.window
     assert wl < tl and wr > tr and wb < tb and wt > tt
+
+
+def test_light_inside_a_closed_mesh_keeps_its_faces(device):
+    """Skipping the far faces of closed surfaces is exact only when the light is outside them: with
+    a rect light inside a closed box, every face is turned away from it and the box cast no shadow
+    at all (a silent wrong answer). The box must still shadow everything outside it."""
+    from conftest import add_box, add_camera, add_quad, add_rect_light, make_stage
+
+    st = make_stage()
+    add_quad(st, "/World/G", (0, 0, 0), 6)
+    add_box(st, "/World/Box", (-1, -1, 0.5), (1, 1, 2.5))
+    add_rect_light(st, "/World/L", (0, 0, 1.5), 0.4, 0.4)
+    add_camera(st, "/World/Cam", (4, -4, 4), (0, 0, 0))
+    scene = wsoft.load_scene(st)
+    assert upload_scene(scene, device).culled_closed == 12  # the box is closed: culling would apply
+    kw = dict(width=96, height=72, device=device)
+    hard = wsoft.render(scene, "hard", shadow_map_size=2048, **kw)
+    ref = wsoft.render(scene, "reference", samples=1, jitter=False, **kw)
+    cov = hard["A"] > 0
+    assert (ref.V[cov] == 0).mean() > 0.5  # the outside of the box is dark
+    assert np.mean(hard.V[cov] == ref.V[cov]) > 0.99

@@ -43,7 +43,7 @@ import warp as wp
 
 from wsoft.lightspace.view import DEPTH_CLEAR, LightView, ViewGPU, texel_of, view_of
 from wsoft.parallel import cpu_threads, ensure_loaded, launch_chunked, run_tasks
-from wsoft.scene.device import DeviceScene, Surfaces, surface_present
+from wsoft.scene.device import DeviceScene, Surfaces, surface_present, view_surfaces
 
 GPU_BAND_ROWS = 64  # CUDA: rows per band (one thread per triangle and band)
 SMALL_BOX_TEXELS = wp.constant(8)  # triangles whose texel box is this small take the flat loop
@@ -734,6 +734,7 @@ def rasterize(
         frag = gated_depth_min
     target.depth = wp.empty(shape, dtype=float, device=dev)
     r = make_rasterizer(view, frag, conservative=conservative, alpha=alpha)
-    st = r.run(ds.points, ds.indices, ds.cutouts, view, target, dev, triangles=subset, initialized=False)
+    surfaces = view_surfaces(ds, view.origin if view.persp else None)  # no far-face skipping around a light inside a closed mesh
+    st = r.run(ds.points, ds.indices, surfaces, view, target, dev, triangles=subset, initialized=False)
     return DepthMap(view=view, depth=target.depth, alpha_tested=alpha, conservative=conservative,
                     private_maps=st.private_targets, big_triangles=st.big_triangles)

@@ -131,6 +131,10 @@ class DeviceScene:
     cutouts: Surfaces
     has_cutouts: int
     culled_closed: int  # triangles of closed surfaces whose far-facing side the light view may skip
+    cull_host: np.ndarray  # [T] int32, the cull flags on the host (a view may turn some prims' off)
+    tri_prim: np.ndarray  # [T] int32 prim of each triangle (host)
+    closed_lo: np.ndarray  # [P, 3] bounds of each prim's culled triangles (+inf / -inf: none)
+    closed_hi: np.ndarray
     tri_albedo: wp.array  # [T] vec3
     tri_baked: wp.array  # [3T] vec3 baked light per corner (primvars:wsoft:bakedLight)
     tri_has_baked: wp.array  # [T] int32
@@ -208,6 +212,7 @@ def upload_scene(scene: Scene, device: str) -> DeviceScene:
         baked = np.zeros((max(scene.triangle_count, 1), 3, 3), np.float32)
         has_baked = np.zeros(max(scene.triangle_count, 1), np.int32)
     lo, hi = scene.bounds
+    closed_lo, closed_hi = _closed_bounds(scene, cull)
     return DeviceScene(
         device=device,
         mesh=mesh,
@@ -216,6 +221,10 @@ def upload_scene(scene: Scene, device: str) -> DeviceScene:
         cutouts=cut,
         has_cutouts=int(bool(cut_ids) and bool(np.any(tri_cut >= 0))),
         culled_closed=int(np.count_nonzero(cull)),
+        cull_host=cull,
+        tri_prim=np.asarray(scene.tri_prim, np.int32),
+        closed_lo=closed_lo,
+        closed_hi=closed_hi,
         tri_albedo=wp.array(albedo, dtype=wp.vec3, device=device),
         tri_baked=wp.array(np.nan_to_num(baked).reshape(-1, 3), dtype=wp.vec3, device=device),
         tri_has_baked=wp.array(has_baked, dtype=wp.int32, device=device),
@@ -223,3 +232,38 @@ def upload_scene(scene: Scene, device: str) -> DeviceScene:
         lo=lo,
         hi=hi,
     )
+
+
+def _closed_bounds(scene: Scene, cull: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per prim, the bounds of its triangles whose far side the light view may skip (+inf/-inf: none)."""
+    n = max(len(scene.prims), int(scene.tri_prim.max()) + 1 if scene.triangle_count else 0, 1)
+    lo = np.full((n, 3), np.inf)
+    hi = np.full((n, 3), -np.inf)
+    sel = np.flatnonzero(cull != 0)
+    if sel.size:
+        pts = scene.points[scene.triangles[sel]].astype(np.float64)  # [k, 3, 3]
+        prims = scene.tri_prim[sel]
+        np.minimum.at(lo, prims, pts.min(axis=1))
+        np.maximum.at(hi, prims, pts.max(axis=1))
+    return lo, hi
+
+
+def view_surfaces(ds: "DeviceScene", origin: np.ndarray | None) -> Surfaces:
+    """The scene's surfaces for a view from ``origin`` (None: an orthographic view, from infinitely
+    far): skipping the far faces of a closed surface is exact only when the view's origin lies
+    outside it, so prims whose culled triangles' bounds hold the origin keep every face."""
+    if origin is None or ds.culled_closed == 0:
+        return ds.cutouts
+    o = np.asarray(origin, np.float64)
+    pad = 1e-6 * max(ds.diagonal, 1e-12)
+    inside = np.flatnonzero(np.all((ds.closed_lo - pad <= o) & (o <= ds.closed_hi + pad), axis=1))
+    if inside.size == 0:
+        return ds.cutouts
+    cull = ds.cull_host.copy()
+    cull[np.isin(ds.tri_prim, inside)] = 0
+    c = ds.cutouts
+    s = Surfaces()
+    for name in ("tri_cut", "double_sided", "tri_uv", "threshold", "opacity", "tex", "tex_offset", "tex_w", "tex_h", "tex_wrap_s", "tex_wrap_t", "tex_data"):
+        setattr(s, name, getattr(c, name))
+    s.cull = wp.array(cull, dtype=wp.int32, device=ds.device)
+    return s
