@@ -81,10 +81,6 @@ class Pass:
         if self.kind not in PASS_KINDS:
             raise ValueError(f"pass {self.name!r}: kind {self.kind!r} is not one of {', '.join(PASS_KINDS)}")
 
-    def describe(self) -> dict:
-        return {"name": self.name, "kind": self.kind, "stage": self.stage, "technique": self.technique, "light": self.light,
-                "inputs": [str(k) for k in self.inputs], "outputs": [str(k) for k in self.outputs]}
-
 
 @dataclass
 class FrameGraph:

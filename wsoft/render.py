@@ -195,7 +195,6 @@ class TechniqueContext:
     height = property(lambda self: self.ctx.height)
     pixel_samples = property(lambda self: self.ctx.pixel_samples)
     camera = property(lambda self: self.ctx.camera)
-    graph = property(lambda self: self.ctx.graph)
 
     def scene_arrays(self) -> Key:
         return self.ctx.scene_arrays()
@@ -214,10 +213,6 @@ class TechniqueContext:
 
     def light_gpu(self, light: Light):
         return self.ctx.light_gpu(light)
-
-    @property
-    def technique_label(self) -> str:
-        return self.label_
 
     # -- keys and names ------------------------------------------------------------------------------
     def visibility_key(self, light: Light) -> Key:
@@ -343,6 +338,12 @@ def technique_labels(techs: list) -> list[str]:
     return labels
 
 
+def is_several(technique) -> bool:
+    """Is ``technique`` a list of techniques (rather than one name, one (name, params) pair or one instance)?"""
+    pair = isinstance(technique, tuple) and len(technique) == 2 and isinstance(technique[1], dict)
+    return isinstance(technique, (list, tuple)) and not pair
+
+
 def as_techniques(technique, params: dict) -> list:
     """``technique`` (a name, a (name, params) pair, a Technique, or a list of those) as Technique instances."""
     from wsoft.techniques import Technique, create
@@ -358,7 +359,7 @@ def as_techniques(technique, params: dict) -> list:
             return create(t, p)
         raise ParameterError(f"not a technique: {t!r}")
 
-    if isinstance(technique, (list, tuple)) and not (isinstance(technique, tuple) and len(technique) == 2 and isinstance(technique[1], dict)):
+    if is_several(technique):
         if params:
             raise ParameterError("with several techniques give each its parameters as (name, {key: value}), not as keywords")
         if not technique:
@@ -597,7 +598,7 @@ def render(
     if not isinstance(scene, Scene):
         scene = load_scene(scene, time=time_code)
     _check_sizes(width, height, pixel_samples)
-    several = isinstance(technique, list) or (isinstance(technique, tuple) and not (len(technique) == 2 and isinstance(technique[1], dict)))
+    several = is_several(technique)
     dev = resolve_device(device)
     t0 = time.perf_counter()
     built = build_graph(scene, technique, width=width, height=height, camera=camera, light=light, device=dev,

@@ -130,16 +130,14 @@ def compare(scene, techniques, *, samples: int = 256, ground_truth: GroundTruth 
     import time
 
     from wsoft.parallel import resolve_device
-    from wsoft.render import Scene, _check_sizes, as_techniques, build_graph, execute, frames_of
+    from wsoft.render import Scene, _check_sizes, as_techniques, build_graph, execute, frames_of, is_several
     from wsoft.scene.usd import load_scene
     from wsoft.techniques import create
 
     if not isinstance(scene, Scene):
         scene = load_scene(scene, time=time_code)
     _check_sizes(width, height, pixel_samples)
-    if isinstance(techniques, str) or (isinstance(techniques, tuple) and len(techniques) == 2 and isinstance(techniques[1], dict)):
-        techniques = [techniques]
-    techs = as_techniques(list(techniques), {})
+    techs = as_techniques(list(techniques) if is_several(techniques) else [techniques], {})
     ref_label = None
     if ground_truth is None:
         refs = [t for t in techs if t.name == "reference"]
