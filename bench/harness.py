@@ -122,9 +122,7 @@ def ground_truth(name: str, ref: dict, light: str | None):
 
     scene = load(name)
     path = first_light(name, light)
-    L = scene.find_light(path)
-    names = [l.name for l in scene.lights]
-    label = L.name if names.count(L.name) == 1 else L.path
+    label = scene.light_label(scene.find_light(path))
     return GroundTruth({label: {"V": ref["V"], "V_stderr": ref["V_stderr"], "A": ref["A"]}}, int(ref["samples"]))
 
 

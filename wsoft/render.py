@@ -65,8 +65,7 @@ class RenderContext:
         self.pixel_samples = pixel_samples
         self.graph = FrameGraph()
         self.counters: dict[str, Any] = {"frame": {}, "passes": {}, "techniques": {}}
-        names = [l.name for l in scene.lights]
-        self._labels = {l.path: (l.name if names.count(l.name) == 1 else l.path) for l in scene.lights}
+        self._labels = {l.path: scene.light_label(l) for l in scene.lights}
 
     # -- naming ------------------------------------------------------------------------------------
     def label(self, light: Light) -> str:

@@ -583,8 +583,7 @@ class Rasterizer:
         return self._kernels[key]
 
     def run(self, points: wp.array, indices: wp.array, cut: Surfaces, view, target, device: str, *,
-            triangles: wp.array | None = None, width: int | None = None, height: int | None = None, initialized: bool = True,
-            strategy: str = "auto") -> RasterStats:
+            triangles: wp.array | None = None, initialized: bool = True, strategy: str = "auto") -> RasterStats:
         """Rasterize the triangles (all of ``indices``, or the index list ``triangles``) into ``target``.
 
         ``initialized = False``: ``target`` holds no data yet; the CPU's first worker clears it as
@@ -593,8 +592,7 @@ class Rasterizer:
         lv = view.gpu() if isinstance(view, LightView) else view
         if bool(lv.persp) != self.persp:
             raise ValueError("the view's projection does not match the rasterizer's")
-        w = lv.width if width is None else width
-        h = lv.height if height is None else height
+        w, h = lv.width, lv.height
         ntri = indices.shape[0] // 3 if triangles is None else triangles.shape[0]
         listed = triangles is not None
         no_list = triangles if listed else wp.zeros(1, dtype=wp.int32, device=device)

@@ -261,9 +261,8 @@ def view_surfaces(ds: "DeviceScene", origin: np.ndarray | None) -> Surfaces:
         return ds.cutouts
     cull = ds.cull_host.copy()
     cull[np.isin(ds.tri_prim, inside)] = 0
-    c = ds.cutouts
     s = Surfaces()
-    for name in ("tri_cut", "double_sided", "tri_uv", "threshold", "opacity", "tex", "tex_offset", "tex_w", "tex_h", "tex_wrap_s", "tex_wrap_t", "tex_data"):
-        setattr(s, name, getattr(c, name))
+    for name in Surfaces.vars:  # the scene's surfaces, every field but the culling flags
+        setattr(s, name, getattr(ds.cutouts, name))
     s.cull = wp.array(cull, dtype=wp.int32, device=ds.device)
     return s

@@ -227,6 +227,11 @@ class Scene:
         for k in ("_device_cache", "bounds", "_dynamic_subset"):
             self.__dict__.pop(k, None)
 
+    def light_label(self, light: Light) -> str:
+        """How channels and stats name a light: its prim name, or its path when two lights share the name."""
+        names = [l.name for l in self.lights]
+        return light.name if names.count(light.name) == 1 else light.path
+
     def find_light(self, path_or_name: str) -> Light:
         for light in self.lights:
             if path_or_name in (light.path, light.name):
