@@ -187,7 +187,7 @@ def _raster_baseline(case: dict, ctx: dict) -> dict:
 def _throughput(case: dict, ctx: dict) -> dict:
     from wsoft.parallel import cpu_threads
     from wsoft.lightspace.light import disk_shaped
-    from wsoft.reference import reference_pattern, shadow_rays, trace_reference, trace_rays
+    from wsoft.reference import ray_epsilon, reference_pattern, shadow_rays, trace_reference, trace_rays
     from wsoft.render import RenderContext
     from wsoft.raster.camera import camera_gpu
     from wsoft.raster.gbuffer import render_gbuffer
@@ -204,8 +204,9 @@ def _throughput(case: dict, ctx: dict) -> dict:
     covered = int((gb.prim.numpy() >= 0).sum())
     nrays = covered * n
     pattern = reference_pattern(n, 0, True)
-    p_wall, p_cpu = _timed(lambda: trace_reference(ds, L, gb, pattern, disk_shaped(light)))
-    o, d, t = shadow_rays(ds, L, gb, pattern, disk_shaped(light))
+    eps = ray_epsilon(gb, light)
+    p_wall, p_cpu = _timed(lambda: trace_reference(ds, L, gb, pattern, disk_shaped(light), eps))
+    o, d, t = shadow_rays(ds, L, gb, pattern, disk_shaped(light), eps)
     threads = cpu_threads() if dev == "cpu" else None
     e_wall, e_cpu = _timed(lambda: trace_rays(ds, o, d, t))
     row = {

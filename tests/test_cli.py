@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 
@@ -162,3 +163,77 @@ def test_out_of_range_value_is_one_line(tmp_path):
     p = run("render", "box_plane", "-t", "pcss", "--set", "bias=nan", "--width", "8", "--height", "8", "--device", "cpu",
             "--out", str(tmp_path / "o.exr"), check=False)
     assert p.returncode == 2 and "bias is NaN" in p.stderr and "Traceback" not in p.stderr
+
+
+def _main(*args):
+    """The CLI in-process: (exit code, stdout, stderr)."""
+    import contextlib
+    import io
+
+    from wsoft.cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            rc = main(list(args))
+        except SystemExit as exc:  # argparse
+            rc = exc.code
+    return rc, out.getvalue(), err.getvalue()
+
+
+def test_output_paths_are_checked_before_rendering(tmp_path):
+    base = scene_path("box_plane.usda")
+    small = ("--width", "16", "--height", "12", "--device", "cpu")
+    rc, _, err = _main("render", base, "-t", "hard", *small, "--out", str(tmp_path))  # a folder
+    assert rc == 2 and "is a directory" in err and len(err.strip().splitlines()) == 1
+    rc, _, err = _main("render", base, "-t", "hard", *small, "--out", base + "/x.exr")  # under a file
+    assert rc == 2 and "is not a directory" in err and "File exists" not in err
+    exr = tmp_path / "f.exr"
+    rc, _, err = _main("render", base, "-t", "hard", *small, "--out", str(exr), "--stats", base + "/s.json")
+    assert rc == 2 and "--stats" in err and "is not a directory" in err
+    assert not exr.exists()  # checked before rendering: nothing half-written
+
+
+def test_unwritable_png_fails_before_the_exr_is_written(tmp_path):
+    base = scene_path("box_plane.usda")
+    exr = tmp_path / "f.exr"
+    rc, _, err = _main("render", base, "-t", "hard", "--width", "16", "--height", "12", "--out", str(exr), "--png", str(tmp_path))
+    assert rc == 2 and "--png" in err and not exr.exists()
+
+
+def test_help_shows_choices_and_defaults():
+    rc, out, _ = _main("render", "--help")
+    assert rc == 0 and "default: 640" in out and "default: 480" in out
+    assert all(t in out for t in ("pcss", "essm", "vssm", "salzman", "reference"))
+    rc, out, _ = _main("bench", "--help")
+    assert rc == 0 and all(s in out for s in ("foundation", "pareto", "adversarial"))
+    rc, out, _ = _main("compare", "--help")
+    assert rc == 0 and "-compare.md" in out and "default: out" in out
+
+
+def test_bad_time_and_bad_technique_are_one_line_errors():
+    rc, _, err = _main("render", scene_path("box_plane.usda"), "-t", "hard", "--time", "nan", "--out", "/tmp/wsoft-never.exr")
+    assert rc == 2 and "time code nan" in err and len(err.strip().splitlines()) == 1
+    rc, _, err = _main("render", scene_path("box_plane.usda"), "-t", "nope", "--out", "/tmp/wsoft-never.exr")
+    assert rc == 2 and "unknown technique 'nope'" in err and len(err.strip().splitlines()) == 1
+
+
+def test_nonfinite_channels_are_counted_and_warned(tmp_path):
+    from wsoft.errors import NonFiniteWarning
+    from wsoft.io import nonfinite_counts, write_exr
+
+    ch = {"V": np.array([[0.5, np.nan], [np.inf, 1.0]], np.float32), "A": np.ones((2, 2), np.float32)}
+    assert nonfinite_counts(ch) == {"V": 2}
+    with pytest.warns(NonFiniteWarning, match="V 2"):
+        bad = write_exr(str(tmp_path / "n.exr"), ch)
+    assert bad == {"V": 2}
+    assert read_exr(str(tmp_path / "n.exr"))["V"][0, 1] == 0.0
+
+
+@pytest.mark.parametrize("key,value", [("bias", "inf"), ("bias", "1e30"), ("slope_bias", "inf")])
+def test_parameters_that_erase_shadows_are_refused(key, value):
+    rc, _, err = _main("render", scene_path("box_plane.usda"), "-t", "hard", "--set", f"{key}={value}", "--out", "/tmp/wsoft-never.exr")
+    assert rc == 2 and key in err
+    for tech, kv in (("esm", "bias=inf"), ("vsm", "min_variance=1e30")):
+        rc, _, err = _main("render", scene_path("box_plane.usda"), "-t", tech, "--set", kv, "--out", "/tmp/wsoft-never.exr")
+        assert rc == 2 and kv.split("=")[0] in err

@@ -82,7 +82,8 @@ def test_several_techniques_share_one_graph(device):
     for label, tech in (("hard", ("hard", {})), ("pcss(filter_samples=16)", ("pcss", {"filter_samples": 16}))):
         alone = wsoft.render(scene, tech[0], **kw, **tech[1])
         assert np.array_equal(fs[label].V, alone.V)
-        own = {"pcss[Light]": "pcss[pcss(filter_samples=16):Light]"} if label != "hard" else {}  # a labelled instance's own pass
+        own = {"pcss[Light]": "pcss[pcss(filter_samples=16):Light]",  # a labelled instance's own passes
+               "horizon_pcss[Light]": "horizon_pcss[pcss(filter_samples=16):Light]"} if label != "hard" else {}
         want = {own.get(n, n) for n in alone.stats["passes"]} - {"shade", "resolve"} | {f"shade[{label}]", f"resolve[{label}]"}
         assert set(fs[label].stats["passes"]) == want
     # a technique's frame time counts the passes it needs, shared ones included

@@ -23,6 +23,38 @@ def _parse_sets(items: list[str] | None) -> dict[str, str]:
     return out
 
 
+class _Help(argparse.HelpFormatter):
+    """Help that shows each option's default when it has one (not None / False)."""
+
+    def _get_help_string(self, action):
+        h = action.help or ""
+        if action.default not in (None, False, argparse.SUPPRESS) and "default" not in h and action.option_strings:
+            h += (" " if h else "") + "(default: %(default)s)"
+        return h
+
+
+def check_output(path: str | None, what: str, *, folder: bool = False) -> None:
+    """Fail before any rendering when ``path`` cannot be written: it names a folder (or, for
+    ``folder``, a file), a parent is a file, or the nearest existing parent is not writable."""
+    from wsoft.errors import ParameterError
+
+    if not path:
+        return
+    p = os.path.abspath(path)
+    if folder:
+        if os.path.exists(p) and not os.path.isdir(p):
+            raise ParameterError(f"{what} {path}: exists and is not a directory")
+    elif os.path.isdir(p):
+        raise ParameterError(f"{what} {path}: is a directory, not a file")
+    parent = p if folder else os.path.dirname(p)
+    while not os.path.exists(parent):
+        parent = os.path.dirname(parent)
+    if not os.path.isdir(parent):
+        raise ParameterError(f"{what} {path}: {parent} is not a directory")
+    if not os.access(parent, os.W_OK | os.X_OK) or (os.path.exists(p) and not os.access(p, os.W_OK)):
+        raise ParameterError(f"{what} {path}: permission denied")
+
+
 def scene_arg(arg: str) -> str:
     """A stage path, or the name of a bundled stage (``box_plane``) when no such file exists."""
     if os.path.exists(arg):
@@ -36,12 +68,18 @@ def scene_arg(arg: str) -> str:
 def cmd_render(args) -> int:
     import wsoft
 
+    for path, what in ((args.out, "--out"), (args.stats, "--stats"), (args.png, "--png")):
+        check_output(path, what)
     scene = wsoft.load_scene(scene_arg(args.scene), time=args.time)
     params = _parse_sets(args.set)
     frame = wsoft.render(
         scene, args.technique, width=args.width, height=args.height, camera=args.camera, light=args.light,
         device=args.device, pixel_samples=args.pixel_samples, **params,
     )
+    for w in scene.warnings:
+        print(f"warning: {w}", file=sys.stderr)
+    for w in frame.stats["warnings"][len(scene.warnings):]:
+        print(f"warning: {w}", file=sys.stderr)
     frame.write_exr(args.out)
     if args.png:
         frame.write_png(args.png)
@@ -49,8 +87,6 @@ def cmd_render(args) -> int:
         os.makedirs(os.path.dirname(os.path.abspath(args.stats)), exist_ok=True)
         with open(args.stats, "w") as f:
             json.dump(frame.stats, f, indent=2, default=str)
-    for w in scene.warnings:
-        print(f"warning: {w}", file=sys.stderr)
     st = frame.stats
     print(f"{st['technique']} on {os.path.basename(scene.path)} ({args.width}x{args.height}, {st['device']}): "
           f"{st['timings_ms']['total']:.1f} ms, passes: {', '.join(st['passes'])}")
@@ -132,6 +168,7 @@ def cmd_compare(args) -> int:
     import wsoft
     from wsoft.io import write_gray_png
 
+    check_output(args.out_dir, "--out-dir", folder=True)
     scene = wsoft.load_scene(scene_arg(args.scene), time=args.time)
     names = list(dict.fromkeys(args.technique or ["hard"]))
     techs = _technique_sets(names, args.set)
@@ -188,19 +225,25 @@ def cmd_compare(args) -> int:
 def cmd_bench(args) -> int:
     from wsoft.bench.harness import run_sweep
 
+    check_output(args.out_dir, "--out-dir", folder=True)
     return run_sweep(args.sweep, quick=args.quick, device=args.device, out_dir=args.out_dir, fresh=args.fresh, scenes=args.scenes)
 
 
 def main(argv: list[str] | None = None) -> int:
+    from wsoft.bench.harness import SWEEPS
+    from wsoft.techniques import TECHNIQUES
+
+    techniques = sorted(TECHNIQUES)
+    fmt = _Help
     ap = argparse.ArgumentParser(prog="wsoft", description="Soft-shadow techniques in Warp on USD stages.")
     sub = ap.add_subparsers(dest="cmd", required=True)
 
-    r = sub.add_parser("render", help="render a stage with a technique, write EXR (and PNG, stats)")
-    r.add_argument("scene")
-    r.add_argument("--technique", "-t", required=True)
+    r = sub.add_parser("render", help="render a stage with a technique, write EXR (and PNG, stats)", formatter_class=fmt)
+    r.add_argument("scene", help="a .usda/.usdc/.usdz file or a bundled stage's name (box_plane)")
+    r.add_argument("--technique", "-t", required=True, metavar="TECHNIQUE", help="one of: " + ", ".join(techniques))
     r.add_argument("--set", action="append", metavar="KEY=VALUE", help="technique parameter (repeatable)")
-    r.add_argument("--width", type=int, default=640)
-    r.add_argument("--height", type=int, default=480)
+    r.add_argument("--width", type=int, default=640, help="image width in pixels")
+    r.add_argument("--height", type=int, default=480, help="image height in pixels")
     r.add_argument("--camera", help="camera prim path (default: the stage's first camera, else automatic)")
     r.add_argument("--light", help="light path or name for V (default: every shadow-casting light; V = the first)")
     r.add_argument("--time", type=float, help="USD time code (default: the stage's start time)")
@@ -211,35 +254,38 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--png", help="shaded PNG")
     r.set_defaults(fn=cmd_render)
 
-    c = sub.add_parser("compare", help="render techniques and the reference in one graph; EXR/PNG of each, a time and error table")
-    c.add_argument("scene")
-    c.add_argument("--technique", "-t", action="append", help="a technique (repeatable; default: hard)")
+    c = sub.add_parser("compare", help="render techniques and the reference in one graph; EXR/PNG of each, a time and error table",
+                       formatter_class=fmt, description="Writes OUT_DIR/<stage>-<technique>.exr/.png/-V.png/.json per technique "
+                       "and OUT_DIR/<stage>-compare.md (times and errors against the reference).")
+    c.add_argument("scene", help="a .usda/.usdc/.usdz file or a bundled stage's name (box_plane)")
+    c.add_argument("--technique", "-t", action="append", metavar="TECHNIQUE",
+                   help="a technique (repeatable; default: hard); one of: " + ", ".join(techniques))
     c.add_argument("--set", action="append", metavar="[TECHNIQUE.]KEY=VALUE", help="a parameter (TECHNIQUE.KEY with several techniques)")
     c.add_argument("--samples", type=int, default=256, help="reference light samples per pixel")
-    c.add_argument("--width", type=int, default=640)
-    c.add_argument("--height", type=int, default=480)
+    c.add_argument("--width", type=int, default=640, help="image width in pixels")
+    c.add_argument("--height", type=int, default=480, help="image height in pixels")
     c.add_argument("--camera")
     c.add_argument("--light")
     c.add_argument("--time", type=float)
     c.add_argument("--device")
-    c.add_argument("--out-dir", default="out")
+    c.add_argument("--out-dir", default="out", help="where the images, stats and the compare table are written")
     c.set_defaults(fn=cmd_compare)
 
-    p = sub.add_parser("plan", help="lights, cutouts and the passes each technique would run")
-    p.add_argument("scene")
-    p.add_argument("--technique", "-t", action="append")
+    p = sub.add_parser("plan", help="lights, cutouts and the passes each technique would run", formatter_class=fmt)
+    p.add_argument("scene", help="a .usda/.usdc/.usdz file or a bundled stage's name (box_plane)")
+    p.add_argument("--technique", "-t", action="append", metavar="TECHNIQUE", help="one of: " + ", ".join(techniques))
     p.add_argument("--light")
     p.add_argument("--time", type=float)
     p.add_argument("--json", action="store_true")
     p.set_defaults(fn=cmd_plan)
 
-    t = sub.add_parser("techniques", help="techniques and their parameters")
+    t = sub.add_parser("techniques", help="techniques and their parameters", formatter_class=fmt)
     t.add_argument("--json", action="store_true")
     t.add_argument("--markdown", action="store_true", help="the README's technique table")
     t.set_defaults(fn=cmd_techniques)
 
-    b = sub.add_parser("bench", help="run a benchmark sweep; rows go to <out-dir>/<sweep>.jsonl")
-    b.add_argument("sweep")
+    b = sub.add_parser("bench", help="run a benchmark sweep; rows go to <out-dir>/<sweep>.jsonl", formatter_class=fmt)
+    b.add_argument("sweep", help="one of: " + ", ".join(sorted(SWEEPS)))
     b.add_argument("--quick", action="store_true", help="the CI-sized version")
     b.add_argument("--device", action="append", help="device(s) to sweep (default: the default device)")
     b.add_argument("--out-dir", default="reports", help="where rows, reports and images go (default: ./reports)")

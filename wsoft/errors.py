@@ -28,3 +28,8 @@ class SceneError(WsoftError):
 
 class ParameterError(WsoftError):
     """An unknown technique, unknown parameter key or a bad parameter value."""
+
+
+class NonFiniteWarning(RuntimeWarning):
+    """A rendered channel holds NaN or inf values (counted in the stats; an EXR gets 0 there).
+    The test suite turns it into an error."""

@@ -7,11 +7,30 @@ import os
 import numpy as np
 
 
-def write_exr(path: str, channels: dict[str, np.ndarray]) -> None:
-    """Write float32 channels (no NaN/inf: they are replaced by 0) to an EXR file."""
+def nonfinite_counts(channels: dict[str, np.ndarray]) -> dict[str, int]:
+    """Channel name -> number of NaN or inf values, for the channels that have any."""
+    out = {}
+    for name, arr in channels.items():
+        n = int(np.count_nonzero(~np.isfinite(np.asarray(arr, np.float32))))
+        if n:
+            out[name] = n
+    return out
+
+
+def write_exr(path: str, channels: dict[str, np.ndarray]) -> dict[str, int]:
+    """Write float32 channels to an EXR file. NaN/inf values are never hidden: they are counted
+    per channel, reported with a :class:`~wsoft.errors.NonFiniteWarning` and written as 0.
+    Returns the counts (channel -> non-finite values)."""
+    import warnings
+
     import OpenEXR
 
+    from wsoft.errors import NonFiniteWarning
+
     data = {}
+    bad = nonfinite_counts({k: v for k, v in channels.items() if not k.startswith("_")})
+    if bad:
+        warnings.warn(f"{path}: non-finite values written as 0: " + ", ".join(f"{k} {n}" for k, n in bad.items()), NonFiniteWarning, stacklevel=2)
     for name, arr in channels.items():
         if name.startswith("_"):
             continue
@@ -21,6 +40,7 @@ def write_exr(path: str, channels: dict[str, np.ndarray]) -> None:
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     with OpenEXR.File(header, data) as f:
         f.write(path)
+    return bad
 
 
 def read_exr(path: str) -> dict[str, np.ndarray]:

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -21,17 +22,19 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from wsoft.errors import ParameterError, SceneError
+from wsoft.errors import NonFiniteWarning, ParameterError, SceneError
+from wsoft.io import nonfinite_counts
 from wsoft.graph import FrameGraph, Key, Pass, Resources
-from wsoft.lightspace.light import light_gpu
+from wsoft.lightspace.light import disk_shaped, light_gpu
 from wsoft.lightspace.view import fit_light_view
 from wsoft.parallel import cpu_threads, resolve_device
 from wsoft.raster.camera import camera_gpu, fit_aspect
 from wsoft.raster.gbuffer import GBuffer, render_gbuffer
+from wsoft.raster.horizon import clip_to_front, front_counts, front_fraction
 from wsoft.raster.rasterizer import rasterize
 from wsoft.raster.shade import shade as shade_samples
 from wsoft.scene.device import upload_scene
-from wsoft.scene.types import Camera, Light, Scene
+from wsoft.scene.types import LIGHT_DISTANT, Camera, Light, Scene
 from wsoft.scene.usd import auto_camera, load_scene
 
 SCENE = Key("scene")
@@ -66,6 +69,12 @@ class RenderContext:
         self.graph = FrameGraph()
         self.counters: dict[str, Any] = {"frame": {}, "passes": {}, "techniques": {}}
         self._labels = {l.path: scene.light_label(l) for l in scene.lights}
+        self.warnings: dict[str, list[str]] = {}  # pass name -> warnings it raised (a frame lists those of its passes)
+
+    def warn(self, pass_name: str, message: str) -> None:
+        """A problem found while running a pass (receivers left unmapped, non-finite values): it
+        goes into the stats' ``warnings`` of every frame that needs the pass, and the CLI prints it."""
+        self.warnings.setdefault(pass_name, []).append(message)
 
     # -- naming ------------------------------------------------------------------------------------
     def label(self, light: Light) -> str:
@@ -144,8 +153,13 @@ class RenderContext:
             prim = gb.prim.numpy()
             rec = gb.pos.numpy()[prim >= 0]
             lo, hi = self.scene.bounds
-            view = fit_light_view(light, rec, lo, hi, size, casters=self.scene.points if soft else None)
+            distant = light.kind == LIGHT_DISTANT  # its depth range starts at the nearest caster over the receivers
+            view = fit_light_view(light, rec, lo, hi, size, casters=self.scene.caster_points if soft or distant else None)
             self.pass_counters(name)["receivers_outside"] = view.receivers_outside
+            if view.receivers_outside:
+                self.warn(name, f"light {light.path}: {view.receivers_outside} of {len(rec)} visible samples lie outside its "
+                          f"single-frustum view (more than 80 degrees off its axis) and are left unshadowed; "
+                          f"a light that surrounds its receivers needs a cube map, which this technique does not build")
             return {key: view}
 
         return self.add(Pass(name, (gk,), (key,), run, kind="light_map", light=self.label(light)))
@@ -168,6 +182,35 @@ class RenderContext:
             return {key: dm}
 
         return self.add(Pass(name, (sk, vk), (key,), run, kind="light_map", light=self.label(light)))
+
+    def front_fraction(self, light: Light, centre: bool = False) -> Key:
+        """Resource: per G-buffer sample, the fraction of ``light`` in front of the receiver's tangent
+        plane (:mod:`wsoft.raster.horizon`), shared by every technique (``centre``: whether the
+        light's centre is in front, 1 or 0)."""
+        gk = self.gbuffer()
+        key = Key("front", self.label(light), variant="centre" if centre else "")
+        name = f"front_{'centre' if centre else 'fraction'}[{self.label(light)}]"
+        L = self.light_gpu(light)
+        disk = disk_shaped(light)
+
+        def run(res):
+            gb = res[gk]
+            front = front_fraction(L, gb, disk, self.device, centre)
+            self.pass_counters(name).update(front_counts(front, gb.prim.numpy() >= 0))
+            return {key: front}
+
+        return self.add(Pass(name, (gk,), (key,), run, kind="shade", light=self.label(light)))
+
+    def clip_to_front(self, tctx: "TechniqueContext", light: Light, vis_key: Key) -> Key:
+        """A technique's visibility of ``light`` capped by the light's front fraction (V = min(V, front))."""
+        fk = self.front_fraction(light, centre=tctx.tech.horizon == "centre")
+        key = Key("visibility", self.label(light), technique=tctx.label_, variant="front")
+
+        def run(res):
+            v = res[vis_key]
+            return {key: Visibility(clip_to_front(v.vis, res[fk]), v.stderr)}
+
+        return tctx.add_pass(tctx.pass_name(f"horizon_{tctx.tech.name}", light), (vis_key, fk), (key,), run, kind="shade", stage="horizon", light=light)
 
     def provide(self, key: Key, value: Any, *, name: str | None = None, kind: str = "reference") -> Key:
         """A resource computed outside the graph (a cached reference image): a pass that hands it over."""
@@ -420,7 +463,10 @@ def build_graph(scene: Scene, technique, *, width: int, height: int, camera=None
             built.lights[label] = []
             continue
         built.lights[label] = mine
-        built.visibility[label] = [tech.add_passes(tctx, l) for l in mine]
+        # the receiver's horizon (a point sees only the light in front of its tangent plane): the
+        # reference applies it per light sample, every other technique is capped by its front fraction
+        built.visibility[label] = [tech.add_passes(tctx, l) if tech.horizon == "exact" else ctx.clip_to_front(tctx, l, tech.add_passes(tctx, l))
+                                   for l in mine]
         built.channels[label] = _add_resolve(ctx, tech, label, mine, built.visibility[label], single=len(techs) == 1)
     return built
 
@@ -531,7 +577,8 @@ def frames_of(built: Built, res: Resources, records: list[dict], total_ms: float
         kinds: dict[str, float] = {}
         for r in mine:
             kinds[r["kind"]] = round(kinds.get(r["kind"], 0.0) + r["ms"], 3)
-        warnings = list(base["warnings"]) + [f"{label}: light {l.path} skipped: {why}" for l, why in built.skipped[label]]
+        warns = list(base["warnings"]) + [f"{label}: light {l.path} skipped: {why}" for l, why in built.skipped[label]]
+        warns += [f"{r['name']}: {w}" for r in mine for w in ctx.warnings.get(r["name"], [])]
         lights = built.lights[label]
         stats = {
             **base,
@@ -552,9 +599,16 @@ def frames_of(built: Built, res: Resources, records: list[dict], total_ms: float
             "pass_kinds": {r["name"]: r["kind"] for r in mine},
             "pass_stages": {r["name"]: r["stage"] for r in mine if r["stage"]},
             "shared_passes": {n: [x for x in shared[n] if x != label] for n in timings if n in shared},
-            "warnings": warnings,
+            "warnings": warns,
         }
-        frames[label] = Frame(channels=res[built.channels[label]], stats=stats)
+        channels = res[built.channels[label]]
+        bad = nonfinite_counts(channels)  # never hidden: counted, warned, and a test failure in the suite
+        stats["nonfinite"] = bad
+        if bad:
+            msg = f"{label}: non-finite values (NaN/inf) in " + ", ".join(f"{k} ({n})" for k, n in bad.items())
+            stats["warnings"].append(msg)
+            warnings.warn(msg, NonFiniteWarning, stacklevel=2)
+        frames[label] = Frame(channels=channels, stats=stats)
     stats = {
         **base,
         "techniques": list(frames),
@@ -566,6 +620,7 @@ def frames_of(built: Built, res: Resources, records: list[dict], total_ms: float
         "pass_kinds": {r["name"]: r["kind"] for r in records},
         "shared_passes": shared,
         "skipped": {label: [{"light": l.path, "reason": why} for l, why in sk] for label, sk in built.skipped.items() if sk},
+        "warnings": list(base["warnings"]) + [f"{r['name']}: {w}" for r in records for w in ctx.warnings.get(r["name"], [])],
     }
     return FrameSet(frames, stats)
 

@@ -116,7 +116,9 @@ def minmax_range(depth: wp.array, device: str) -> tuple[float, float]:
 def effective_depth_range(dm, mode: str, scene, device: str) -> tuple[float, float, bool]:
     """The effective depth range that normalises a depth map's linear depth: (z_min, z_max - z_min,
     empty). ``pyramid``: from the map's min/max pyramid; ``bounds``: the scene bounds in light
-    space. An empty map gives (0, 1, True); the range is never narrower than 1e-6 of the depth."""
+    space. An empty map gives (0, 1, True). The range is never narrower than 1% of the view's depth
+    span (far - near): a map holding one depth only (a flat receiver square to the light, nothing
+    above it) would otherwise normalise float32 noise into the whole [0, 1] range and shadow itself."""
     if mode == "bounds":
         lo, hi = scene.bounds
         corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])], np.float64)
@@ -128,4 +130,5 @@ def effective_depth_range(dm, mode: str, scene, device: str) -> tuple[float, flo
     empty = not math.isfinite(zmin)
     if empty:
         zmin, zmax = 0.0, 1.0
-    return zmin, max(zmax - zmin, 1e-6 * max(abs(zmax), 1.0)), empty
+    floor = max(1e-2 * (dm.view.far - dm.view.near), 1e-6 * max(abs(zmax), 1.0))
+    return zmin, max(zmax - zmin, floor), empty

@@ -22,7 +22,7 @@ class LightGPU:
     half_size: wp.vec2  # rect half width / height
     radius: float  # disk / sphere radius
     cos_max: float  # distant: cosine of the cone half angle
-    far: float  # distant: length of shadow rays
+    far: float  # distant: length of shadow rays (4 scene diagonals, at most 1e30)
 
 
 def light_gpu(light: Light, scene_diagonal: float) -> LightGPU:
@@ -35,7 +35,7 @@ def light_gpu(light: Light, scene_diagonal: float) -> LightGPU:
     g.half_size = wp.vec2(*light.half_size)
     g.radius = float(light.radius)
     g.cos_max = float(math.cos(math.radians(0.5 * light.angle_deg)))
-    g.far = float(4.0 * scene_diagonal)
+    g.far = float(min(4.0 * scene_diagonal, 1.0e30))  # reaches every caster; finite in float32 arithmetic
     return g
 
 
@@ -160,3 +160,40 @@ def receiver_bias(lv: ViewGPU, L: LightGPU, p: wp.vec3, n: wp.vec3, z: float, bi
     cos_t = wp.abs(wp.dot(n, wp.vec3(c[0], c[1], c[2])))
     tan_t = wp.min(wp.sqrt(wp.max(1.0 - cos_t * cos_t, 0.0)) / wp.max(cos_t, 1.0e-4), 10.0)
     return bias + slope_texels * texel * tan_t
+
+
+# --------------------------------------------------------------------------- the receiver's horizon
+
+
+@wp.func
+def in_front(n: wp.vec3, d: wp.vec3) -> bool:
+    """Does the direction ``d`` leave the visible side of a surface of normal ``n``? A point sees
+    only the part of a light in front of its tangent plane: behind it, the surface's own sheet is in
+    the way (the one rule of :mod:`wsoft.raster.horizon`, the reference and every technique)."""
+    return wp.dot(n, d) > 0.0
+
+
+@wp.func
+def light_side(L: LightGPU, p: wp.vec3, n: wp.vec3) -> int:
+    """Where the whole light lies against the tangent plane at ``p`` (normal ``n``): 1 wholly in
+    front, -1 wholly behind (or on it), 0 across it. Bounds: a local light's enclosing sphere
+    (centre, half-diagonal or radius), a distant light's cone."""
+    if L.kind == 3:
+        s = wp.dot(n, L.az)
+        sin_a = wp.sqrt(wp.max(1.0 - L.cos_max * L.cos_max, 0.0))
+        if s > sin_a:
+            return 1
+        if s <= -sin_a:
+            return -1
+        return 0
+    r = L.radius
+    if L.kind == 0:
+        r = wp.length(L.half_size)
+    elif L.kind == 4:
+        r = 0.0
+    s = wp.dot(n, L.position - p)
+    if s > r:
+        return 1
+    if s <= -r:
+        return -1
+    return 0

@@ -71,6 +71,7 @@ class LightView:
     width: int
     height: int
     receivers_outside: int = 0
+    extent: float = 1.0  # the frame's scale: diagonal of the receivers' bounds with the light's position (see frame_extent)
 
     def gpu(self) -> ViewGPU:
         g = ViewGPU()
@@ -113,6 +114,30 @@ def _basis_from_axis(z: np.ndarray) -> np.ndarray:
     return np.stack([x, y, z], axis=1)
 
 
+def frame_extent(receivers: np.ndarray, light: Light | None = None) -> float:
+    """The frame's scale, which every scale-dependent default (depth biases, ray offsets, near
+    planes) is a fraction of: the diagonal of the bounds of the receivers the camera sees, with a
+    local light's position (its reach). Geometry out of view (a far ground, a stray huge triangle)
+    does not change it, unlike the scene's bounds."""
+    rec = np.asarray(receivers, np.float64).reshape(-1, 3)
+    if light is not None and light.kind != LIGHT_DISTANT:
+        rec = np.vstack([rec, np.asarray(light.position, np.float64)[None]])
+    if len(rec) == 0:
+        return 1.0
+    ext = float(np.linalg.norm(rec.max(axis=0) - rec.min(axis=0)))
+    return ext if math.isfinite(ext) and ext > 0.0 else max(float(np.abs(rec).max(initial=0.0)), 1e-6)
+
+
+def _prism_depth_min(points: np.ndarray, origin: np.ndarray, axes: np.ndarray, window, default: float) -> float:
+    """Smallest view depth of the ``points`` inside an orthographic window's prism (``default`` if none)."""
+    if points is None or len(points) == 0:
+        return default
+    v = to_frame(np.asarray(points, np.float64).reshape(-1, 3), origin, axes)
+    l, r, b, t = window
+    inside = (v[:, 0] >= l) & (v[:, 0] <= r) & (v[:, 1] >= b) & (v[:, 1] <= t)
+    return min(float(v[inside, 2].min()), default) if inside.any() else default
+
+
 def fit_light_view(
     light: Light,
     receivers: np.ndarray,
@@ -132,40 +157,61 @@ def fit_light_view(
     depth z blocks within w (1/z - 1/z_r) of a receiver's tangent; for a distant light of cone
     half-angle a, within (z_r - z) tan a). Perspective windows are clamped to ±80° around the
     view axis; receivers beyond are counted in ``receivers_outside``.
+
+    Every scale in the view comes from :func:`frame_extent` (receivers and the light), not the
+    scene's bounds: a distant light's depth range starts at the nearest caster vertex inside the
+    window's prism (``casters``, else the scene's bounds' corners inside it); casters nearer
+    still (a huge triangle whose corners are far outside) keep their true, smaller depth.
     """
     if not 256 <= size <= 8192:
         from wsoft.errors import ParameterError
 
         raise ParameterError(f"shadow_map_size {size} out of range [256, 8192]")
-    diag = float(np.linalg.norm(scene_hi - scene_lo)) or 1.0
-    center = 0.5 * (scene_lo + scene_hi)
     rec = np.asarray(receivers, np.float64).reshape(-1, 3)
     if len(rec) == 0:
         rec = np.stack([scene_lo, scene_hi])
+    ext = frame_extent(rec, light)
     if light.kind == LIGHT_DISTANT:
         axes = np.stack([light.frame[:, 0], light.frame[:, 1], -light.frame[:, 2]], axis=1)  # view along emission
+        center = 0.5 * (rec.min(axis=0) + rec.max(axis=0))
+        vr = to_frame(rec, center, axes)
         corners = np.array([[x, y, z] for x in (scene_lo[0], scene_hi[0]) for y in (scene_lo[1], scene_hi[1]) for z in (scene_lo[2], scene_hi[2])])
-        origin = center - axes[:, 2] * diag
-        vr = to_frame(rec, origin, axes)
-        vc = to_frame(corners, origin, axes)
-        pad = margin + 1e-4 * diag
-        if casters is not None and light.angle_deg > 0:
-            pad += math.tan(math.radians(0.5 * light.angle_deg)) * max(float(vr[:, 2].max() - vc[:, 2].min()), 0.0)
+        pts = casters if casters is not None else corners
+        pad = margin + 1e-4 * ext
         l, r = vr[:, 0].min() - pad, vr[:, 0].max() + pad
         b, t = vr[:, 1].min() - pad, vr[:, 1].max() + pad
-        near = max(vc[:, 2].min() - 1e-3 * diag, 0.0)
-        far = vc[:, 2].max() + 1e-3 * diag
+        zr_min, zr_max = float(vr[:, 2].min()), float(vr[:, 2].max())
+        zc = _prism_depth_min(pts, center, axes, (l, r, b, t), zr_min)
+        if casters is not None and light.angle_deg > 0:
+            tan_a = math.tan(math.radians(0.5 * light.angle_deg))
+            for _ in range(2):  # the widened prism may hold nearer casters
+                g = tan_a * max(zr_max - zc, 0.0)
+                zc = _prism_depth_min(pts, center, axes, (l - g, r + g, b - g, t + g), zc)
+            g = tan_a * max(zr_max - zc, 0.0)
+            l, r, b, t = l - g, r + g, b - g, t + g
+        # the origin a little before the nearest caster: depths stay positive and their float
+        # precision is that of the caster-to-receiver distance
+        lead = 1e-3 * ext
+        origin = center + axes[:, 2] * (zc - lead)
+        near = 0.0
+        far = (zr_max - zc) + 2.0 * lead
         persp, outside = False, 0
     else:
         origin = np.asarray(light.position, np.float64)
         if light.kind in (LIGHT_SPHERE, LIGHT_POINT):
             d = rec.mean(axis=0) - origin
-            axes = _basis_from_axis(d if np.linalg.norm(d) > 1e-9 else -light.frame[:, 2])
+            axes = _basis_from_axis(d if np.linalg.norm(d) > 1e-9 * ext else -light.frame[:, 2])
         else:
             axes = np.stack([light.frame[:, 0], -light.frame[:, 1], -light.frame[:, 2]], axis=1)  # right-handed, view along −Z
         vr = to_frame(rec, origin, axes)
-        zmin_ok = 1e-6 * diag
+        zmin_ok = 1e-6 * ext
         ok = vr[:, 2] > zmin_ok
+        # a rect or disk light emits forward only: receivers behind its plane see nothing of it
+        # (the horizon rule darkens them), so they are neither fitted nor counted outside
+        one_sided = light.kind not in (LIGHT_SPHERE, LIGHT_POINT)
+        behind = (to_frame(rec, origin, np.asarray(light.frame, np.float64))[:, 2] >= 0.0) if one_sided else np.zeros(len(rec), bool)
+        if one_sided and (ok & ~behind).any():
+            ok &= ~behind
         tx = vr[ok, 0] / vr[ok, 2]
         ty = vr[ok, 1] / vr[ok, 2]
         # widen by the margin seen at each receiver's depth
@@ -182,7 +228,7 @@ def fit_light_view(
         if casters is not None and w > 0 and len(zr):
             zr_max = float(zr.max())
             vc = to_frame(np.asarray(casters, np.float64).reshape(-1, 3), origin, axes)
-            vc = vc[(vc[:, 2] > 1e-3 * diag) & (vc[:, 2] < zr_max)]
+            vc = vc[(vc[:, 2] > 1e-3 * ext) & (vc[:, 2] < zr_max)]
             if len(vc):
                 grow = w * (1.0 / vc[:, 2] - 1.0 / zr_max)
                 cx, cy = vc[:, 0] / vc[:, 2], vc[:, 1] / vc[:, 2]
@@ -192,11 +238,11 @@ def fit_light_view(
                     l, r, b, t = l - g, r + g, b - g, t + g
         l, r = max(l, -MAX_TAN), min(r, MAX_TAN)
         b, t = max(b, -MAX_TAN), min(t, MAX_TAN)
-        outside = int(np.count_nonzero(~inside))
-        near = max(1e-4 * diag, 1e-7)
+        outside = int(np.count_nonzero(~inside & ~behind))
+        near = max(1e-4 * ext, 1e-7)
         if len(zr):
             near = min(near, 0.5 * float(zr.min()))
-        far = (float(zr.max()) if len(zr) else diag) * 1.01 + 1e-3 * diag
+        far = (float(zr.max()) if len(zr) else ext) * 1.01 + 1e-3 * ext
         persp = True
     # keep a border of texels and avoid a zero-area window
     w = max(r - l, 1e-6)
@@ -206,7 +252,7 @@ def fit_light_view(
     window = (l - ex, l + w + ex, b - ey, b + h + ey)
     return LightView(
         light_path=light.path, persp=persp, origin=origin, axes=axes, window=window,
-        near=float(near), far=float(far), width=size, height=size, receivers_outside=outside,
+        near=float(near), far=float(far), width=size, height=size, receivers_outside=outside, extent=ext,
     )
 
 

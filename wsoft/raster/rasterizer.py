@@ -22,7 +22,9 @@ warp.fem builds its kernels): nothing unused is compiled in.
 Every kernel projects, culls the far faces of closed surfaces (exact, from
 :class:`~wsoft.scene.device.Surfaces`), clips at a perspective view's near plane (one or two
 triangles) and scan-converts (small boxes in one flat loop, wide triangles along exact spans of
-covered texel centres). Scheduling (:meth:`Rasterizer.run`):
+covered texel centres). Fragments deeper than the view's far depth (behind every receiver: they
+can shadow nothing) are not emitted, so a huge or far triangle cannot flood a map with depths
+that wreck its depth range. Scheduling (:meth:`Rasterizer.run`):
 
 * **CUDA**: one launch over (bands of :data:`GPU_BAND_ROWS` rows) x triangles; fragments write
   with real atomics.
@@ -325,7 +327,8 @@ def _make_raster_triangle(persp: bool, spec: FragmentSpec, conservative: bool, a
                         w = wp.vec3(0.0)
                         if wp.static(bary):
                             w = corner_weights(l0, l1, 1.0 - l0 - l1, qa, qb, qc, wp.static(int(persp)), wa, wb, wc)
-                        wp.static(frag)(target, x0 + dx, yb0 + dy, z, w, tri)
+                        if z <= lv.far:  # behind every receiver: shadows nothing
+                            wp.static(frag)(target, x0 + dx, yb0 + dy, z, w, tri)
                     dx += 1
                     if dx == nx:
                         dx = 0
@@ -426,7 +429,8 @@ def _make_raster_triangle(persp: bool, spec: FragmentSpec, conservative: bool, a
                     z = q
                     if wp.static(persp):
                         z = 1.0 / wp.max(q, 1.0e-30)
-                    wp.static(frag)(target, x, y, z, w, tri)
+                    if z <= lv.far:  # behind every receiver: shadows nothing
+                        wp.static(frag)(target, x, y, z, w, tri)
 
     return wp.func(raster_triangle, module="unique")
 

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from wsoft.lightspace.light import LightGPU, light_point
+from wsoft.lightspace.light import LightGPU, in_front, light_point
 from wsoft.lightspace.samples import LightSamples, SamplePattern, sample_coords, sampling_begin
 from wsoft.parallel import launch_chunked
 from wsoft.raster.gbuffer import GBufferGPU, gb_covered, gb_pixel
@@ -27,11 +27,19 @@ from wsoft.scene.device import DeviceScene, Surfaces, occluded
 
 
 @wp.func
+def ray_offset(p: wp.vec3, eps: float) -> float:
+    """The offset of a shadow ray's origin: ``eps`` (a fraction of the frame's extent), at least a
+    few float32 ulps of the point's largest coordinate (far from the origin a fixed offset is lost)."""
+    m = wp.max(wp.abs(p[0]), wp.max(wp.abs(p[1]), wp.abs(p[2])))
+    return wp.max(eps, 2.0e-6 * m)
+
+
+@wp.func
 def ray_origin(p: wp.vec3, n: wp.vec3, d: wp.vec3, eps: float) -> wp.vec3:
-    """Shadow-ray origin: ``p`` moved ``eps`` along the normal, to the side the ray leaves on."""
-    if wp.dot(n, d) < 0.0:
-        return p - n * eps
-    return p + n * eps
+    """Shadow-ray origin: ``p`` moved off its surface along the (camera-facing) normal ``n``, to the
+    visible side. Rays that would leave through the back (``not in_front(n, d)``) are never traced:
+    the surface's own sheet blocks them (:mod:`wsoft.raster.horizon`)."""
+    return p + n * ray_offset(p, eps)
 
 
 @wp.kernel
@@ -63,8 +71,9 @@ def trace_visibility(
         c, state = sample_coords(ls, state, base, rot, s)
         r = light_point(light, p, c)
         d = wp.vec3(r[0], r[1], r[2])
-        if not occluded(mesh, cut, has_cutouts, ray_origin(p, n, d, eps), d, r[3] - eps):
-            visible += 1
+        if in_front(n, d):
+            if not occluded(mesh, cut, has_cutouts, ray_origin(p, n, d, eps), d, r[3] - ray_offset(p, eps)):
+                visible += 1
     v = float(visible) / float(samples)
     pe = (float(visible) + 0.5) / (float(samples) + 1.0)
     vis[i] = v
@@ -76,16 +85,17 @@ def reference_pattern(samples: int, seed: int, jitter: bool) -> SamplePattern:
     return SamplePattern("stratified" if jitter else "regular", samples, seed=seed, per_pixel=True)
 
 
-def trace_reference(ds: DeviceScene, light: LightGPU, gb, pattern: SamplePattern, disk: bool) -> tuple[wp.array, wp.array]:
+def trace_reference(ds: DeviceScene, light: LightGPU, gb, pattern: SamplePattern, disk: bool, eps: float) -> tuple[wp.array, wp.array]:
     """Visibility and its standard error per G-buffer sample (flat float32 arrays), with the
-    light samples of ``pattern`` (mapped onto a disk when ``disk``)."""
+    light samples of ``pattern`` (mapped onto a disk when ``disk``); ``eps``: the rays' offset
+    (:func:`ray_epsilon`)."""
     n = gb.count
     vis = wp.empty(n, dtype=float, device=ds.device)
     err = wp.empty(n, dtype=float, device=ds.device)
     launch_chunked(
         trace_visibility,
         n,
-        inputs=[ds.mesh.id, ds.cutouts, ds.has_cutouts, light, pattern.on(ds.device, disk), gb.gpu(), ray_epsilon(ds)],
+        inputs=[ds.mesh.id, ds.cutouts, ds.has_cutouts, light, pattern.on(ds.device, disk), gb.gpu(), eps],
         outputs=[vis, err],
         device=ds.device,
         min_chunk=256,
@@ -93,9 +103,17 @@ def trace_reference(ds: DeviceScene, light: LightGPU, gb, pattern: SamplePattern
     return vis, err
 
 
-def ray_epsilon(ds: DeviceScene) -> float:
-    """Offset of shadow-ray origins along the normal, relative to the scene's size."""
-    return 2.0e-5 * ds.diagonal
+RAY_EPSILON = 2.0e-5  # shadow-ray offset as a fraction of the frame's extent
+
+
+def ray_epsilon(gb, light) -> float:
+    """Offset of shadow-ray origins along the normal: a fraction of the frame's extent (the
+    receivers in view and the light, :func:`~wsoft.lightspace.view.frame_extent`), not of the
+    scene's bounds, which a far or huge triangle can make as large as the whole frame."""
+    from wsoft.lightspace.view import frame_extent
+
+    rec = gb.pos.numpy()[gb.prim.numpy() >= 0]
+    return RAY_EPSILON * frame_extent(rec, light)
 
 
 # -- explicit rays: the same shadow rays as arrays (for throughput comparisons with other tracers) --
@@ -127,7 +145,7 @@ def generate_shadow_rays(
         d = wp.vec3(r[0], r[1], r[2])
         origin[k * samples + s] = ray_origin(p, n, d, eps)
         dir[k * samples + s] = d
-        tmax[k * samples + s] = r[3] - eps
+        tmax[k * samples + s] = wp.where(in_front(n, d), r[3] - ray_offset(p, eps), 0.0)  # behind the plane: blocked, not traced
 
 
 @wp.kernel
@@ -149,7 +167,7 @@ def trace_shadow_rays(
         hit[r] = 0
 
 
-def shadow_rays(ds: DeviceScene, light: LightGPU, gb, pattern: SamplePattern, disk: bool):
+def shadow_rays(ds: DeviceScene, light: LightGPU, gb, pattern: SamplePattern, disk: bool, eps: float):
     """Origins, unit directions and lengths of the shadow rays of every covered G-buffer sample:
     the same rays the reference traces with ``pattern``, ``pattern.count`` per sample."""
     import numpy as np
@@ -160,7 +178,7 @@ def shadow_rays(ds: DeviceScene, light: LightGPU, gb, pattern: SamplePattern, di
     o = wp.empty(n, dtype=wp.vec3, device=ds.device)
     d = wp.empty(n, dtype=wp.vec3, device=ds.device)
     t = wp.empty(n, dtype=float, device=ds.device)
-    launch_chunked(generate_shadow_rays, len(covered), inputs=[light, pattern.on(ds.device, disk), gb.gpu(), pix, ray_epsilon(ds)],
+    launch_chunked(generate_shadow_rays, len(covered), inputs=[light, pattern.on(ds.device, disk), gb.gpu(), pix, eps],
                    outputs=[o, d, t], device=ds.device, min_chunk=256)
     return o, d, t
 

@@ -171,6 +171,13 @@ class Scene:
         used = self.points[np.unique(self.triangles)] if self.triangle_count else self.points
         return used.min(axis=0).astype(np.float64), used.max(axis=0).astype(np.float64)
 
+    @cached_property
+    def caster_points(self) -> np.ndarray:
+        """The vertices of the triangles (points no triangle uses are not casters), float32 [N, 3]."""
+        if self.triangle_count == 0:
+            return np.zeros((0, 3), np.float32)
+        return self.points[np.unique(self.triangles)]
+
     @property
     def diagonal(self) -> float:
         lo, hi = self.bounds
@@ -224,7 +231,7 @@ class Scene:
 
     def changed(self) -> None:
         """Forget device copies and derived values after the arrays were edited in place."""
-        for k in ("_device_cache", "bounds", "_dynamic_subset"):
+        for k in ("_device_cache", "bounds", "caster_points", "_dynamic_subset"):
             self.__dict__.pop(k, None)
 
     def light_label(self, light: Light) -> str:

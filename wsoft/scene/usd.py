@@ -51,9 +51,15 @@ def load_scene(path_or_stage, time: float | None = None) -> Scene:
     """Load a USD stage (a file path or an open ``Usd.Stage``) at ``time``.
 
     ``time=None`` uses the stage's start time code when it has an authored time range,
-    else the default time. Returns a :class:`Scene` with world-space triangles.
+    else the default time. Returns a :class:`Scene` with world-space triangles. USD's own
+    diagnostics while opening (a missing sublayer, reference or ``.mtlx``) become one
+    ``warning`` line each on the scene, naming the layer; a file USD cannot parse is an error
+    carrying the parser's own ``file:line:col`` message.
     """
     Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = _pxr()
+    from pxr import UsdUtils
+
+    delegate = UsdUtils.CoalescingDiagnosticDelegate()  # USD's warnings are collected, not printed
     if isinstance(path_or_stage, Usd.Stage):
         stage = path_or_stage
         file = stage.GetRootLayer().realPath or stage.GetRootLayer().identifier
@@ -61,15 +67,50 @@ def load_scene(path_or_stage, time: float | None = None) -> Scene:
         file = os.fspath(path_or_stage)
         if not os.path.exists(file):
             raise SceneError("file not found", file=file)
+        if os.path.isdir(file):
+            raise SceneError("is a folder, not a USD file", file=file)
+        _check_time(time, file)
         try:
             stage = Usd.Stage.Open(file)
-        except Exception as exc:  # Tf.ErrorException: first line is the useful one
-            first = str(exc).strip().splitlines()
-            detail = next((ln.strip() for ln in first if ln.strip() and not ln.strip().startswith("Error in")), "unreadable")
-            raise SceneError(f"cannot open USD stage: {detail}", file=file) from None
+        except Exception as exc:  # Tf.ErrorException: the parser's own message is the useful one
+            raise SceneError(f"cannot open USD stage: {_usd_error_detail(str(exc))}", file=file) from None
         if stage is None:
             raise SceneError("cannot open USD stage", file=file)
-    return _StageReader(stage, file, time).read()
+    _check_time(time, file)
+    scene = _StageReader(stage, file, time).read()
+    scene.warnings[:0] = _diagnostic_lines(delegate.TakeUncoalescedDiagnostics(), file)
+    return scene
+
+
+def _check_time(time: float | None, file: str) -> None:
+    if time is not None and not math.isfinite(float(time)):
+        raise SceneError(f"time code {time} is not a finite number", file=file)
+
+
+def _usd_error_detail(text: str) -> str:
+    """The useful part of a ``Tf.ErrorException``: the quoted messages of its ``Error in ...`` lines,
+    the parser's ``file:line:col: ...`` first, without the generic 'Failed to open layer'."""
+    import re
+
+    msgs = [m.strip() for m in re.findall(r"Error in '[^']*' at line \d+ in file [^:]+ : '(.*?)'\s*(?=\n\s*Error in|\Z)", text, re.S)]
+    msgs = [m for m in msgs if m and not m.startswith("Failed to open layer")] or msgs
+    if not msgs:
+        lines = [ln.strip() for ln in text.strip().splitlines() if ln.strip()]
+        return lines[0] if lines else "unreadable"
+    return re.sub(r"pxrInternal_\w+?::(\w+::)*", "", " ".join(msgs[0].split()))
+
+
+def _diagnostic_lines(diagnostics, file: str) -> list[str]:
+    """USD's diagnostics as one line each: the commentary without USD's ``(instantiating stage ...)`` tail."""
+    import re
+
+    out = []
+    for d in diagnostics:
+        msg = re.sub(r"\s*\(instantiating stage on stage @[^@]*@ <0x[0-9a-f]+>\)\s*$", "", " ".join(str(d.commentary).split()))
+        line = f"{file}: USD: {msg}"
+        if msg and line not in out:
+            out.append(line)
+    return out
 
 
 class _StageReader:
@@ -102,6 +143,20 @@ class _StageReader:
     def world(self, prim) -> np.ndarray:
         m = self.xf.GetLocalToWorldTransform(prim)
         return np.array(m, dtype=np.float64).T  # column-vector convention
+
+    def finite(self, prim, name: str, value) -> float:
+        """``value`` as a float; a NaN or infinite one is an error naming the attribute."""
+        v = float(value)
+        if not math.isfinite(v):
+            raise self.err(prim, f"{name} = {v} is not a finite number")
+        return v
+
+    def size(self, prim, name: str, value) -> float:
+        """A light's size attribute: finite and >= 0."""
+        v = self.finite(prim, name, value)
+        if v < 0:
+            raise self.err(prim, f"{name} = {v:g} is negative")
+        return v
 
     def get(self, attr, default=None):
         if not attr or not attr.HasAuthoredValue() and attr.Get(self.timecode) is None:
@@ -204,6 +259,9 @@ class _StageReader:
         if not np.all(np.isfinite(p)):
             bad = int(np.argwhere(~np.isfinite(p).all(axis=1))[0, 0])
             raise self.err(prim, f"points[{bad}] is not finite (NaN or inf)")
+        if np.any(counts < 0):
+            bad = int(np.argmax(counts < 0))
+            raise self.err(prim, f"faceVertexCounts[{bad}] = {int(counts[bad])} is negative")
         if counts.sum() != len(idx):
             raise self.err(prim, f"faceVertexCounts sum to {int(counts.sum())} but faceVertexIndices has {len(idx)} entries")
         if len(idx) and (idx.min() < 0 or idx.max() >= len(p)):
@@ -226,11 +284,26 @@ class _StageReader:
 
         # world transform
         M = self.world(prim)
-        pw = p @ M[:3, :3].T + M[:3, 3]
+        if not np.all(np.isfinite(M)):
+            raise self.err(prim, "world transform is not finite (NaN or inf in its xformOps or an ancestor's)")
+        with np.errstate(over="ignore", invalid="ignore"):
+            pw = p @ M[:3, :3].T + M[:3, 3]
+        if not np.all(np.isfinite(pw.astype(np.float32))):
+            bad = int(np.argwhere(~np.isfinite(pw.astype(np.float32)).all(axis=1))[0, 0])
+            raise self.err(prim, f"points[{bad}] is not finite in float32 once transformed to world space ({p[bad].tolist()})")
         if np.linalg.det(M[:3, :3]) < 0:  # mirroring transform flips the winding
             corners = corners[:, [0, 2, 1]]
             tris = tris[:, [0, 2, 1]]
 
+        # zero-area triangles (repeated or collinear corners in float32) cannot block a ray: dropped
+        q = pw.astype(np.float32).astype(np.float64)[tris]
+        area2 = np.linalg.norm(np.cross(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]), axis=1)
+        keep = area2 > 0.0
+        if not keep.all():
+            self.warn(prim, f"{int((~keep).sum())} zero-area triangles ignored")
+            if not keep.any():
+                return None
+            tris, corners, face_of_tri = tris[keep], corners[keep], face_of_tri[keep]
         uv = self.read_st(prim, mesh, corners, face_of_tri, tris)
         mat = self.bind_materials(prim, mesh, len(counts), face_of_tri)
         ds = bool(self.get(mesh.GetDoubleSidedAttr(), False))
@@ -383,16 +456,20 @@ class _StageReader:
         key = (resolved or asset.path, channel, tuple(wraps))
         if key in self.texture_index:
             return self.texture_index[key]
-        if not resolved or not os.path.exists(resolved):
+        data = _read_asset(resolved) if resolved else None  # through USD's asset resolver: files inside a .usdz too
+        if data is None:
             self.warn(tex_shader.GetPrim(), f"texture {asset.path!r} not found; surface is opaque")
             return -1
         try:
+            import io
+
             from PIL import Image
 
-            with Image.open(resolved) as im:
-                rgba = np.asarray(im.convert("RGBA"), dtype=np.float32) / 255.0
+            with Image.open(io.BytesIO(data)) as im:
+                im.load()  # a truncated file fails here, not later
+                rgba = _rgba01(im)
         except Exception as exc:
-            self.warn(tex_shader.GetPrim(), f"texture {asset.path!r} cannot be read ({exc}); surface is opaque")
+            self.warn(tex_shader.GetPrim(), f"texture {asset.path!r} cannot be read ({' '.join(str(exc).split())}); surface is opaque")
             return -1
         ch = {"r": 0, "g": 1, "b": 2, "a": 3}.get(channel, 3)
         data = np.ascontiguousarray(rgba[::-1, :, ch])  # bottom-up rows: st (0,0) = lower-left
@@ -414,28 +491,35 @@ class _StageReader:
         frame = u @ vt
         pos = M[:3, 3].copy()
         lux = UsdLux.LightAPI(prim)
-        intensity = float(self.get(lux.GetIntensityAttr(), 1.0)) * 2.0 ** float(self.get(lux.GetExposureAttr(), 0.0))
+        intensity = self.finite(prim, "inputs:intensity", self.get(lux.GetIntensityAttr(), 1.0))
+        exposure = self.finite(prim, "inputs:exposure", self.get(lux.GetExposureAttr(), 0.0))
+        if not -126.0 <= exposure <= 127.0:
+            raise self.err(prim, f"inputs:exposure = {exposure:g} is out of range (2^exposure must be a finite float: -126..127)")
+        intensity *= 2.0 ** exposure
         color = tuple(float(c) for c in self.get(lux.GetColorAttr(), (1.0, 1.0, 1.0)))
         common = dict(path=str(prim.GetPath()), position=pos, frame=frame, intensity=intensity, color=color)
         if type_name == "RectLight":
             lt = UsdLux.RectLight(prim)
-            w = float(self.get(lt.GetWidthAttr(), 1.0)) * scale[0]
-            h = float(self.get(lt.GetHeightAttr(), 1.0)) * scale[1]
-            if w < 0 or h < 0:
-                raise self.err(prim, "RectLight width/height must be >= 0")
+            w = self.size(prim, "inputs:width", self.get(lt.GetWidthAttr(), 1.0)) * scale[0]
+            h = self.size(prim, "inputs:height", self.get(lt.GetHeightAttr(), 1.0)) * scale[1]
             if w == 0 and h == 0:
+                self.warn(prim, "RectLight has zero width and height: rendered as a point light (hard shadows)")
                 return Light(kind=LIGHT_POINT, **common)
+            if w == 0 or h == 0:
+                self.warn(prim, f"RectLight has zero {'width' if w == 0 else 'height'}: it emits from a line segment (no area)")
             return Light(kind=LIGHT_RECT, half_size=(0.5 * w, 0.5 * h), **common)
         if type_name == "DiskLight":
-            r = float(self.get(UsdLux.DiskLight(prim).GetRadiusAttr(), 0.5)) * 0.5 * (scale[0] + scale[1])
+            r = self.size(prim, "inputs:radius", self.get(UsdLux.DiskLight(prim).GetRadiusAttr(), 0.5)) * 0.5 * (scale[0] + scale[1])
+            if r == 0:
+                self.warn(prim, "DiskLight has radius 0: rendered as a point light (hard shadows)")
             return Light(kind=LIGHT_DISK if r > 0 else LIGHT_POINT, radius=max(r, 0.0), **common)
         if type_name == "SphereLight":
             lt = UsdLux.SphereLight(prim)
-            r = float(self.get(lt.GetRadiusAttr(), 0.5)) * float(np.mean(scale))
+            r = self.size(prim, "inputs:radius", self.get(lt.GetRadiusAttr(), 0.5)) * float(np.mean(scale))
             if bool(self.get(lt.GetTreatAsPointAttr(), False)) or r <= 0:
                 return Light(kind=LIGHT_POINT, **common)
             return Light(kind=LIGHT_SPHERE, radius=r, **common)
-        angle = float(self.get(UsdLux.DistantLight(prim).GetAngleAttr(), 0.53))
+        angle = self.finite(prim, "inputs:angle", self.get(UsdLux.DistantLight(prim).GetAngleAttr(), 0.53))
         if not (0.0 <= angle < 180.0):
             raise self.err(prim, f"DistantLight angle {angle} must be in [0, 180) degrees")
         return Light(kind=LIGHT_DISTANT, angle_deg=angle, **common)
@@ -451,6 +535,8 @@ class _StageReader:
             raise self.err(prim, "camera transform is singular or not finite")
         M[:3, :3] = axes / scale
         clip = (float(cam.clippingRange.min), float(cam.clippingRange.max))
+        if not all(math.isfinite(c) for c in clip) or not 0.0 <= clip[0] < clip[1]:
+            self.warn(prim, f"clippingRange {clip} is empty or inverted (need 0 <= near < far): this camera sees nothing")
         ortho = cam.projection == Gf.Camera.Orthographic
         ha, va = float(cam.horizontalAperture), float(cam.verticalAperture)
         ho, vo = float(cam.horizontalApertureOffset), float(cam.verticalApertureOffset)
@@ -467,6 +553,34 @@ class _StageReader:
             tan_half = (0.5 * ha / f, 0.5 * va / f)
             offset = (ho / f, vo / f)
         return Camera(path=str(prim.GetPath()), to_world=M, orthographic=ortho, tan_half=tan_half, offset=offset, clip=clip)
+
+
+def _read_asset(resolved: str) -> bytes | None:
+    """The bytes of a resolved asset path (a file, or a file inside a package such as
+    ``scene.usdz[textures/a.png]``), read through USD's asset resolver; None when absent."""
+    from pxr import Ar
+
+    try:
+        asset = Ar.GetResolver().OpenAsset(Ar.ResolvedPath(resolved))
+    except Exception:
+        return None
+    if asset is None:
+        return None
+    buf = asset.GetBuffer()
+    return None if buf is None else bytes(buf)
+
+
+def _rgba01(im) -> np.ndarray:
+    """An image's RGBA in [0, 1], whatever its bit depth (8- and 16-bit, palette, grey, float)."""
+    if im.mode in ("I;16", "I;16B", "I;16L", "I"):
+        a = np.asarray(im, dtype=np.float64)
+        top = 65535.0 if im.mode.startswith("I;16") or a.max(initial=0) > 255 else 255.0
+        g = np.clip(a / top, 0.0, 1.0).astype(np.float32)
+        return np.stack([g, g, g, np.ones_like(g)], axis=-1)
+    if im.mode == "F":
+        g = np.clip(np.asarray(im, dtype=np.float32), 0.0, 1.0)
+        return np.stack([g, g, g, np.ones_like(g)], axis=-1)
+    return np.asarray(im.convert("RGBA"), dtype=np.float32) / 255.0
 
 
 def _baked(parts: list[tuple[np.ndarray | None, int]]) -> np.ndarray | None:

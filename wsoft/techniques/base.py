@@ -83,6 +83,10 @@ class Technique:
     writes: ClassVar[tuple[str, ...]] = ("visibility",)
     quality: ClassVar[tuple[Quality, ...]] = ()
     tolerance: ClassVar[Tolerance | None] = None
+    # the receiver's horizon (wsoft.raster.horizon): "fraction" caps V by the part of the light in
+    # front of the tangent plane, "centre" zeroes V where the light's centre is behind it (a
+    # technique that answers for the centre alone), "exact": the technique applies it itself
+    horizon: ClassVar[str] = "fraction"
 
     def __init__(self, params):
         self.params = params

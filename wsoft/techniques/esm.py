@@ -29,7 +29,7 @@ class ESMParams:
     c: float = param(80.0, "exponent on the normalised depth: larger is sharper and leaks less", range=(0.01, 10000.0))
     filter: str = param("gaussian", "prefilter: box or gaussian")
     radius: int = param(2, "prefilter radius in texels (0: none)", range=(0, 64))
-    bias: float = param(1e-4, "depth bias as a fraction of the scene's bounding diagonal", range=(0.0, 0.1))
+    bias: float = param(1e-4, "depth bias as a fraction of the frame's extent (receivers in view and the light)", range=(0.0, 0.1))
 
     def __post_init__(self):
         check_ranges(self)
@@ -123,7 +123,7 @@ class ESM(Technique):
 
         def run(res):
             gb, dm = res[gbuf], res[depth]
-            bias = p.bias * ctx.scene.diagonal / max(dm.view.far - dm.view.near, 1e-12)
+            bias = p.bias * dm.view.extent / max(dm.view.far - dm.view.near, 1e-12)
             vis = wp.empty(gb.count, dtype=float, device=ctx.device)
             launch_chunked(shade_esm, gb.count, inputs=[dm.view.gpu(), res[basis], gb.gpu(), p.c, bias], outputs=[vis], device=ctx.device)
             return {out: ctx.visibility(vis)}

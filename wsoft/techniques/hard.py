@@ -27,7 +27,7 @@ from wsoft.techniques.base import Technique, Tolerance, check, param
 @dataclass(frozen=True)
 class HardParams:
     shadow_map_size: int = param(1024, "texels per side of the light depth map", range=(256, 8192))
-    bias: float = param(1e-4, "constant depth bias as a fraction of the scene's bounding diagonal", range=(0.0, 0.1))
+    bias: float = param(1e-4, "constant depth bias as a fraction of the frame's extent (receivers in view and the light)", range=(0.0, 0.1))
     slope_bias: float = param(1.5, "slope-scaled depth bias in texels (times tan of the incidence angle, capped at 10)", range=(0.0, 64.0))
     conservative: bool = param(False, "conservative rasterization: every texel a triangle touches")
 
@@ -79,6 +79,7 @@ class Hard(Technique):
     # a binary shadow of the light's centre: right in the umbra and the fully lit region, wrong by
     # up to 1 in the penumbra (about half of it on box_plane)
     tolerance = Tolerance(mae=0.009, mae_penumbra=0.36)
+    horizon = "centre"  # binary: dark where the light's centre is behind the receiver's plane
 
     def add_passes(self, ctx, light):
         p = self.params
@@ -86,10 +87,10 @@ class Hard(Technique):
         depth = ctx.light_depth(light, size=p.shadow_map_size, conservative=p.conservative)
         out = ctx.visibility_key(light)
         L = ctx.light_gpu(light)
-        bias = p.bias * ctx.scene.diagonal
 
         def run(res):
             gb, dm = res[gbuf], res[depth]
+            bias = p.bias * dm.view.extent
             vis = wp.empty(gb.count, dtype=float, device=ctx.device)
             launch_chunked(shade_hard, gb.count, inputs=[dm.view.gpu(), L, dm.depth, gb.gpu(), bias, p.slope_bias], outputs=[vis], device=ctx.device)
             return {out: ctx.visibility(vis)}

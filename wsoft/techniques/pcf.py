@@ -30,7 +30,7 @@ class PCFParams:
     radius: float = param(2.0, "kernel half-width in texels", range=(0.0, 512.0))
     taps: int = param(16, "depth comparisons per sample (a perfect square for the grid pattern)", range=(1, 1024))
     pattern: str = param("grid", "tap pattern: grid (square kernel) or poisson (disk kernel)")
-    bias: float = param(1e-4, "constant depth bias as a fraction of the scene's bounding diagonal", range=(0.0, 0.1))
+    bias: float = param(1e-4, "constant depth bias as a fraction of the frame's extent (receivers in view and the light)", range=(0.0, 0.1))
     receiver_plane: bool = param(True, "compare against the receiver's tangent plane at each tap (receiver-plane bias)")
     slope_bias: float = param(1.5, "slope-scaled bias in texels, used when receiver_plane is off", range=(0.0, 64.0))
 
@@ -90,10 +90,10 @@ class PCF(Technique):
         depth = ctx.light_depth(light, size=p.shadow_map_size)
         out = ctx.visibility_key(light)
         L = ctx.light_gpu(light)
-        bias = p.bias * ctx.scene.diagonal
 
         def run(res):
             gb, dm = res[gbuf], res[depth]
+            bias = p.bias * dm.view.extent
             taps = taps_on(ctx.device, p.pattern, p.taps)
             vis = wp.empty(gb.count, dtype=float, device=ctx.device)
             launch_chunked(

@@ -48,7 +48,7 @@ class PCSSParams:
     blocker_samples: int = param(16, "taps of the blocker search", range=(1, 1024))
     filter_samples: int = param(36, "taps of the percentage-closer filter", range=(1, 4096))
     pattern: str = param("grid", "tap pattern: grid (perfect-square counts) or poisson")
-    bias: float = param(1e-4, "constant depth bias as a fraction of the scene's bounding diagonal", range=(0.0, 0.1))
+    bias: float = param(1e-4, "constant depth bias as a fraction of the frame's extent (receivers in view and the light)", range=(0.0, 0.1))
     min_radius: float = param(1.0, "smallest filter half-width in texels", range=(0.0, 512.0))
     max_radius: float = param(256.0, "largest blocker-search and filter half-width in texels", range=(0.0, 4096.0))
 
@@ -139,10 +139,10 @@ class PCSS(Technique):
         depth = ctx.light_depth(light, size=p.shadow_map_size, soft=True)
         out = ctx.visibility_key(light)
         k = light_kernel(light)
-        bias = p.bias * ctx.scene.diagonal
 
         def run(res):
             gb, dm = res[gbuf], res[depth]
+            bias = p.bias * dm.view.extent
             d = dm.depth.numpy()
             covered = d[d < DEPTH_CLEAR]
             z_min = float(covered.min()) if covered.size else float(dm.view.far)

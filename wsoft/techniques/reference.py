@@ -14,7 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from wsoft.lightspace.light import disk_shaped
-from wsoft.reference import reference_pattern, trace_reference
+from wsoft.reference import ray_epsilon, reference_pattern, trace_reference
 from wsoft.scene.device import upload_scene
 from wsoft.params import check_ranges
 from wsoft.techniques.base import Quality, Technique, Tolerance, check, param
@@ -43,6 +43,7 @@ class Reference(Technique):
     writes = ("visibility", "V_stderr")
     quality = (Quality("samples", (1, 4, 16, 64, 256), "more light samples: error down as 1/sqrt(samples), time up linearly"),)
     tolerance = Tolerance(mae=0.0003, mae_penumbra=0.01)
+    horizon = "exact"  # per light sample, in the tracing kernel
 
     def supports(self, scene, light) -> str | None:
         if self.params.casters == "dynamic" and (scene.tri_dynamic is None or not scene.tri_dynamic.any()):
@@ -64,7 +65,7 @@ class Reference(Technique):
             ds = res[scene_key]
             if dynamic:  # occluders: the dynamic casters only (their own BVH, built once per device)
                 ds, _ = scene.dynamic_subset().device_copy(ctx.device, upload_scene)
-            vis, err = trace_reference(ds, L, res[gbuf], pattern, disk)
+            vis, err = trace_reference(ds, L, res[gbuf], pattern, disk, ray_epsilon(res[gbuf], light))
             return {out: ctx.visibility(vis, err)}
 
         name = ("reference_alpha" if scene.has_cutouts else "reference") + ("_dynamic" if dynamic else "")

@@ -48,7 +48,7 @@ class SalzmanParams:
     bits: int = param(32, "storage of the filtered map: 32 (float) or 8 bits per component", range=(8, 32))
     grid: int = param(32, "cells per side of the caster grid (0: blur everything, no rejection)", range=(0, 1024))
     casters: str = param("auto", "which prims cast: dynamic, all, or auto (dynamic if any)")
-    bias: float = param(1e-4, "depth bias as a fraction of the scene's bounding diagonal", range=(0.0, 0.1))
+    bias: float = param(1e-4, "depth bias as a fraction of the frame's extent (receivers in view and the light)", range=(0.0, 0.1))
 
     def __post_init__(self):
         check_ranges(self)
@@ -243,7 +243,7 @@ class Salzman(Technique):
 
         def run(res):
             gb, view, sm = res[gbuf], res[view_key], res[map_key]
-            bias = p.bias * scene.diagonal / max(sm.zfar - sm.znear, 1e-12)
+            bias = p.bias * view.extent / max(sm.zfar - sm.znear, 1e-12)
             if p.bits == 8:
                 bias = max(bias, 1.5 / 255.0)
             vis = wp.empty(gb.count, dtype=float, device=ctx.device)

@@ -31,7 +31,7 @@ class VSMParams:
     radius: int = param(2, "prefilter radius in texels (0: none)", range=(0, 64))
     min_variance: float = param(1e-6, "smallest variance, in normalised depth squared", range=(0.0, 0.25))
     bleed_reduction: float = param(0.2, "light-bleeding reduction amount", range=(0.0, 0.99))
-    bias: float = param(1e-4, "depth bias as a fraction of the scene's bounding diagonal", range=(0.0, 0.1))
+    bias: float = param(1e-4, "depth bias as a fraction of the frame's extent (receivers in view and the light)", range=(0.0, 0.1))
 
     def __post_init__(self):
         check_ranges(self)
@@ -115,7 +115,7 @@ class VSM(Technique):
 
         def run(res):
             gb, dm = res[gbuf], res[depth]
-            bias = p.bias * ctx.scene.diagonal / max(dm.view.far - dm.view.near, 1e-12)
+            bias = p.bias * dm.view.extent / max(dm.view.far - dm.view.near, 1e-12)
             vis = wp.empty(gb.count, dtype=float, device=ctx.device)
             launch_chunked(shade_vsm, gb.count, inputs=[dm.view.gpu(), res[moments], gb.gpu(), bias, p.min_variance, p.bleed_reduction], outputs=[vis], device=ctx.device)
             return {out: ctx.visibility(vis)}

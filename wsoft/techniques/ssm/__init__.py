@@ -114,7 +114,7 @@ class SSMParams:
     gap_fill: bool = param(True, "extend micropatches toward their left and bottom neighbours")
     msaa: str = param("interpolate", "with pixel_samples > 1: interpolate, single or per_sample")
     tau: float = param(0.01, "relative camera-depth difference below which a sample takes its pixel's visibility", range=(0.0, 100.0))
-    bias: float = param(2e-4, "depth bias against the receiver's tangent plane, fraction of the scene diagonal", range=(0.0, 0.1))
+    bias: float = param(2e-4, "depth bias against the receiver's tangent plane, fraction of the frame's extent (receivers in view and the light)", range=(0.0, 0.1))
     seed: int = param(7, "seed of the jittered and random bitmask samples", range=(0, 2**31 - 1))
 
     def __post_init__(self):
@@ -338,7 +338,6 @@ class SSM(Technique):
         search_key = ctx.key("ssm_search", light)
         loq_key = ctx.key("ssm_loq", light)
         out = ctx.visibility_key(light)
-        bias = p.bias * ctx.scene.diagonal
         dev = ctx.device
         disk = light.kind != LIGHT_RECT
         budget = budget_image(p, ctx.width, ctx.height)
@@ -356,7 +355,7 @@ class SSM(Technique):
             st.gap_fill = int(p.gap_fill)
             st.overprecision = int(p.overprecision)
             st.refine = p.refine
-            st.bias = bias
+            st.bias = p.bias * dm.view.extent
             st.blend = int(p.blend and bool(np.isfinite(budget).any()))
             return st
 

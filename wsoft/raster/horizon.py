@@ -1,0 +1,95 @@
+"""The receiver's horizon: what part of a light lies in front of a visible point's tangent plane.
+
+A point on a surface sees only the part of a light in front of its visible side's tangent plane
+(the side the camera sees, ``N`` in the G-buffer): a light wholly behind it gives V = 0, one
+straddling the plane counts its front part. The reference applies the rule per light sample
+(:func:`~wsoft.lightspace.light.in_front`); a technique's visibility is capped by the light's
+*front fraction* computed here once per light (:func:`front_fraction`), ``V = min(V, front)``
+(:func:`clip_to_front`; a technique that answers for the light's centre alone, ``hard``, is
+zeroed where the centre is behind the plane), so a thin sheet lit from behind (a leaf, a wall, a ground seen from
+below) is dark for every technique, not lit through its own sheet.
+
+The front fraction is exact (0 or 1) wherever the light's bounds lie on one side of the plane
+and counted over a regular grid of :data:`FRONT_SAMPLES` light samples where they straddle it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from wsoft.lightspace.light import LightGPU, in_front, light_center_dir, light_point, light_side
+from wsoft.lightspace.samples import LightSamples, SamplePattern, sample_coords, sampling_begin
+from wsoft.parallel import launch_chunked
+from wsoft.raster.gbuffer import GBufferGPU, gb_covered, gb_pixel
+
+FRONT_SAMPLES = 256  # a 16 x 16 grid over the light where it straddles a receiver's plane
+
+
+@wp.kernel
+def front_fraction_kernel(
+    offset: int,
+    L: LightGPU,
+    ls: LightSamples,
+    gb: GBufferGPU,
+    centre: int,
+    # outputs
+    front: wp.array[float],
+):
+    i = wp.tid() + offset
+    if not gb_covered(gb, i):
+        front[i] = 1.0
+        return
+    p = gb.pos[i]
+    n = gb.nrm[i]
+    if centre != 0:
+        d = light_center_dir(L, p)
+        front[i] = wp.where(in_front(n, wp.vec3(d[0], d[1], d[2])), 1.0, 0.0)
+        return
+    side = light_side(L, p, n)
+    if side != 0:
+        front[i] = wp.where(side > 0, 1.0, 0.0)
+        return
+    xy = gb_pixel(gb, i)
+    state, base, rot = sampling_begin(ls, i, xy[0], xy[1])
+    k = int(0)
+    for s in range(ls.count):
+        c, state = sample_coords(ls, state, base, rot, s)
+        r = light_point(L, p, c)
+        if in_front(n, wp.vec3(r[0], r[1], r[2])):
+            k += 1
+    front[i] = float(k) / float(ls.count)
+
+
+@wp.kernel
+def clip_to_front_kernel(
+    offset: int,
+    vis: wp.array[float],
+    front: wp.array[float],
+    # outputs
+    out: wp.array[float],
+):
+    i = wp.tid() + offset
+    out[i] = wp.min(vis[i], front[i])
+
+
+def front_fraction(L: LightGPU, gb, disk: bool, device: str, centre: bool = False) -> wp.array:
+    """Per G-buffer sample, the fraction of the light in front of its tangent plane (1 off surfaces);
+    ``centre``: 1 or 0, whether the light's centre is in front (for techniques that answer for it)."""
+    front = wp.empty(gb.count, dtype=float, device=device)
+    ls = SamplePattern("regular", FRONT_SAMPLES).on(device, disk)
+    launch_chunked(front_fraction_kernel, gb.count, inputs=[L, ls, gb.gpu(), int(centre)], outputs=[front], device=device, min_chunk=1 << 12)
+    return front
+
+
+def clip_to_front(vis: wp.array, front: wp.array) -> wp.array:
+    """``min(vis, front)`` per sample, as a new array."""
+    out = wp.empty_like(vis)
+    launch_chunked(clip_to_front_kernel, vis.shape[0], inputs=[vis, front], outputs=[out], device=str(vis.device), min_chunk=1 << 15)
+    return out
+
+
+def front_counts(front: wp.array, covered: np.ndarray) -> dict[str, int]:
+    """How many covered samples have the light wholly behind their plane, and how many straddle it."""
+    f = front.numpy()[covered]
+    return {"light_behind": int(np.count_nonzero(f == 0.0)), "light_straddles": int(np.count_nonzero((f > 0.0) & (f < 1.0)))}
