@@ -19,6 +19,11 @@ STORAGE_VARIATIONS = {
     "mu": [{"mu": 16}, {"mu": 24}],
     "sat": [{"sat": "uint32"}, {"sat": "float32"}],
     "c": [{"c": 8.0}, {"c": 20.0}, {"c": 27.7}],  # around the optimal R = 13.9 of the μ = 20 tile grid
+    # the other readings of §5.2 and the old bias (issue 10): only flagged kernels subdivided, the
+    # fixed bias 0.002 whose e^{c bias} = 1.028 exceeds 1 + ε, and both
+    "reading": [{"subdivide": "flagged"}, {"bias": 0.002}, {"subdivide": "flagged", "bias": 0.002}],
+    # the float32 SAT (not in the paper) at a larger exponent than its mantissa rule's 2.8
+    "float32 c": [{"sat": "float32", "c": 5.55}, {"sat": "float32", "c": 8.3}],
 }
 
 
@@ -89,6 +94,42 @@ def hard_case(case: dict, ctx: dict) -> dict:
     return {"name": case["name"], "params": params, "image": image, "error": fr.stats["error"], "max_brighter_than_reference": brighter}
 
 
+def _essm_counters(r: dict) -> dict:
+    lights = r.get("counters", {}).get("techniques", {}).get(r.get("label", r["technique"]), {})
+    return next(iter(lights.values()), {}) if lights else {}
+
+
+def fidelity_section(renders: list[dict]) -> list[str]:
+    """The readings of the paper wsoft chose, each beside the other reading, measured in this run."""
+    rows = [r for r in renders if r["technique"] == "essm" and r["group"] in ("essm map size", "essm reading", "essm sat", "essm float32 c")
+            and r["case"]["params"].get("shadow_map_size") == 1024]
+    if not rows:
+        return []
+    L = ["", "## Readings of the paper (issue 10), each beside the other one", "",
+         "* **§5.2 micro-subdivision**: every kernel is cut into n x n sub-kernels and each is classified (`subdivide=always`, the",
+         "  default); `flagged` cuts only a kernel whose own value exceeds 1 + ε, which misses kernels whose inflated lit texels and",
+         "  leaking occluded ones average below it.",
+         "* **bias and ε**: a lit planar kernel's ESM value is e^{c·bias}; the old fixed bias 0.002 gave 1.028 > 1 + ε = 1.02 at",
+         "  c = 13.9, so almost every lit kernel fell back to PCF. The default bias is now ln(1 + ε)/(2c).",
+         "* **PCF fallback**: each texel's depth is compared with the receiver plane at that texel's centre (it was the sample point,",
+         "  up to half a texel away, which striped tilted lit ground); no parameter keeps the old comparison.",
+         "* **float32 SAT** (not from the paper): its exponent comes from its 24-bit mantissa, R = 24 ln 2 − 2 ln N (2.8 at 1024²),",
+         "  not from its overflow bound (74.2 at 1024²), which turned small kernels into noise.",
+         "* **§6.2 and §7 cannot both hold**: §6.2's μ = 20 integer tile grid fixes R = μ ln 2 = 13.9, while §7 asks for R from the",
+         "  float range (ln FLT_MAX ≈ 88). wsoft keeps §6.2's storage and R = 13.9; a larger c with μ = 20 loses the precision of",
+         "  the receivers *nearest the light* (small normalised depth, where e^{cz} is a few integer units), and a smaller c leaks",
+         "  light where receiver and occluder are close (contact). `MAE facing` (receivers facing the light) is shown beside the MAE.",
+         "",
+         "| scene | params | frame ms | look-ups / sample | PCF fallbacks / sample | MAE | MAE facing | MAE penumbra |",
+         "|---|---|---:|---:|---:|---:|---:|---:|"]
+    for r in sorted(rows, key=lambda r: (r["scene"], str(r["case"]["params"]))):
+        c = _essm_counters(r)
+        e = r["error"]
+        L.append(f"| {r['scene']} | {params_text(r['case']['params'])} | {r['timings_ms']['total']:.1f} | {c.get('lookups_per_sample', 0):.1f} | "
+                 f"{c.get('pcf_fallbacks_per_sample', 0):.2f} | {e['mae']:.4f} | {e['facing']['mae']:.4f} | {e['mae_penumbra']:.4f} |")
+    return L
+
+
 def report(rows: list[dict], md: Path, ctx: dict) -> None:
     hard = [r for r in rows if r["case"]["kind"] == "case"]
     renders = [r for r in rows if r["case"]["kind"] == "render"]
@@ -112,6 +153,7 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
         e = r["error"]
         L.append(f"| {scene} | {tech} | {params_text(r['case']['params'])} | {r['timings_ms']['total']:.1f} | {e['mae']:.4f} | {e['mae_penumbra']:.4f} | "
                  f"{e['facing']['mae']:.4f} | {e['facing']['pixels'] / max(e['pixels'], 1):.2f} |")
+    L += fidelity_section(renders)
     defaults = [r for r in renders if r["technique"] in ("essm", "vssm", "pcss") and r["case"]["params"] == {"shadow_map_size": 1024}]
     if defaults:
         L += ["", "## At 1024², default parameters", "", "| scene | technique | frame ms | MAE | MAE facing | MAE penumbra |", "|---|---|---|---|---|---|"]

@@ -19,6 +19,9 @@ def _devices():
     import wsoft.parallel  # noqa: F401
 
     wp.init()
+    wanted = os.environ.get("WSOFT_TEST_DEVICES")  # e.g. "cuda:0" (python -m wsoft.gpu_check sets it)
+    if wanted:
+        return [d.strip() for d in wanted.split(",") if d.strip()]
     devs = ["cpu"]
     if wp.is_cuda_available():
         devs.append("cuda:0")

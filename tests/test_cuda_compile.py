@@ -1,0 +1,105 @@
+"""The CUDA path without a GPU: every Warp module of the package that owns kernels is compiled for
+CUDA (PTX through the NVRTC that Warp's wheels carry) at sm_70, sm_80 and sm_90, into a temporary
+folder (the user's kernel cache is left alone). An architecture this NVRTC cannot target is
+skipped with the reason (CUDA 13's NVRTC dropped Volta, sm_70: the oldest it targets is sm_75,
+which is compiled instead). Generic kernels compile through their declared
+overloads; the rasterizer's specialised kernels (one Warp module per projection, fragment,
+conservative/alpha, listed/deferring combination) are generated first. A module added later is
+picked up by the walk over the package, with no edit here."""
+
+from __future__ import annotations
+
+import importlib
+import os
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import pytest
+import warp as wp
+
+import wsoft
+
+ARCHS = (70, 75, 80, 90)
+SKIP_PREFIXES = ("wsoft.__main__", "wsoft.bench", "wsoft.usd_scenes", "wsoft.gpu_check")
+
+
+def rasterizer_kernels() -> list:
+    """Every specialised rasterizer kernel: fragment x projection x conservative x alpha x listed x deferring."""
+    from wsoft.raster.rasterizer import FRAGMENTS, ORTHOGRAPHIC, PERSPECTIVE, make_rasterizer
+
+    out = []
+    for spec in FRAGMENTS.values():
+        for view in (PERSPECTIVE, ORTHOGRAPHIC):
+            for conservative in (False, True):
+                for alpha in (False, True):
+                    r = make_rasterizer(view, spec.func, conservative=conservative, alpha=alpha)
+                    out += [r.kernel(listed, defer) for listed in (False, True) for defer in (False, True)]
+    return out
+
+
+def kernel_modules() -> dict[str, object]:
+    """Warp module name -> module, for every module of the package that owns at least one kernel."""
+    kernels = []
+    root = Path(wsoft.__file__).parent
+    for path in sorted(root.rglob("*.py")):  # every file: namespace packages (wsoft.raster) included
+        parts = list(path.relative_to(root.parent).with_suffix("").parts)
+        if parts[-1] == "__init__":
+            parts.pop()
+        name = ".".join(parts)
+        if name.startswith(SKIP_PREFIXES):
+            continue
+        mod = importlib.import_module(name)
+        kernels += [v for v in vars(mod).values() if isinstance(v, wp.Kernel)]
+    kernels += rasterizer_kernels()
+    return {k.module.name: k.module for k in kernels}
+
+
+def _nvrtc_missing() -> str | None:
+    """Why CUDA compilation cannot run here (no NVRTC in this Warp build), or None."""
+    wp.init()
+    from warp._src import context
+
+    core = getattr(context.runtime, "core", None)
+    if core is None or not hasattr(core, "wp_cuda_compile_program"):
+        return "this Warp build has no CUDA compiler (NVRTC)"
+    return None
+
+
+@pytest.fixture(scope="module")
+def modules():
+    why = _nvrtc_missing()
+    if why:
+        pytest.skip(why)
+    return kernel_modules()
+
+
+def test_every_kernel_module_is_found(modules):
+    names = set(modules)
+    for expected in ("wsoft.reference", "wsoft.raster.gbuffer", "wsoft.raster.horizon", "wsoft.accel.sat", "wsoft.techniques.essm",
+                     "wsoft.techniques.ssm.kernels"):
+        assert expected in names
+    raster = {k.module.name for k in rasterizer_kernels()}  # the specialised rasterizers: one "unique" module each
+    assert len(raster) == 64 and raster <= names
+    assert all(m.kernels for m in modules.values())
+
+
+@pytest.mark.parametrize("arch", ARCHS)
+def test_every_module_compiles_for_cuda(modules, arch, tmp_path):
+    from warp._src import context
+
+    supported = getattr(context.runtime, "nvrtc_supported_archs", None)
+    if supported is not None and arch not in supported:
+        version = ".".join(map(str, context.runtime.get_nvrtc_version()))
+        pytest.skip(f"this NVRTC (CUDA {version}) cannot target sm_{arch}; it targets sm_{min(supported)} and newer")
+    def build(item):
+        name, module = item
+        try:
+            wp.compile_aot_module(module, arch=arch, module_dir=str(tmp_path / name), use_ptx=True)
+        except Exception as exc:  # noqa: BLE001 - any compiler error is the finding
+            return f"{name} (sm_{arch}): {' '.join(str(exc).split())[:2000]}"
+        ptx = [p for p in os.listdir(tmp_path / name) if p.endswith(".ptx")]
+        return None if ptx else f"{name} (sm_{arch}): no PTX written"
+
+    with ThreadPoolExecutor(max_workers=max(1, min(4, os.cpu_count() or 1))) as pool:
+        errors = [e for e in pool.map(build, sorted(modules.items())) if e]
+    assert not errors, "\n".join(errors)
