@@ -38,7 +38,9 @@ lights through the sun's cone in an orthographic map. Point lights (and suns of 
 no soft shadow and are rejected.
 
 Counters (``stats["counters"]``, prefix ``ssm[light].``): ``backprojecting_fraction`` (of covered
-receivers), ``umbra_fraction``, ``lit_fraction``, ``occluders_mean`` and ``occluders_stdev``
+receivers) and ``backprojecting_fraction_all_pixels`` (of every receiver, background included),
+``search_width_mean_texels`` (mean side of the backprojecting receivers' search areas),
+``umbra_fraction``, ``lit_fraction``, ``occluders_mean``, ``occluders_stdev`` and ``occluders_max``
 (micro-occluders processed per backprojecting receiver, both levels when blending),
 ``levels_used`` (histogram: receivers per level, a blended receiver counts at both),
 ``structure_build_ms``, ``microrect_build_ms`` and ``memory_bytes`` per structure.
@@ -110,7 +112,8 @@ class SSMParams:
     smooth_radius: int = param(5, "half-width of the LOQ smoothing in pixels (5: 11 x 11; 0: none)", range=(0, 32))
     depth_threshold: float = param(0.05, "relative camera-depth jump at which the LOQ smoothing stops", range=(1e-6, 100.0))
     refine: int = param(4, "search-area refinement iterations", range=(0, 16))
-    overprecision: bool = param(True, "grow the queried region to the support of the level's micro-occluders")
+    overprecision: bool = param(True, "grow the queried region to the support of the level's micro-occluders (lit/umbra classification only)")
+    gather: str = param("budget", "microrects at a coarse level: budget (the cells over the search area, at most (b+1)² a level) or wide (one more cell each side)")
     gap_fill: bool = param(True, "extend micropatches toward their left and bottom neighbours")
     msaa: str = param("interpolate", "with pixel_samples > 1: interpolate, single or per_sample")
     tau: float = param(0.01, "relative camera-depth difference below which a sample takes its pixel's visibility", range=(0.0, 100.0))
@@ -122,6 +125,7 @@ class SSMParams:
         n = self.shadow_map_size
         check(n & (n - 1) == 0, f"shadow_map_size {n} must be a power of two in [256, 8192]")
         check(self.occluder in OCCLUDERS, f"occluder {self.occluder!r} is not one of {', '.join(OCCLUDERS)}")
+        check(self.gather in ("budget", "wide"), f"gather {self.gather!r} is not budget or wide")
         check(self.visibility in ("area", "bitmask"), f"visibility {self.visibility!r} is not area or bitmask")
         check(self.bitmask_size in (8, 16, 32), f"bitmask_size {self.bitmask_size} is not 8, 16 or 32")
         check(self.pattern in PATTERNS, f"pattern {self.pattern!r} is not one of {', '.join(PATTERNS)}")
@@ -298,15 +302,21 @@ def search_counters(s: SSMSearch, processed: wp.array | None = None) -> dict:
     covered = status != STATUS_BACKGROUND
     nc = max(int(covered.sum()), 1)
     pen = status == STATUS_PENUMBRA
+    area = s.area.numpy()[pen] if pen.any() else np.zeros((0, 4), np.float32)
+    widths = np.maximum(area[:, 2] - area[:, 0], area[:, 3] - area[:, 1]) if len(area) else np.zeros(0)
     out = {
         "receivers": int(covered.sum()),
+        "samples": int(status.size),
         "backprojecting_fraction": float(pen.sum() / nc),
+        "backprojecting_fraction_all_pixels": float(pen.sum() / max(status.size, 1)),
+        "search_width_mean_texels": float(widths.mean()) if widths.size else 0.0,
         "umbra_fraction": float((status == STATUS_UMBRA).sum() / nc),
         "lit_fraction": float((status == STATUS_LIT).sum() / nc),
     }
     if processed is not None:
         cnt = processed.numpy()[pen].astype(np.float64)
         out["occluders_mean"] = float(cnt.mean()) if cnt.size else 0.0
+        out["occluders_max"] = int(cnt.max()) if cnt.size else 0
         out["occluders_stdev"] = float(cnt.std()) if cnt.size else 0.0
         out["occluders_total"] = int(cnt.sum())
     return out
@@ -354,6 +364,7 @@ class SSM(Technique):
             st.pattern = code
             st.gap_fill = int(p.gap_fill)
             st.overprecision = int(p.overprecision)
+            st.gather_wide = int(p.gather == "wide")
             st.refine = p.refine
             st.bias = p.bias * dm.view.extent
             st.blend = int(p.blend and bool(np.isfinite(budget).any()))

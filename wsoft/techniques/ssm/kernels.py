@@ -71,6 +71,7 @@ class SSMSetup:
     pattern: int  # PATTERN_*
     gap_fill: int
     overprecision: int
+    gather_wide: int  # microrects: also the cells one beyond the search area's (up to (b+3)² a level)
     refine: int  # search-area refinement iterations
     bias: float  # world units
     blend: int
@@ -164,6 +165,9 @@ def search_areas(
             cell = 1 << int(wp.ceil(lev))
             if cell > 1:
                 ex = extra
+        # the region grown to the support of the level's micro-occluders (§6) decides lit / umbra
+        # only; the search area itself drives the refinement and the level, so every occluder type
+        # is compared on the same search areas and levels
         gx = grown_bounds(tc[0] - hx, tc[0] + hx, cell, ex)
         gy = grown_bounds(tc[1] - hy, tc[1] + hy, cell, ex)
         r = depth_range(acc, gx[0], gy[0], gx[1], gy[1])
@@ -176,9 +180,14 @@ def search_areas(
         if inside and r[1] < zr - st.bias and r[1] < plane_min_over(lv, pv, nv, gx[0], gy[0], gx[1], gy[1]) - st.bias:
             status[i] = STATUS_UMBRA
             return
-        if r[0] <= z:
+        zs = r[0]
+        if cell > 1 or ex > 0:
+            sx = grown_bounds(tc[0] - hx, tc[0] + hx, 1, 0)
+            sy = grown_bounds(tc[1] - hy, tc[1] + hy, 1, 0)
+            zs = depth_range(acc, sx[0], sy[0], sx[1], sy[1])[0]
+        if zs <= z or zs >= zr - st.bias:
             break
-        z = r[0]
+        z = zs
         if it == st.refine:
             h = spread(lv, st.k, z, zr)
             hx = h[0] * lv.scale[0]
@@ -367,10 +376,14 @@ def level_visibility(
     cx1 = int(wp.floor(a[2] / fc))
     cy0 = int(wp.floor(a[1] / fc))
     cy1 = int(wp.floor(a[3] / fc))
-    if st.occluder != OCC_MICROPATCH:
+    if st.occluder == OCC_MICROQUAD:  # a quad spans from one texel centre to the next
         cx0 -= 1
         cy0 -= 1
-    if st.occluder == OCC_MICRORECT:
+    if st.occluder == OCC_MICRORECT and st.gather_wide != 0:
+        # the wide gather: one more cell each side, up to (b+3)² microrects against the b_mo x b_mo
+        # cap of §3/§4.2 (the default reads the (b+1)² cells over the search area, as micropatches)
+        cx0 -= 1
+        cy0 -= 1
         cx1 += 1
         cy1 += 1
     cx0 = wp.max(cx0, 0)
