@@ -57,8 +57,10 @@ def kernel_modules() -> dict[str, object]:
 def _nvrtc_missing() -> str | None:
     """Why CUDA compilation cannot run here (no NVRTC in this Warp build), or None."""
     wp.init()
-    from warp._src import context
-
+    try:
+        from warp._src import context
+    except ImportError:  # another Warp layout: its runtime is not where this test looks
+        return f"Warp {wp.__version__} keeps its runtime elsewhere (no warp._src.context)"
     core = getattr(context.runtime, "core", None)
     if core is None or not hasattr(core, "wp_cuda_compile_program"):
         return "this Warp build has no CUDA compiler (NVRTC)"
@@ -85,7 +87,7 @@ def test_every_kernel_module_is_found(modules):
 
 @pytest.mark.parametrize("arch", ARCHS)
 def test_every_module_compiles_for_cuda(modules, arch, tmp_path):
-    from warp._src import context
+    from warp._src import context  # importable: the fixture checked
 
     supported = getattr(context.runtime, "nvrtc_supported_archs", None)
     if supported is not None and arch not in supported:
