@@ -466,11 +466,16 @@ def all_lit(ch, base=None, technique="") -> str | None:
     return None if v.size > 100 and v.min() >= 1.0 - 1e-6 else f"min V {v.min():.3f}, {int((v < 0.999).sum())} pixels below 1"
 
 
+def _same_v(ch, other, what: str) -> str | None:
+    """``other``'s V on the pixels both frames cover (more than 100 of them), to 1e-6."""
+    both = _covered(ch) & (other["A"] > 0)
+    d = np.abs(ch["V"] - other["V"])[both]
+    return None if both.sum() > 100 and d.max() <= 1e-6 else f"V differs from {what} by up to {d.max():.3g} on {both.sum()} pixels"
+
+
 def same_as_base(ch, base, technique="") -> str | None:
     """The base's V on the pixels both cover (out-of-view geometry must not move a shadow)."""
-    both = _covered(ch) & (base["A"] > 0)
-    d = np.abs(ch["V"] - base["V"])[both]
-    return None if both.sum() > 100 and d.max() <= 1e-6 else f"V differs from the base by up to {d.max():.3g} on {both.sum()} pixels"
+    return _same_v(ch, base, "the base")
 
 
 def far_side_dark(ch, base=None, technique="") -> str | None:
@@ -492,10 +497,7 @@ def far_side_dark(ch, base=None, technique="") -> str | None:
 
 def same_as(other: str):
     def check(ch, base, technique="", frames=None) -> str | None:
-        o = frames[other]
-        both = _covered(ch) & (o["A"] > 0)
-        d = np.abs(ch["V"] - o["V"])[both]
-        return None if both.sum() > 100 and d.max() <= 1e-6 else f"V differs from {other} by up to {d.max():.3g}"
+        return _same_v(ch, frames[other], other)
 
     check.__doc__ = f"The same V as the stage {other!r} on the same pixels."
     check.wants = other

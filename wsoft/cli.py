@@ -76,9 +76,7 @@ def cmd_render(args) -> int:
         scene, args.technique, width=args.width, height=args.height, camera=args.camera, light=args.light,
         device=args.device, pixel_samples=args.pixel_samples, **params,
     )
-    for w in scene.warnings:
-        print(f"warning: {w}", file=sys.stderr)
-    for w in frame.stats["warnings"][len(scene.warnings):]:
+    for w in frame.stats["warnings"]:  # the stage's, then the passes'
         print(f"warning: {w}", file=sys.stderr)
     frame.write_exr(args.out)
     if args.png:

@@ -35,11 +35,12 @@ def ray_offset(p: wp.vec3, eps: float) -> float:
 
 
 @wp.func
-def ray_origin(p: wp.vec3, n: wp.vec3, d: wp.vec3, eps: float) -> wp.vec3:
-    """Shadow-ray origin: ``p`` moved off its surface along the (camera-facing) normal ``n``, to the
-    visible side. Rays that would leave through the back (``not in_front(n, d)``) are never traced:
-    the surface's own sheet blocks them (:mod:`wsoft.raster.horizon`)."""
-    return p + n * ray_offset(p, eps)
+def ray_origin(p: wp.vec3, n: wp.vec3, off: float) -> wp.vec3:
+    """Shadow-ray origin: ``p`` moved ``off`` (:func:`ray_offset`) off its surface along the
+    (camera-facing) normal ``n``, to the visible side. Rays that would leave through the back
+    (``not in_front(n, d)``) are never traced: the surface's own sheet blocks them
+    (:mod:`wsoft.raster.horizon`)."""
+    return p + n * off
 
 
 @wp.kernel
@@ -63,6 +64,8 @@ def trace_visibility(
         return
     p = gb.pos[i]
     n = gb.nrm[i]
+    off = ray_offset(p, eps)
+    o = ray_origin(p, n, off)
     xy = gb_pixel(gb, i)
     state, base, rot = sampling_begin(ls, i, xy[0], xy[1])
     visible = int(0)
@@ -72,7 +75,7 @@ def trace_visibility(
         r = light_point(light, p, c)
         d = wp.vec3(r[0], r[1], r[2])
         if in_front(n, d):
-            if not occluded(mesh, cut, has_cutouts, ray_origin(p, n, d, eps), d, r[3] - ray_offset(p, eps)):
+            if not occluded(mesh, cut, has_cutouts, o, d, r[3] - off):
                 visible += 1
     v = float(visible) / float(samples)
     pe = (float(visible) + 0.5) / (float(samples) + 1.0)
@@ -136,6 +139,8 @@ def generate_shadow_rays(
     i = pix[k]
     p = gb.pos[i]
     n = gb.nrm[i]
+    off = ray_offset(p, eps)
+    o = ray_origin(p, n, off)
     xy = gb_pixel(gb, i)
     state, base, rot = sampling_begin(ls, i, xy[0], xy[1])
     samples = ls.count
@@ -143,9 +148,9 @@ def generate_shadow_rays(
         c, state = sample_coords(ls, state, base, rot, s)
         r = light_point(light, p, c)
         d = wp.vec3(r[0], r[1], r[2])
-        origin[k * samples + s] = ray_origin(p, n, d, eps)
+        origin[k * samples + s] = o
         dir[k * samples + s] = d
-        tmax[k * samples + s] = wp.where(in_front(n, d), r[3] - ray_offset(p, eps), 0.0)  # behind the plane: blocked, not traced
+        tmax[k * samples + s] = wp.where(in_front(n, d), r[3] - off, 0.0)  # behind the plane: blocked, not traced
 
 
 @wp.kernel

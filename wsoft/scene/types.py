@@ -168,7 +168,7 @@ class Scene:
         """World bounds of the points that triangles use (computed once: scenes are not edited in place)."""
         if len(self.points) == 0:
             return np.zeros(3), np.zeros(3)
-        used = self.points[np.unique(self.triangles)] if self.triangle_count else self.points
+        used = self.caster_points if self.triangle_count else self.points
         return used.min(axis=0).astype(np.float64), used.max(axis=0).astype(np.float64)
 
     @cached_property

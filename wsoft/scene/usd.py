@@ -288,15 +288,16 @@ class _StageReader:
             raise self.err(prim, "world transform is not finite (NaN or inf in its xformOps or an ancestor's)")
         with np.errstate(over="ignore", invalid="ignore"):
             pw = p @ M[:3, :3].T + M[:3, 3]
-        if not np.all(np.isfinite(pw.astype(np.float32))):
-            bad = int(np.argwhere(~np.isfinite(pw.astype(np.float32)).all(axis=1))[0, 0])
+        pw32 = pw.astype(np.float32)  # what the kernels see
+        if not np.all(np.isfinite(pw32)):
+            bad = int(np.argwhere(~np.isfinite(pw32).all(axis=1))[0, 0])
             raise self.err(prim, f"points[{bad}] is not finite in float32 once transformed to world space ({p[bad].tolist()})")
         if np.linalg.det(M[:3, :3]) < 0:  # mirroring transform flips the winding
             corners = corners[:, [0, 2, 1]]
             tris = tris[:, [0, 2, 1]]
 
         # zero-area triangles (repeated or collinear corners in float32) cannot block a ray: dropped
-        q = pw.astype(np.float32).astype(np.float64)[tris]
+        q = pw32.astype(np.float64)[tris]
         area2 = np.linalg.norm(np.cross(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]), axis=1)
         keep = area2 > 0.0
         if not keep.all():
