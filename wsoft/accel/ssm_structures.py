@@ -22,8 +22,10 @@ covers. Level ``i + 1`` is derived from level ``i`` by the greedy two-pass merge
 microrect (even ``a, b``) first merges its neighbours in +x and +y when their depth is closer
 to it than to the next retained one (the last ones of a row always), then the diagonal one if
 the merged extent contains it (always at the map's edge); in the second pass it merges the
-neighbours in -x, -y and the diagonal that no one took in the first. Extents (``wp.vec4i``:
-x0, y0, x1, y1 inclusive) and depths are two textures with full mip chains, flat like ``pyr``.
+neighbours in -x, -y and the diagonal that no one took in the first. With ``diagonal="nearest"``
+(not the paper's) a diagonal that the first pass leaves goes to the retained neighbour of nearest
+depth. Extents (``wp.vec4i``: x0, y0, x1, y1 inclusive) and depths are two textures with full mip
+chains, flat like ``pyr``.
 """
 
 from __future__ import annotations
@@ -331,12 +333,45 @@ def takes_diagonal(ext: wp.array[wp.vec4i], off: int, n: int, a: int, b: int, e1
     return rect_contains(e1, ext[off + (b + 1) * n + a + 1])
 
 
+@wp.func
+def diagonal_owner(ext: wp.array[wp.vec4i], dep: wp.array[float], off: int, n: int, dx: int, dy: int, nearest: int) -> wp.vec2i:
+    """The retained level-i microrect that takes the diagonal microrect ``(dx, dy)`` (both odd).
+
+    §5.2: the one at ``(dx - 1, dy - 1)`` when its first-pass extent contains it, else the one at
+    ``(dx + 1, dy + 1)`` in the second pass, whatever the depths. With ``nearest`` (not the
+    paper's), the second choice is the one of its (up to four) retained neighbours whose own depth
+    is nearest to it, ties in the paper's order: a ground microrect then no longer takes a caster's
+    diagonal (and its minimum depth) across an edge."""
+    a = dx - 1
+    b = dy - 1
+    if takes_diagonal(ext, off, n, a, b, first_pass(ext, dep, off, n, a, b)):
+        return wp.vec2i(a, b)
+    if nearest == 0:
+        return wp.vec2i(dx + 1, dy + 1)
+    d = dep[off + dy * n + dx]
+    best = wp.vec2i(dx + 1, dy + 1)
+    bd = wp.abs(d - dep[off + (dy + 1) * n + dx + 1])
+    c = wp.abs(d - dep[off + (dy - 1) * n + dx + 1])
+    if c < bd:
+        best = wp.vec2i(dx + 1, dy - 1)
+        bd = c
+    c = wp.abs(d - dep[off + (dy + 1) * n + dx - 1])
+    if c < bd:
+        best = wp.vec2i(dx - 1, dy + 1)
+        bd = c
+    c = wp.abs(d - dep[off + b * n + a])
+    if c < bd:
+        best = wp.vec2i(a, b)
+    return best
+
+
 @wp.kernel
 def microrect_level(
     offset: int,
     off: int,
     n: int,
     dst_off: int,
+    nearest: int,
     # outputs
     ext: wp.array[wp.vec4i],
     dep: wp.array[float],
@@ -350,7 +385,7 @@ def microrect_level(
     b = 2 * yy
     d0 = dep[off + b * n + a]
     d = d0
-    # first pass: +x, +y, then the diagonal if the extent contains it
+    # first pass: +x, +y (the diagonals are settled below, by diagonal_owner)
     e = ext[off + b * n + a]
     if a + 1 < n:
         db = dep[off + b * n + a + 1]
@@ -362,10 +397,7 @@ def microrect_level(
         if b + 2 >= n or closer_to_first(dd, d0, dep[off + (b + 2) * n + a]):
             e = rect_union(e, ext[off + (b + 1) * n + a])
             d = wp.min(d, dd)
-    if takes_diagonal(ext, off, n, a, b, e):
-        e = rect_union(e, ext[off + (b + 1) * n + a + 1])
-        d = wp.min(d, dep[off + (b + 1) * n + a + 1])
-    # second pass: -x, -y and the diagonal nobody took in the first
+    # second pass: -x, -y that no one took in the first
     if a >= 2:
         dl = dep[off + b * n + a - 1]
         if not closer_to_first(dl, dep[off + b * n + a - 2], d0):
@@ -376,11 +408,18 @@ def microrect_level(
         if not closer_to_first(dl, dep[off + (b - 2) * n + a], d0):
             e = rect_union(e, ext[off + (b - 1) * n + a])
             d = wp.min(d, dl)
-    if a >= 2 and b >= 2:
-        e1 = first_pass(ext, dep, off, n, a - 2, b - 2)
-        if not takes_diagonal(ext, off, n, a - 2, b - 2, e1):
-            e = rect_union(e, ext[off + (b - 1) * n + a - 1])
-            d = wp.min(d, dep[off + (b - 1) * n + a - 1])
+    # the diagonals this one owns (the paper's rule: +x+y when contained, -x-y when its owner
+    # did not take it; with ``nearest`` any of the four by depth)
+    for sy in range(2):
+        for sx in range(2):
+            dx = a - 1 + 2 * sx
+            dy = b - 1 + 2 * sy
+            if dx < 0 or dy < 0 or dx >= n or dy >= n:
+                continue
+            o = diagonal_owner(ext, dep, off, n, dx, dy, nearest)
+            if o[0] == a and o[1] == b:
+                e = rect_union(e, ext[off + dy * n + dx])
+                d = wp.min(d, dep[off + dy * n + dx])
     ext[dst_off + i] = e
     dep[dst_off + i] = d
 
@@ -422,7 +461,11 @@ class MicroRects:
         return self.ext.numpy()[a:b].reshape(n, n, 4), self.dep.numpy()[a:b].reshape(n, n)
 
 
-def build_microrects(depth: wp.array, device: str) -> MicroRects:
+def build_microrects(depth: wp.array, device: str, diagonal: str = "paper") -> MicroRects:
+    """Microrects of every level from the level-0 depth map; ``diagonal`` picks who takes a
+    diagonal neighbour in the second pass (:func:`diagonal_owner`): ``paper`` or ``nearest``."""
+    if diagonal not in ("paper", "nearest"):
+        raise ValueError(f"diagonal {diagonal!r} is not paper or nearest")
     n = depth.shape[1]
     log2_exact(n)
     offs = level_offsets(n)
@@ -433,7 +476,7 @@ def build_microrects(depth: wp.array, device: str) -> MicroRects:
     launch_chunked(microrect_base, n * n, inputs=[depth], outputs=[ext, dep], device=device)
     k, m = 0, n
     while m >= 2:
-        launch_chunked(microrect_level, (m // 2) ** 2, inputs=[int(offs[k]), m, int(offs[k + 1])], outputs=[ext, dep], device=device)
+        launch_chunked(microrect_level, (m // 2) ** 2, inputs=[int(offs[k]), m, int(offs[k + 1]), int(diagonal == "nearest")], outputs=[ext, dep], device=device)
         k += 1
         m //= 2
     wp.synchronize_device(device)

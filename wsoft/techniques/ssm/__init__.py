@@ -114,6 +114,7 @@ class SSMParams:
     refine: int = param(4, "search-area refinement iterations", range=(0, 16))
     overprecision: bool = param(True, "grow the queried region to the support of the level's micro-occluders (lit/umbra classification only)")
     gather: str = param("budget", "microrects at a coarse level: budget (the cells over the search area, at most (b+1)² a level) or wide (one more cell each side)")
+    microrect_diagonal: str = param("paper", "microrects: who takes a diagonal neighbour the first pass leaves: paper (the +x+y one, §5.2) or nearest (the neighbour of nearest depth; not the paper's)")
     gap_fill: bool = param(True, "extend micropatches toward their left and bottom neighbours")
     msaa: str = param("interpolate", "with pixel_samples > 1: interpolate, single or per_sample")
     tau: float = param(0.01, "relative camera-depth difference below which a sample takes its pixel's visibility", range=(0.0, 100.0))
@@ -126,6 +127,7 @@ class SSMParams:
         check(n & (n - 1) == 0, f"shadow_map_size {n} must be a power of two in [256, 8192]")
         check(self.occluder in OCCLUDERS, f"occluder {self.occluder!r} is not one of {', '.join(OCCLUDERS)}")
         check(self.gather in ("budget", "wide"), f"gather {self.gather!r} is not budget or wide")
+        check(self.microrect_diagonal in ("paper", "nearest"), f"microrect_diagonal {self.microrect_diagonal!r} is not paper or nearest")
         check(self.visibility in ("area", "bitmask"), f"visibility {self.visibility!r} is not area or bitmask")
         check(self.bitmask_size in (8, 16, 32), f"bitmask_size {self.bitmask_size} is not 8, 16 or 32")
         check(self.pattern in PATTERNS, f"pattern {self.pattern!r} is not one of {', '.join(PATTERNS)}")
@@ -227,7 +229,7 @@ def build_maps(depth: wp.array, p: SSMParams, device: str) -> SSMMaps:
     if p.structure == "mssm":
         pyr = build_minmax_pyramid(depth, device, skip_empty=False)
         occ = build_structure("hsm", depth, device, pyramid=pyr)
-    mr = build_microrects(depth, device) if p.occluder == "microrect" else None
+    mr = build_microrects(depth, device, p.microrect_diagonal) if p.occluder == "microrect" else None
     return SSMMaps(st, occ, mr)
 
 
@@ -344,7 +346,7 @@ class SSM(Technique):
         depth = ctx.light_depth(light, size=p.shadow_map_size, soft=True)
         k = light_kernel(light)
         # the pruning structure and microrects depend on the map only: shared by every budget
-        maps_key = ctx.shared_key("ssm_maps", light, "structure", "ysm_size", "occluder")
+        maps_key = ctx.shared_key("ssm_maps", light, "structure", "ysm_size", "occluder", "microrect_diagonal")
         search_key = ctx.key("ssm_search", light)
         loq_key = ctx.key("ssm_loq", light)
         out = ctx.visibility_key(light)
