@@ -43,17 +43,21 @@ def cases(quick: bool, devices: list[str]) -> list[dict]:
         if quick:
             out.append({"kind": "raster_vs_raycast", "scene": "contact", "light": None, "size": 1024, "device": dev})
             out.append({"kind": "ray_throughput", "scene": "contact", "light": None, "width": 80, "height": 60, "samples": 4, "device": dev})
+            out.append({"kind": "reference_frame", "scene": "cutout", "width": 160, "height": 120, "samples": 16, "device": dev})
         else:
             for light in ("Sun", "Rect"):
                 out.append({"kind": "raster_vs_raycast", "scene": "city", "light": light, "size": 2048, "device": dev})
                 out.append({"kind": "raster_baseline", "scene": "city", "light": light, "size": 2048, "device": dev, "baseline": BASELINE_REV})
-            out.append({"kind": "ray_throughput", "scene": "city", "light": "Sun", "width": 320, "height": 240, "samples": 16, "device": dev})
-            out.append({"kind": "ray_throughput", "scene": "contact", "light": None, "width": 320, "height": 240, "samples": 16, "device": dev})
+            for samples in (16, 64):
+                out.append({"kind": "ray_throughput", "scene": "city", "light": "Sun", "width": 320, "height": 240, "samples": samples, "device": dev})
+                out.append({"kind": "ray_throughput", "scene": "contact", "light": None, "width": 320, "height": 240, "samples": samples, "device": dev})
+            for scene in bundled_scenes():
+                out.append({"kind": "reference_frame", "scene": scene, "width": 640, "height": 480, "samples": 64, "device": dev})
     return out
 
 
 def run_case(case: dict, ctx: dict) -> dict:
-    return {"render": render_row, "raster_vs_raycast": _raster_vs_raycast, "ray_throughput": _throughput,
+    return {"render": render_row, "raster_vs_raycast": _raster_vs_raycast, "ray_throughput": _throughput, "reference_frame": _reference_frame,
             "raster_baseline": _raster_baseline}[case["kind"]](case, ctx)
 
 
@@ -187,10 +191,42 @@ def _raster_baseline(case: dict, ctx: dict) -> dict:
                   "coverage_mismatch": int(((a < DEPTH_CLEAR) != (b < DEPTH_CLEAR)).sum()), "max_rel_diff": float(rel.max()) if rel.size else 0.0}
 
 
+def bundled_scenes() -> list[str]:
+    """Every bundled stage, by name."""
+    from wsoft import usd_scenes
+
+    return sorted(p.stem for p in Path(usd_scenes.folder()).iterdir() if p.suffix in (".usda", ".usdc", ".usdz"))
+
+
+def _reference_frame(case: dict, ctx: dict) -> dict:
+    """``reference samples=N`` on every light of a scene, per-ray against packet traversal: the
+    reference passes' time (median of 3 after a warm-up) and whether V is identical."""
+    import wsoft
+
+    scene = load(case["scene"])
+    kw = {"width": case["width"], "height": case["height"], "device": case["device"], "samples": case["samples"], "seed": 1}
+    out = {"scene": case["scene"], "lights": len(scene.lights), "triangles": scene.triangle_count}
+    frames = {}
+    for mode in ("ray", "packet"):
+        wsoft.render(scene, "reference", traversal=mode, **kw)
+        runs = []
+        for _ in range(3):
+            fr = wsoft.render(scene, "reference", traversal=mode, **kw)
+            st = fr.stats
+            runs.append(sum(ms for name, ms in st["timings_ms"].items() if name.startswith("reference")))
+        frames[mode] = fr
+        out[f"{mode}_ms"] = float(np.median(runs))
+        out[f"{mode}_frame_ms"] = st["timings_ms"]["total"]
+    out["packet_over_ray"] = out["ray_ms"] / out["packet_ms"]
+    chans = [c for c in frames["ray"].channels if c.startswith("V")]
+    out["identical"] = all(np.array_equal(frames["ray"][c], frames["packet"][c]) for c in chans)
+    return out
+
+
 def _throughput(case: dict, ctx: dict) -> dict:
     from wsoft.parallel import cpu_threads
     from wsoft.lightspace.light import disk_shaped
-    from wsoft.reference import ray_epsilon, reference_pattern, shadow_rays, trace_reference, trace_rays
+    from wsoft.reference import ray_epsilon, reference_pattern, shadow_rays, trace_ray_packets, trace_reference, trace_rays
     from wsoft.render import RenderContext
     from wsoft.raster.camera import camera_gpu
     from wsoft.raster.gbuffer import render_gbuffer
@@ -208,20 +244,27 @@ def _throughput(case: dict, ctx: dict) -> dict:
     nrays = covered * n
     pattern = reference_pattern(n, 0, True)
     eps = ray_epsilon(gb, light)
-    p_wall, p_cpu = _timed(lambda: trace_reference(ds, L, gb, pattern, disk_shaped(light), eps))
-    o, d, t = shadow_rays(ds, L, gb, pattern, disk_shaped(light), eps)
+    disk = disk_shaped(light)
     threads = cpu_threads() if dev == "cpu" else None
-    e_wall, e_cpu = _timed(lambda: trace_rays(ds, o, d, t))
-    row = {
-        "scene": case["scene"], "light": light.path, "device": dev, "rays": nrays, "threads": threads,
-        "warp_pass_ms": 1e3 * p_wall, "warp_pass_mrays_s": nrays / p_wall / 1e6, "warp_pass_cpu_over_wall": p_cpu / p_wall,
-        "warp_rays_ms": 1e3 * e_wall, "warp_rays_mrays_s": nrays / e_wall / 1e6, "warp_rays_cpu_over_wall": e_cpu / e_wall,
-    }
-    if dev == "cpu":
-        with _threads(1):
-            w1, _ = _timed(lambda: trace_rays(ds, o, d, t))
-        row["warp_rays_1t_mrays_s"] = nrays / w1 / 1e6
+    o, d, t = shadow_rays(ds, L, gb, pattern, disk, eps)
+    packed_stats = __import__("wsoft.scene.packets", fromlist=["packed_bvh"]).packed_bvh(ds)[1]  # built once, outside the timings
+    row = {"scene": case["scene"], "light": light.path, "device": dev, "rays": nrays, "threads": threads, "samples": n,
+           "packed_bvh": packed_stats}
+    # the reference pass (ray generation included) and the explicit rays (tracing only), per ray and in packets
+    timed = {"pass_ray": lambda: trace_reference(ds, L, gb, pattern, disk, eps, "ray"),
+             "pass_packet": lambda: trace_reference(ds, L, gb, pattern, disk, eps, "packet"),
+             "rays_ray": lambda: trace_rays(ds, o, d, t),
+             "rays_packet": lambda: trace_ray_packets(ds, o, d, t, n)}
+    for key, fn in timed.items():
+        wall, cpu = _timed(fn)
+        row[f"{key}_ms"], row[f"{key}_mrays_s"], row[f"{key}_cpu_over_wall"] = 1e3 * wall, nrays / wall / 1e6, cpu / wall
+        if dev == "cpu":
+            with _threads(1):
+                w1, _ = _timed(fn)
+            row[f"{key}_1t_mrays_s"] = nrays / w1 / 1e6
     warp_hits = trace_rays(ds, o, d, t).numpy()
+    row["packets_identical"] = bool(np.array_equal(trace_ray_packets(ds, o, d, t, n).numpy(), warp_hits)
+                                    and np.array_equal(timed["pass_ray"]()[0].numpy(), timed["pass_packet"]()[0].numpy()))
     row["occluded_fraction"] = float(warp_hits.mean())
     try:
         from embreex import mesh_construction, rtcore, rtcore_scene
@@ -256,11 +299,12 @@ def _throughput(case: dict, ctx: dict) -> dict:
     row.update({
         "embree_1t_mrays_s": nrays / e1_wall / 1e6,
         "embree_mrays_s": nrays / en_wall / 1e6, "embree_cpu_over_wall": en_cpu / en_wall,
-        "warp_over_embree": (nrays / e_wall) / (nrays / en_wall),
         "agreement_with_embree": float(np.mean(emb_hits == warp_hits)),
     })
-    if "warp_rays_1t_mrays_s" in row:
-        row["warp_over_embree_1t"] = row["warp_rays_1t_mrays_s"] / row["embree_1t_mrays_s"]
+    for key in timed:
+        row[f"{key}_over_embree"] = row[f"{key}_mrays_s"] / row["embree_mrays_s"]
+        if f"{key}_1t_mrays_s" in row:
+            row[f"{key}_over_embree_1t"] = row[f"{key}_1t_mrays_s"] / row["embree_1t_mrays_s"]
     return row
 
 
@@ -305,17 +349,47 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
         L += ["", "## Reference shadow-ray throughput beside Embree (same rays, same thread count)", ""]
         L.append("Embree runs through embreex, which traces a batch on the calling thread: the 1-thread columns are the like-for-like")
         L.append("figure; for N threads Embree gets one batch per Python thread (embreex holds the GIL part of the time: see its CPU/wall).")
+        L.append("`pass`: the reference's tracing kernel, which generates each ray from its light sample (the stratified sample, the")
+        L.append("light point, the direction) before tracing it; `rays`: the same rays written out first and traced from arrays, as")
+        L.append("Embree traces them. `ray`: one ray at a time through Warp's `mesh_query_ray_anyhit`; `packet`: a receiver's rays 32")
+        L.append("at a time through the same BVH (`wsoft.scene.packets`). Target (issue 11): packet ≥ 1.0× Embree on the same rays,")
+        L.append("1 thread and all threads. `identical`: packet and per-ray answers equal bit for bit (pass visibility and ray hits).")
         L.append("")
-        L.append("| scene | light | device | threads | rays | reference pass Mrays/s (CPU/wall) | Warp rays Mrays/s (CPU/wall) | Embree Mrays/s (CPU/wall) | Warp/Embree | Warp 1 thread | Embree 1 thread | Warp/Embree 1 thread | agreement |")
-        L.append("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+        L.append("| scene | light | samples | threads | rays | traced | Warp ray Mrays/s | Warp packet Mrays/s | Embree Mrays/s | packet / Embree | "
+                 "packet / ray | 1 thread: ray | packet | Embree | packet / Embree | identical |")
+        L.append("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
         for r in thr:
-            if "embree_mrays_s" in r:
-                emb = (f"{r['embree_mrays_s']:.2f} ({r['embree_cpu_over_wall']:.2f}) | {r['warp_over_embree']:.2f} | {r.get('warp_rays_1t_mrays_s', float('nan')):.2f} | "
-                       f"{r['embree_1t_mrays_s']:.2f} | {r.get('warp_over_embree_1t', float('nan')):.2f} | {r['agreement_with_embree']:.5f}")
-            else:
-                emb = f"{r.get('embree')} | | | | | "
-            L.append(f"| {r['scene']} | {r['light'].split('/')[-1]} | {r['device']} | {r['threads']} | {r['rays']} | {r['warp_pass_mrays_s']:.2f} ({r['warp_pass_cpu_over_wall']:.2f}) | "
-                     f"{r['warp_rays_mrays_s']:.2f} ({r['warp_rays_cpu_over_wall']:.2f}) | {emb} |")
+            if "pass_packet_mrays_s" not in r:
+                continue  # a row of the older layout (rerun the sweep)
+            for kind in ("rays", "pass"):
+                e, e1 = r.get("embree_mrays_s"), r.get("embree_1t_mrays_s")
+                emb = f"{e:.2f} ({r['embree_cpu_over_wall']:.2f})" if e else str(r.get("embree", ""))
+                ratio = f"{r[f'{kind}_packet_mrays_s'] / e:.2f}" if e else ""
+                ratio1 = f"{r[f'{kind}_packet_1t_mrays_s'] / e1:.2f}" if e1 and f"{kind}_packet_1t_mrays_s" in r else ""
+                L.append(f"| {r['scene']} | {r['light'].split('/')[-1]} | {r['samples']} | {r['threads']} | {r['rays']} | "
+                         f"{'from arrays' if kind == 'rays' else 'pass (generates its rays)'} | "
+                         f"{r[f'{kind}_ray_mrays_s']:.2f} ({r[f'{kind}_ray_cpu_over_wall']:.2f}) | "
+                         f"{r[f'{kind}_packet_mrays_s']:.2f} ({r[f'{kind}_packet_cpu_over_wall']:.2f}) | {emb} | {ratio} | "
+                         f"{r[f'{kind}_packet_mrays_s'] / r[f'{kind}_ray_mrays_s']:.2f} | "
+                         f"{r.get(f'{kind}_ray_1t_mrays_s', float('nan')):.2f} | {r.get(f'{kind}_packet_1t_mrays_s', float('nan')):.2f} | "
+                         f"{e1 if e1 is None else f'{e1:.2f}'} | {ratio1} | {r['packets_identical']} |")
+        pk = list({r["scene"]: r for r in thr if "packed_bvh" in r}.values())
+        if pk:
+            L += ["", "The packets' BVH: Warp's, repacked once per scene (both children's boxes in one 64-byte record, depth first; the",
+                  "triangles' corners in leaf order): " + "; ".join(
+                      f"{r['scene']}: {r['packed_bvh']['inner_nodes']} inner nodes, {r['packed_bvh']['bytes'] / 2**20:.1f} MiB, "
+                      f"{r['packed_bvh']['build_ms']:.0f} ms" for r in pk) + "."]
+    rf = [r for r in rows if r["case"]["kind"] == "reference_frame"]
+    if rf:
+        c0 = rf[0]["case"]
+        L += ["", f"## `reference samples={c0['samples']}` at {c0['width']}×{c0['height']}: per-ray against packet traversal", ""]
+        L.append("The reference passes of a frame (every light of the stage), median of 3 after a warm-up, with `traversal=ray` (before)")
+        L.append("and `traversal=packet` (after, the CPU default); `identical`: every light's V and V_stderr equal bit for bit.")
+        L.append("")
+        L.append("| scene | lights | triangles | ray ms | packet ms | speed-up | identical |")
+        L.append("|---|---|---|---|---|---|---|")
+        for r in rf:
+            L.append(f"| {r['scene']} | {r['lights']} | {r['triangles']} | {r['ray_ms']:.0f} | {r['packet_ms']:.0f} | {r['packet_over_ray']:.2f}× | {r['identical']} |")
     base = [r for r in rows if r["case"]["kind"] == "raster_baseline"]
     if base:
         L += ["", "## Rasterizer before and after the fragment factory (issue 9; same view, alternating runs in one process)", ""]
@@ -345,6 +419,11 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
         L.append("|---|---|---|---|---|")
         for s, w, k, ms, u in sorted(util):
             L.append(f"| {s} | {w} | {k} | {ms:.1f} | {u:.2f} |")
+        low = [f"{s} {w} {k} ({ms:.0f} ms, {u:.2f})" for s, w, k, ms, u in sorted(util) if ms > 50 and u < 1.8]
+        from wsoft.parallel import cpu_threads
+
+        L += ["", f"Target (issue 11): every pass over 50 ms at CPU/wall ≥ 1.8 on {cpu_threads()} threads: "
+              + ("met." if not low else "NOT met by " + "; ".join(low) + ".")]
     sizes = sorted({r["params"]["shadow_map_size"] for r in renders if r["technique"] == "hard"})
     samples = sorted({r["params"]["samples"] for r in renders if r["technique"] == "reference"})
     refs = sorted({r["ref_samples"] for r in renders})

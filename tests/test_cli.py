@@ -37,7 +37,7 @@ def test_render_reference_multi_light(tmp_path):
     assert np.array_equal(ch["V"], ch["V.Rect"])
     s = json.loads(stats.read_text())
     assert STATS_KEYS <= set(s)
-    assert s["params"] == {"samples": 4, "seed": 0, "jitter": True, "casters": "all"}
+    assert s["params"] == {"samples": 4, "seed": 0, "jitter": True, "casters": "all", "traversal": "auto"}
     assert "total" in s["timings_ms"] and s["passes"][0] == "upload_scene"
     assert png.stat().st_size > 0
 

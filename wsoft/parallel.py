@@ -6,12 +6,18 @@ compiled kernel runs), so all cores work. On CUDA the same kernel runs as one la
 
 Chunked kernels take ``offset: int`` as their first input and index with
 ``i = wp.tid() + offset``.
+
+Warp compiles (or loads from its cache) a module at its first launch, on whichever thread
+launches it. :func:`init_warp` wraps ``Module.load`` once so that every real load is recorded
+as an interval; :func:`compile_time` tells how much of a span of time went to it, so the
+frame graph reports compilation apart from the passes' times.
 """
 
 from __future__ import annotations
 
 import os
 import threading
+import time
 from concurrent.futures import ThreadPoolExecutor
 from typing import Callable
 
@@ -22,6 +28,10 @@ from wsoft.errors import ParameterError
 _POOL: ThreadPoolExecutor | None = None
 _INIT = False
 _LOAD_LOCK = threading.Lock()
+# every real module load (compile or cache load): (start, end) perf_counter seconds and the loading
+# thread's CPU seconds; appended under _LOADS_LOCK from any thread
+_LOADS: list[tuple[float, float, float]] = []
+_LOADS_LOCK = threading.Lock()
 
 # Warp's per-module compile messages are noise for users; WSOFT_WARP_VERBOSE=1 shows them.
 if os.environ.get("WSOFT_WARP_VERBOSE", "") != "1":
@@ -53,7 +63,57 @@ def init_warp() -> None:
         finally:
             os.dup2(saved, 2)
             os.close(saved)
+    _time_module_loads()
     _INIT = True
+
+
+def _time_module_loads() -> None:
+    """Wrap Warp's ``Module.load`` (once) to record the calls that compiled or loaded a module.
+
+    ``Module.load`` runs before every launch; it is a load only when it returns an executable the
+    module did not hold before (the others are its fast path and are not recorded)."""
+    from warp._src.context import Module
+
+    load = Module.load
+    if getattr(load, "_wsoft_timed", False):
+        return
+
+    def timed_load(self, *args, **kwargs):
+        held = tuple(self.execs.values())
+        t0, c0 = time.perf_counter(), time.thread_time()
+        out = None
+        try:
+            out = load(self, *args, **kwargs)
+            return out
+        finally:
+            if out is None or out not in held:  # a compile, a cache load, or a failed build
+                t1, c1 = time.perf_counter(), time.thread_time()
+                with _LOADS_LOCK:
+                    _LOADS.append((t0, t1, c1 - c0))
+
+    timed_load._wsoft_timed = True
+    timed_load.__wrapped__ = load
+    timed_load.__doc__ = load.__doc__
+    Module.load = timed_load
+
+
+def compile_time(t0: float, t1: float) -> tuple[float, float]:
+    """Seconds Warp spent compiling or loading modules between ``time.perf_counter()`` readings
+    ``t0`` and ``t1``, on any thread: (wall, cpu). Wall is the union of the load intervals inside
+    the span (loads on several threads at once count once), cpu the loading threads' CPU time of the
+    loads that lie wholly inside it."""
+    with _LOADS_LOCK:
+        loads = sorted(x for x in _LOADS if x[1] > t0 and x[0] < t1)
+    wall = cpu = 0.0
+    end = t0
+    for a, b, c in loads:
+        lo, hi = max(a, end), min(b, t1)
+        if hi > lo:
+            wall += hi - lo
+            end = hi
+        if a >= t0 and b <= t1:
+            cpu += c
+    return wall, cpu
 
 
 def cpu_threads() -> int:
@@ -95,15 +155,31 @@ def _pool() -> ThreadPoolExecutor:
     return _POOL
 
 
+_WORKER = threading.local()
+
+
+def _as_worker(task: Callable[[], None]) -> Callable[[], None]:
+    def run():
+        _WORKER.active = True
+        try:
+            task()
+        finally:
+            _WORKER.active = False
+
+    return run
+
+
 def run_tasks(tasks: list[Callable[[], None]], device: str) -> None:
-    """Run independent launch tasks: on the CPU thread pool, or in order on a GPU stream."""
+    """Run independent launch tasks: on the CPU thread pool, or in order on a GPU stream. Tasks
+    that run tasks themselves run those in order (a pool task waiting on tasks queued behind it in
+    the same pool would wait forever)."""
     if not tasks:
         return
-    if not device.startswith("cpu") or len(tasks) == 1 or cpu_threads() == 1:
+    if not device.startswith("cpu") or len(tasks) == 1 or cpu_threads() == 1 or getattr(_WORKER, "active", False):
         for t in tasks:
             t()
         return
-    for fut in [_pool().submit(t) for t in tasks]:
+    for fut in [_pool().submit(_as_worker(t)) for t in tasks]:
         fut.result()
 
 
@@ -124,14 +200,15 @@ def ensure_loaded(kernel, device: str) -> None:
         wp.load_module(kernel.module, device=device)
 
 
-def launch_chunked(kernel, n: int, inputs: list, outputs: list, device: str, min_chunk: int = 1024) -> None:
-    """Launch ``kernel`` over ``n`` items, chunked across CPU threads (kernel's first input is ``offset``)."""
+def launch_chunked(kernel, n: int, inputs: list, outputs: list, device: str, min_chunk: int = 1024, per_thread: int = 4) -> None:
+    """Launch ``kernel`` over ``n`` items, chunked across CPU threads (kernel's first input is
+    ``offset``); ``per_thread`` chunks a thread (more: a better balance where items cost unevenly)."""
     ensure_loaded(kernel, device)
 
     def task(start: int, count: int):
         return lambda: wp.launch(kernel, dim=count, inputs=[start, *inputs], outputs=outputs, device=device)
 
-    run_tasks([task(s, c) for s, c in chunk_ranges(n, device, min_chunk)], device)
+    run_tasks([task(s, c) for s, c in chunk_ranges(n, device, min_chunk, per_thread)], device)
 
 
 init_warp()

@@ -27,7 +27,7 @@ from wsoft.io import nonfinite_counts
 from wsoft.graph import FrameGraph, Key, Pass, Resources
 from wsoft.lightspace.light import disk_shaped, light_gpu
 from wsoft.lightspace.view import fit_light_view
-from wsoft.parallel import cpu_threads, resolve_device
+from wsoft.parallel import compile_time, cpu_threads, resolve_device
 from wsoft.raster.camera import camera_gpu, fit_aspect
 from wsoft.raster.gbuffer import GBuffer, render_gbuffer
 from wsoft.raster.horizon import clip_to_front, front_counts, front_fraction
@@ -524,11 +524,14 @@ def _check_sizes(width: int, height: int, pixel_samples: int) -> None:
         raise ParameterError(f"pixel_samples {pixel_samples} out of range [1, 64]")
 
 
-def execute(built: Built, device: str, *, extra: list[Key] | None = None, check_immutable: bool = False) -> tuple[Resources, list[dict], float]:
-    """Run a built graph for its techniques' channels (and ``extra`` resources); (resources, records, ms)."""
+def execute(built: Built, device: str, *, extra: list[Key] | None = None, check_immutable: bool = False,
+            progress=None) -> tuple[Resources, list[dict], float]:
+    """Run a built graph for its techniques' channels (and ``extra`` resources); (resources, records, ms).
+    ``progress``: see :meth:`FrameGraph.execute`."""
     t0 = time.perf_counter()
     with wp.ScopedDevice(device):
-        res, records = built.ctx.graph.execute(built.requested + list(extra or []), device, check_immutable=check_immutable)
+        res, records = built.ctx.graph.execute(built.requested + list(extra or []), device, check_immutable=check_immutable,
+                                               progress=progress)
     return res, records, 1e3 * (time.perf_counter() - t0)
 
 
@@ -541,8 +544,19 @@ def frame_ms(total_ms: float, records: list[dict], closure: set[str], single: bo
     return sum(r["ms"] for r in records if r["name"] in closure)
 
 
-def frames_of(built: Built, res: Resources, records: list[dict], total_ms: float) -> FrameSet:
-    """One :class:`Frame` per technique with its own stats; the set's stats cover the whole graph."""
+def cpu_over_wall(record: dict) -> float:
+    """A pass's CPU time over its wall time: how many CPU threads it kept busy on average (the
+    process's CPU time, so other work in the process during the pass counts too)."""
+    return round(record["cpu_ms"] / record["ms"], 3) if record["ms"] > 0 else 0.0
+
+
+def frames_of(built: Built, res: Resources, records: list[dict], total_ms: float, compile_ms: float = 0.0) -> FrameSet:
+    """One :class:`Frame` per technique with its own stats; the set's stats cover the whole graph.
+
+    ``total_ms``: the render's wall time; ``compile_ms``: the part of it Warp spent compiling or
+    loading modules (:func:`~wsoft.parallel.compile_time`), left out of ``total`` and reported as
+    ``timings_ms["compile"]`` (the records' pass times already leave it out)."""
+    total_ms -= compile_ms
     ctx, scene = built.ctx, built.ctx.scene
     graph = ctx.graph
     closures = {label: graph.closure([built.channels[label]]) for label in built.labels if label in built.channels}
@@ -588,9 +602,11 @@ def frames_of(built: Built, res: Resources, records: list[dict], total_ms: float
             "lights": [l.path for l in lights],
             "light": lights[0].path,
             "light_labels": [ctx.label(l) for l in lights],
-            "timings_ms": {**timings, "total": round(frame_ms(total_ms, records, closures[label], single), 3)},
+            "timings_ms": {**timings, "total": round(frame_ms(total_ms, records, closures[label], single), 3),
+                           "compile": round(compile_ms if single else sum(r.get("compile_ms", 0.0) for r in mine), 3)},
             "timings_by_kind_ms": kinds,
             "cpu_ms": {r["name"]: round(r["cpu_ms"], 3) for r in mine},
+            "cpu_over_wall": {r["name"]: cpu_over_wall(r) for r in mine},
             "memory_bytes": {k: v for r in mine for k, v in r["bytes"].items()},
             "counters": {"frame": frame_counters,
                          "passes": {n: c for n, c in ctx.counters["passes"].items() if n in closures[label]},
@@ -612,8 +628,9 @@ def frames_of(built: Built, res: Resources, records: list[dict], total_ms: float
     stats = {
         **base,
         "techniques": list(frames),
-        "timings_ms": {**{r["name"]: round(r["ms"], 3) for r in records}, "total": round(total_ms, 3)},
+        "timings_ms": {**{r["name"]: round(r["ms"], 3) for r in records}, "total": round(total_ms, 3), "compile": round(compile_ms, 3)},
         "cpu_ms": {r["name"]: round(r["cpu_ms"], 3) for r in records},
+        "cpu_over_wall": {r["name"]: cpu_over_wall(r) for r in records},
         "memory_bytes": memory,
         "counters": {"frame": frame_counters, **{k: v for k, v in ctx.counters.items() if k != "frame"}},
         "passes": [r["name"] for r in records],
@@ -636,6 +653,7 @@ def render(
     device: str | None = None,
     pixel_samples: int = 1,
     time_code: float | None = None,
+    progress=None,
     **params,
 ) -> Frame | FrameSet:
     """Render on ``scene`` (a :class:`Scene` or a USD path) and return a :class:`Frame`, or a
@@ -648,17 +666,22 @@ def render(
     ``camera``: a camera prim path (default: the stage's first camera, else an automatic one).
     ``light``: a light path or name (default: every shadow-casting light; ``V`` = the first a
     technique supports). A light a technique does not support is skipped with a warning.
+    ``progress``: called as ``progress(done, total, pass_name)`` before each pass of the graph and
+    ``progress(total, total, None)`` after the last (the command line's progress bar).
     """
     if not isinstance(scene, Scene):
         scene = load_scene(scene, time=time_code)
     _check_sizes(width, height, pixel_samples)
     several = is_several(technique)
     dev = resolve_device(device)
+    from wsoft.techniques import TECHNIQUES  # noqa: F401  (the technique modules load before the clock starts)
+
     t0 = time.perf_counter()
     built = build_graph(scene, technique, width=width, height=height, camera=camera, light=light, device=dev,
                         pixel_samples=pixel_samples, params=params)
-    res, records, _ = execute(built, dev)
-    fs = frames_of(built, res, records, 1e3 * (time.perf_counter() - t0))
+    res, records, _ = execute(built, dev, progress=progress)
+    t1 = time.perf_counter()
+    fs = frames_of(built, res, records, 1e3 * (t1 - t0), compile_ms=1e3 * compile_time(t0, t1)[0])
     if several:
         return fs
     return fs[built.labels[0]]

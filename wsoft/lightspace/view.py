@@ -33,11 +33,31 @@ MISS = wp.constant(-3.0e38)  # receiver_plane_depth: the ray does not meet the p
 MAX_TAN = math.tan(math.radians(80.0))  # widest half-angle a perspective light view may open
 
 
-def to_frame(p: np.ndarray, origin: np.ndarray, axes: np.ndarray) -> np.ndarray:
-    """``(p - origin) @ axes`` for an (N, 3) array, without BLAS: a BLAS matrix product leaves
-    OpenBLAS's threads spinning, taking the cores from the Warp launches that follow."""
-    d = p - origin
-    return d[:, 0:1] * axes[0] + d[:, 1:2] * axes[1] + d[:, 2:3] * axes[2]
+def to_frame(p: np.ndarray, origin: np.ndarray, axes: np.ndarray, threads: bool = True) -> np.ndarray:
+    """``(p - origin) @ axes`` for an (N, 3) array (float64), without BLAS: a BLAS matrix product
+    leaves OpenBLAS's threads spinning, taking the cores from the Warp launches that follow. Large
+    arrays go in row blocks over the CPU thread pool (NumPy releases the GIL in its loops): the
+    same operations on every element, so the same result. ``threads=False`` inside a pool task
+    (a task waiting on tasks of the same pool could wait forever)."""
+    p = np.asarray(p)
+    out = np.empty((len(p), 3), np.float64)
+
+    def block(a: int, b: int) -> None:
+        for s in range(a, b, 8192):  # small blocks: the temporaries stay in cache
+            e = min(s + 8192, b)
+            d = p[s:e] - origin
+            o = out[s:e]
+            np.multiply(d[:, 0:1], axes[0], out=o)
+            o += d[:, 1:2] * axes[1]
+            o += d[:, 2:3] * axes[2]
+
+    if not threads:
+        block(0, len(p))
+        return out
+    from wsoft.parallel import chunk_ranges, run_tasks
+
+    run_tasks([lambda a=a, n=n: block(a, a + n) for a, n in chunk_ranges(len(p), "cpu", min_chunk=65536, per_thread=1)], "cpu")
+    return out
 
 
 @wp.struct
@@ -120,22 +140,89 @@ def frame_extent(receivers: np.ndarray, light: Light | None = None) -> float:
     local light's position (its reach). Geometry out of view (a far ground, a stray huge triangle)
     does not change it, unlike the scene's bounds."""
     rec = np.asarray(receivers, np.float64).reshape(-1, 3)
-    if light is not None and light.kind != LIGHT_DISTANT:
-        rec = np.vstack([rec, np.asarray(light.position, np.float64)[None]])
     if len(rec) == 0:
+        return frame_extent_of_bounds(None, None, light)
+    return frame_extent_of_bounds(rec.min(axis=0), rec.max(axis=0), light)
+
+
+def frame_extent_of_bounds(lo: np.ndarray | None, hi: np.ndarray | None, light: Light | None = None) -> float:
+    """:func:`frame_extent` from the receivers' bounds (``None``: no receiver)."""
+    pts = [] if lo is None else [np.asarray(lo, np.float64), np.asarray(hi, np.float64)]
+    if light is not None and light.kind != LIGHT_DISTANT:
+        pts.append(np.asarray(light.position, np.float64))
+    if not pts:
         return 1.0
-    ext = float(np.linalg.norm(rec.max(axis=0) - rec.min(axis=0)))
-    return ext if math.isfinite(ext) and ext > 0.0 else max(float(np.abs(rec).max(initial=0.0)), 1e-6)
+    box = np.stack(pts)
+    ext = float(np.linalg.norm(box.max(axis=0) - box.min(axis=0)))
+    return ext if math.isfinite(ext) and ext > 0.0 else max(float(np.abs(box).max(initial=0.0)), 1e-6)
 
 
-def _prism_depth_min(points: np.ndarray, origin: np.ndarray, axes: np.ndarray, window, default: float) -> float:
-    """Smallest view depth of the ``points`` inside an orthographic window's prism (``default`` if none)."""
-    if points is None or len(points) == 0:
+def _prism_depth_min(v: np.ndarray, window, default: float) -> float:
+    """Smallest view depth of the view-space points ``v`` inside an orthographic window's prism
+    (``default`` if none)."""
+    if v is None or len(v) == 0:
         return default
-    v = to_frame(np.asarray(points, np.float64).reshape(-1, 3), origin, axes)
     l, r, b, t = window
-    inside = (v[:, 0] >= l) & (v[:, 0] <= r) & (v[:, 1] >= b) & (v[:, 1] <= t)
-    return min(float(v[inside, 2].min()), default) if inside.any() else default
+    from wsoft.parallel import chunk_ranges, run_tasks
+
+    found = []
+
+    def block(a: int, e: int) -> None:  # row blocks over the thread pool, as to_frame
+        w = v[a:e]
+        inside = (w[:, 0] >= l) & (w[:, 0] <= r) & (w[:, 1] >= b) & (w[:, 1] <= t)
+        if inside.any():
+            found.append(float(w[inside, 2].min()))
+
+    run_tasks([lambda a=a, n=n: block(a, a + n) for a, n in chunk_ranges(len(v), "cpu", min_chunk=65536, per_thread=1)], "cpu")
+    return min(found + [default])
+
+
+def _local_fit_stats(rec: np.ndarray, origin: np.ndarray, axes: np.ndarray, facing: np.ndarray | None, zmin_ok: float, margin: float) -> dict:
+    """What a local light's view fit needs of the receivers, in row blocks over the CPU thread
+    pool (elementwise the same operations, exact minima and maxima: the same numbers as whole
+    arrays): for the receivers in front of the light's origin (``all``) and, when ``facing`` (the
+    light's emission axis) is given, those also in front of its plane (``front``): their count,
+    the window (l, r, b, t: tangents widened by ``margin`` at each one's depth), depth range and
+    how many lie beyond the ±80° window (``outside``, never counting those behind the plane)."""
+    from wsoft.parallel import chunk_ranges, run_tasks
+
+    parts: list[dict] = []
+
+    def block(a: int, e: int) -> None:
+        v = to_frame(rec[a:e], origin, axes, threads=False)
+        ok = v[:, 2] > zmin_ok
+        if facing is not None:
+            d = rec[a:e] - origin
+            behind = (d[:, 0] * facing[0] + d[:, 1] * facing[1] + d[:, 2] * facing[2]) >= 0.0
+        else:
+            behind = np.zeros(e - a, bool)
+        out = {}
+        for key, sel in (("all", ok), ("front", ok & ~behind)):
+            n = int(np.count_nonzero(sel))
+            if n == 0:
+                out[key] = {"n": 0, "outside": int(np.count_nonzero(~sel & ~behind))}
+                continue
+            z = v[sel, 2]
+            tx = v[sel, 0] / z
+            ty = v[sel, 1] / z
+            mz = margin / np.maximum(z, zmin_ok) if margin > 0 else 0.0
+            inside = (np.abs(tx) <= MAX_TAN) & (np.abs(ty) <= MAX_TAN)
+            out[key] = {"n": n, "l": float(np.min(tx - mz)), "r": float(np.max(tx + mz)), "b": float(np.min(ty - mz)),
+                        "t": float(np.max(ty + mz)), "zmin": float(z.min()), "zmax": float(z.max()),
+                        "outside": int(np.count_nonzero(~sel & ~behind)) + int(np.count_nonzero(~inside & ~behind[sel]))}
+        parts.append(out)
+
+    run_tasks([lambda a=a, n=n: block(a, a + n) for a, n in chunk_ranges(len(rec), "cpu", min_chunk=32768, per_thread=1)], "cpu")
+    res = {}
+    for key in ("all", "front"):
+        ps = [p[key] for p in parts]
+        full = [p for p in ps if p["n"]]
+        r = {"n": sum(p["n"] for p in ps), "outside": sum(p["outside"] for p in ps)}
+        if full:
+            r.update(l=min(p["l"] for p in full), r=max(p["r"] for p in full), b=min(p["b"] for p in full), t=max(p["t"] for p in full),
+                     zmin=min(p["zmin"] for p in full), zmax=max(p["zmax"] for p in full))
+        res[key] = r
+    return res
 
 
 def fit_light_view(
@@ -170,23 +257,26 @@ def fit_light_view(
     rec = np.asarray(receivers, np.float64).reshape(-1, 3)
     if len(rec) == 0:
         rec = np.stack([scene_lo, scene_hi])
-    ext = frame_extent(rec, light)
+    rlo, rhi = rec.min(axis=0), rec.max(axis=0)
+    ext = frame_extent_of_bounds(rlo, rhi, light)
     if light.kind == LIGHT_DISTANT:
         axes = np.stack([light.frame[:, 0], light.frame[:, 1], -light.frame[:, 2]], axis=1)  # view along emission
-        center = 0.5 * (rec.min(axis=0) + rec.max(axis=0))
+        center = 0.5 * (rlo + rhi)
         vr = to_frame(rec, center, axes)
+        vlo, vhi = vr.min(axis=0), vr.max(axis=0)
         corners = np.array([[x, y, z] for x in (scene_lo[0], scene_hi[0]) for y in (scene_lo[1], scene_hi[1]) for z in (scene_lo[2], scene_hi[2])])
         pts = casters if casters is not None else corners
         pad = margin + 1e-4 * ext
-        l, r = vr[:, 0].min() - pad, vr[:, 0].max() + pad
-        b, t = vr[:, 1].min() - pad, vr[:, 1].max() + pad
-        zr_min, zr_max = float(vr[:, 2].min()), float(vr[:, 2].max())
-        zc = _prism_depth_min(pts, center, axes, (l, r, b, t), zr_min)
+        l, r = vlo[0] - pad, vhi[0] + pad
+        b, t = vlo[1] - pad, vhi[1] + pad
+        zr_min, zr_max = float(vlo[2]), float(vhi[2])
+        vp = to_frame(np.asarray(pts, np.float64).reshape(-1, 3), center, axes) if pts is not None and len(pts) else None
+        zc = _prism_depth_min(vp, (l, r, b, t), zr_min)
         if casters is not None and light.angle_deg > 0:
             tan_a = math.tan(math.radians(0.5 * light.angle_deg))
             for _ in range(2):  # the widened prism may hold nearer casters
                 g = tan_a * max(zr_max - zc, 0.0)
-                zc = _prism_depth_min(pts, center, axes, (l - g, r + g, b - g, t + g), zc)
+                zc = _prism_depth_min(vp, (l - g, r + g, b - g, t + g), zc)
             g = tan_a * max(zr_max - zc, 0.0)
             l, r, b, t = l - g, r + g, b - g, t + g
         # the origin a little before the nearest caster: depths stay positive and their float
@@ -203,30 +293,19 @@ def fit_light_view(
             axes = _basis_from_axis(d if np.linalg.norm(d) > 1e-9 * ext else -light.frame[:, 2])
         else:
             axes = np.stack([light.frame[:, 0], -light.frame[:, 1], -light.frame[:, 2]], axis=1)  # right-handed, view along −Z
-        vr = to_frame(rec, origin, axes)
         zmin_ok = 1e-6 * ext
-        ok = vr[:, 2] > zmin_ok
         # a rect or disk light emits forward only: receivers behind its plane see nothing of it
         # (the horizon rule darkens them), so they are neither fitted nor counted outside
         one_sided = light.kind not in (LIGHT_SPHERE, LIGHT_POINT)
-        behind = (to_frame(rec, origin, np.asarray(light.frame, np.float64))[:, 2] >= 0.0) if one_sided else np.zeros(len(rec), bool)
-        if one_sided and (ok & ~behind).any():
-            ok &= ~behind
-        tx = vr[ok, 0] / vr[ok, 2]
-        ty = vr[ok, 1] / vr[ok, 2]
-        # widen by the margin seen at each receiver's depth
-        mz = margin / np.maximum(vr[ok, 2], zmin_ok) if margin > 0 else 0.0
-        inside = ok.copy()
-        if ok.any():
-            l, r = float(np.min(tx - mz)), float(np.max(tx + mz))
-            b, t = float(np.min(ty - mz)), float(np.max(ty + mz))
-            inside[ok] = (np.abs(tx) <= MAX_TAN) & (np.abs(ty) <= MAX_TAN)
+        st = _local_fit_stats(rec, origin, axes, np.asarray(light.frame, np.float64)[:, 2] if one_sided else None, zmin_ok, margin)
+        s = st["front"] if one_sided and st["front"]["n"] else st["all"]
+        if s["n"]:
+            l, r, b, t = s["l"], s["r"], s["b"], s["t"]
         else:
             l, r, b, t = -1.0, 1.0, -1.0, 1.0
-        zr = vr[ok, 2]
         w = light.extent()
-        if casters is not None and w > 0 and len(zr):
-            zr_max = float(zr.max())
+        if casters is not None and w > 0 and s["n"]:
+            zr_max = s["zmax"]
             vc = to_frame(np.asarray(casters, np.float64).reshape(-1, 3), origin, axes)
             vc = vc[(vc[:, 2] > 1e-3 * ext) & (vc[:, 2] < zr_max)]
             if len(vc):
@@ -238,11 +317,11 @@ def fit_light_view(
                     l, r, b, t = l - g, r + g, b - g, t + g
         l, r = max(l, -MAX_TAN), min(r, MAX_TAN)
         b, t = max(b, -MAX_TAN), min(t, MAX_TAN)
-        outside = int(np.count_nonzero(~inside & ~behind))
+        outside = s["outside"]
         near = max(1e-4 * ext, 1e-7)
-        if len(zr):
-            near = min(near, 0.5 * float(zr.min()))
-        far = (float(zr.max()) if len(zr) else ext) * 1.01 + 1e-3 * ext
+        if s["n"]:
+            near = min(near, 0.5 * s["zmin"])
+        far = (s["zmax"] if s["n"] else ext) * 1.01 + 1e-3 * ext
         persp = True
     # keep a border of texels and avoid a zero-area window
     w = max(r - l, 1e-6)

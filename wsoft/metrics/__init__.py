@@ -119,17 +119,17 @@ def add_error_pass(ctx, technique_label: str, channels: Key, reference: Key, lig
 
 
 def compare(scene, techniques, *, samples: int = 256, ground_truth: GroundTruth | None = None, width: int = 640, height: int = 480,
-            camera=None, light=None, device: str | None = None, pixel_samples: int = 1, time_code: float | None = None):
+            camera=None, light=None, device: str | None = None, pixel_samples: int = 1, time_code: float | None = None, progress=None):
     """Render ``techniques`` (as :func:`wsoft.render` takes a list) and the reference in one graph,
     and measure each technique's error against the reference on the same pixels.
 
     The reference is ``reference`` with ``samples`` light samples (added unless the list holds a
     reference already), or ``ground_truth`` computed earlier. Returns the
     :class:`~wsoft.render.FrameSet`; each technique's ``stats["errors"]`` maps light label ->
-    error, ``stats["error"]`` is the first light's."""
+    error, ``stats["error"]`` is the first light's. ``progress``: as :func:`wsoft.render` takes it."""
     import time
 
-    from wsoft.parallel import resolve_device
+    from wsoft.parallel import compile_time, resolve_device
     from wsoft.render import Scene, _check_sizes, as_techniques, build_graph, execute, frames_of, is_several
     from wsoft.scene.usd import load_scene
     from wsoft.techniques import create
@@ -157,8 +157,9 @@ def compare(scene, techniques, *, samples: int = 256, ground_truth: GroundTruth 
             ref_key = built.channels[ref_label] if ground_truth is None else ground_truth_key(ctx, ground_truth, l)
             errors.setdefault(label, {})[ctx.label(l)] = add_error_pass(ctx, label, built.channels[label], ref_key, l)
     extra = [k for m in errors.values() for k in m.values()]
-    res, records, _ = execute(built, dev, extra=extra)
-    fs = frames_of(built, res, records, 1e3 * (time.perf_counter() - t0))
+    res, records, _ = execute(built, dev, extra=extra, progress=progress)
+    t1 = time.perf_counter()
+    fs = frames_of(built, res, records, 1e3 * (t1 - t0), compile_ms=1e3 * compile_time(t0, t1)[0])
     for label, m in errors.items():
         st = fs[label].stats
         st["errors"] = {ll: res[k] for ll, k in m.items()}

@@ -13,7 +13,7 @@ and find their way with :func:`gb_pixel`, :func:`gb_layer`, :func:`gb_index` and
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import warp as wp
@@ -209,10 +209,30 @@ class GBuffer:
     prim: wp.array
     uv: wp.array
     bary: wp.array
+    _bounds: tuple | None = field(default=None, repr=False, compare=False)
 
     @property
     def count(self) -> int:
         return self.width * self.height * self.spp
+
+    def receiver_bounds(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(lo, hi) of the covered samples' positions (float64, exactly the float32 extremes), or
+        None when nothing is covered: reduced on the device in disjoint chunks, computed once."""
+        if self._bounds is None:
+            n = self.count
+            chunks = max(1, min(256, (n + 4095) // 4096))
+            dev = self.pos.device
+            lo = wp.empty(chunks, dtype=wp.vec3, device=dev)
+            hi = wp.empty(chunks, dtype=wp.vec3, device=dev)
+            found = wp.empty(chunks, dtype=wp.int32, device=dev)
+            launch_chunked(reduce_receiver_bounds, chunks, inputs=[n, chunks, self.pos, self.prim], outputs=[lo, hi, found],
+                           device=str(dev), min_chunk=1)
+            f = found.numpy() > 0
+            if not f.any():
+                self._bounds = (None,)
+            else:
+                self._bounds = (lo.numpy()[f].astype(np.float64).min(axis=0), hi.numpy()[f].astype(np.float64).max(axis=0))
+        return None if self._bounds[0] is None else self._bounds
 
     def arrays(self) -> dict[str, wp.array]:
         return {"pos": self.pos, "nrm": self.nrm, "dist": self.dist, "prim": self.prim, "uv": self.uv, "bary": self.bary}
@@ -227,6 +247,35 @@ class GBuffer:
         """A field as numpy, shape [spp, H, W(, C)]."""
         a = getattr(self, name).numpy()
         return a.reshape((self.spp, self.height, self.width) + a.shape[1:])
+
+
+@wp.kernel
+def reduce_receiver_bounds(
+    offset: int,
+    n: int,
+    chunks: int,
+    pos: wp.array[wp.vec3],
+    prim: wp.array[wp.int32],
+    # outputs
+    lo: wp.array[wp.vec3],
+    hi: wp.array[wp.vec3],
+    found: wp.array[wp.int32],
+):
+    """Chunk ``c`` of the samples: the bounds of its covered positions (each chunk its own slot)."""
+    c = wp.tid() + offset
+    step = (n + chunks - 1) // chunks
+    a = wp.vec3(1.0e38)
+    b = wp.vec3(-1.0e38)
+    any_covered = int(0)
+    for i in range(c * step, wp.min(n, (c + 1) * step)):
+        if prim[i] >= 0:
+            p = pos[i]
+            a = wp.min(a, p)
+            b = wp.max(b, p)
+            any_covered = 1
+    lo[c] = a
+    hi[c] = b
+    found[c] = any_covered
 
 
 def render_gbuffer(ds: DeviceScene, cam: CameraGPU, width: int, height: int, spp: int, alpha_tested: bool) -> GBuffer:

@@ -9,6 +9,15 @@ through the concentric map onto the disk (the sphere seen as its silhouette disk
 lights uniformly in the sun's cone. Rays are any-hit against the scene's BVH and alpha-tested
 through cutout triangles. Randomness is seeded by the pattern's seed and the sample index.
 
+Two traversals give the same answer bit for bit (``tests/test_packets.py``; the one exception
+found, a ray grazing the shared edge of two zero-thickness boxes, is dropped by Warp's per-ray walk
+and found by the packet, as the brute force has it): ``packet`` (the
+default on CPU) traces a receiver's samples in packets of 32 rays through the BVH together
+(:mod:`wsoft.scene.packets`: all start at the receiver and fan out over the light), ``ray``
+traces each with Warp's ``mesh_query_ray_anyhit`` (the default on CUDA, where a thread holding
+32 rays would spill its registers, and below 8 samples, where a packet's set-up costs more than
+it saves).
+
 The standard error reported per sample is ``sqrt(p(1-p)/N)`` with the pseudo-count estimate
 ``p = (k + 0.5)/(N + 1)`` (k visible of N): the independent-sampling error, an upper bound
 for stratified sampling that never reports zero uncertainty.
@@ -22,7 +31,11 @@ from wsoft.lightspace.light import LightGPU, in_front, light_point
 from wsoft.lightspace.samples import LightSamples, SamplePattern, sample_coords, sampling_begin
 from wsoft.parallel import launch_chunked
 from wsoft.raster.gbuffer import GBufferGPU, gb_covered, gb_pixel
+from wsoft.lightspace.bitmask import popcount
 from wsoft.scene.device import DeviceScene, Surfaces, occluded
+from wsoft.scene.packets import PACKET, PackedBVH, packed_bvh, packet_f, trace_each, trace_packet
+
+TRAVERSALS = ("auto", "packet", "ray")
 
 
 
@@ -83,18 +96,121 @@ def trace_visibility(
     stderr[i] = wp.sqrt(pe * (1.0 - pe) / float(samples))
 
 
+@wp.kernel
+def trace_visibility_packets(
+    offset: int,
+    mesh: wp.uint64,
+    pb: PackedBVH,
+    cut: Surfaces,
+    has_cutouts: int,
+    light: LightGPU,
+    ls: LightSamples,
+    gb: GBufferGPU,
+    eps: float,
+    # outputs
+    vis: wp.array[float],
+    stderr: wp.array[float],
+    given_up: wp.array[wp.int32],
+):
+    """:func:`trace_visibility` with a receiver's samples traced in packets of :data:`PACKET`
+    (the same rays, generated in the same order). Once a packet of a
+    receiver gives up (its rays fan out over fine geometry, :func:`trace_packet`), the
+    receiver's other samples go ray by ray; ``given_up``: 1 for such receivers."""
+    i = wp.tid() + offset
+    given_up[i] = 0
+    if not gb_covered(gb, i):
+        vis[i] = 1.0
+        stderr[i] = 0.0
+        return
+    p = gb.pos[i]
+    n = gb.nrm[i]
+    off = ray_offset(p, eps)
+    o = ray_origin(p, n, off)
+    xy = gb_pixel(gb, i)
+    state, base, rot = sampling_begin(ls, i, xy[0], xy[1])
+    visible = int(0)
+    samples = ls.count
+    first = int(0)
+    each = int(0)
+    while first < samples:
+        dx = packet_f()
+        dy = packet_f()
+        dz = packet_f()
+        tm = packet_f()
+        mask = wp.uint32(0)
+        for k in range(wp.min(PACKET, samples - first)):
+            c, state = sample_coords(ls, state, base, rot, first + k)
+            r = light_point(light, p, c)
+            d = wp.vec3(r[0], r[1], r[2])
+            if in_front(n, d):  # behind the tangent plane: blocked by the surface itself, not traced
+                dx[k] = d[0]
+                dy[k] = d[1]
+                dz[k] = d[2]
+                tm[k] = r[3] - off
+                mask = mask | (wp.uint32(1) << wp.uint32(k))
+        if each == 0:
+            live, each = trace_packet(mesh, pb, cut, has_cutouts, o, dx, dy, dz, tm, mask)
+            visible += popcount(live)
+        else:
+            visible += popcount(trace_each(mesh, cut, has_cutouts, o, dx, dy, dz, tm, mask))
+        first += PACKET
+    v = float(visible) / float(samples)
+    pe = (float(visible) + 0.5) / (float(samples) + 1.0)
+    vis[i] = v
+    stderr[i] = wp.sqrt(pe * (1.0 - pe) / float(samples))
+    given_up[i] = each
+
+
+PACKET_MIN_SAMPLES = 8  # below this a packet's set-up costs more than it saves (measured: bench foundation)
+
+
+def resolve_traversal(traversal: str, device: str, samples: int) -> str:
+    """``auto``: ``packet`` on CPU from :data:`PACKET_MIN_SAMPLES` light samples up, else ``ray``."""
+    if traversal not in TRAVERSALS:
+        raise ValueError(f"traversal {traversal!r} is not one of {', '.join(TRAVERSALS)}")
+    if traversal == "auto":
+        return "packet" if str(device).startswith("cpu") and samples >= PACKET_MIN_SAMPLES else "ray"
+    return traversal
+
+
 def reference_pattern(samples: int, seed: int, jitter: bool) -> SamplePattern:
     """The reference's default sampling: stratified per pixel (``jitter = False``: stratum centres)."""
     return SamplePattern("stratified" if jitter else "regular", samples, seed=seed, per_pixel=True)
 
 
-def trace_reference(ds: DeviceScene, light: LightGPU, gb, pattern: SamplePattern, disk: bool, eps: float) -> tuple[wp.array, wp.array]:
+def trace_reference(ds: DeviceScene, light: LightGPU, gb, pattern: SamplePattern, disk: bool, eps: float, traversal: str = "auto",
+                    counters: dict | None = None) -> tuple[wp.array, wp.array]:
     """Visibility and its standard error per G-buffer sample (flat float32 arrays), with the
     light samples of ``pattern`` (mapped onto a disk when ``disk``); ``eps``: the rays' offset
-    (:func:`ray_epsilon`)."""
+    (:func:`ray_epsilon`); ``traversal``: ``packet``, ``ray`` or ``auto`` (:func:`resolve_traversal`).
+    ``counters`` (a dict) receives ``traversal`` (the one used), ``packet_fallback`` (why not
+    packets, when the BVH is too deep for them) and ``receivers_ray_by_ray`` (receivers whose
+    packets gave up: their rays fan out over fine geometry)."""
     n = gb.count
     vis = wp.empty(n, dtype=float, device=ds.device)
     err = wp.empty(n, dtype=float, device=ds.device)
+    mode = resolve_traversal(traversal, ds.device, pattern.count)
+    pb, pstats = packed_bvh(ds) if mode == "packet" else (None, {})
+    if mode == "packet" and pb is None:  # a BVH too deep for the packets' stack
+        mode = "ray"
+        if counters is not None:
+            counters["packet_fallback"] = pstats["error"]
+    if counters is not None:
+        counters["traversal"] = mode
+    if mode == "packet":
+        given_up = wp.empty(n, dtype=wp.int32, device=ds.device)
+        launch_chunked(
+            trace_visibility_packets,
+            n,
+            inputs=[ds.mesh.id, pb, ds.cutouts, ds.has_cutouts, light, pattern.on(ds.device, disk), gb.gpu(), eps],
+            outputs=[vis, err, given_up],
+            device=ds.device,
+            min_chunk=256,
+            per_thread=32,  # receivers cost unevenly (lit, penumbra, packets that give up): small chunks balance the threads
+        )
+        if counters is not None:
+            counters["receivers_ray_by_ray"] = int(given_up.numpy().sum())
+        return vis, err
     launch_chunked(
         trace_visibility,
         n,
@@ -102,6 +218,7 @@ def trace_reference(ds: DeviceScene, light: LightGPU, gb, pattern: SamplePattern
         outputs=[vis, err],
         device=ds.device,
         min_chunk=256,
+        per_thread=32,
     )
     return vis, err
 
@@ -113,10 +230,10 @@ def ray_epsilon(gb, light) -> float:
     """Offset of shadow-ray origins along the normal: a fraction of the frame's extent (the
     receivers in view and the light, :func:`~wsoft.lightspace.view.frame_extent`), not of the
     scene's bounds, which a far or huge triangle can make as large as the whole frame."""
-    from wsoft.lightspace.view import frame_extent
+    from wsoft.lightspace.view import frame_extent_of_bounds
 
-    rec = gb.pos.numpy()[gb.prim.numpy() >= 0]
-    return RAY_EPSILON * frame_extent(rec, light)
+    b = gb.receiver_bounds()
+    return RAY_EPSILON * (frame_extent_of_bounds(*b, light) if b is not None else frame_extent_of_bounds(None, None, light))
 
 
 # -- explicit rays: the same shadow rays as arrays (for throughput comparisons with other tracers) --
@@ -186,6 +303,63 @@ def shadow_rays(ds: DeviceScene, light: LightGPU, gb, pattern: SamplePattern, di
     launch_chunked(generate_shadow_rays, len(covered), inputs=[light, pattern.on(ds.device, disk), gb.gpu(), pix, eps],
                    outputs=[o, d, t], device=ds.device, min_chunk=256)
     return o, d, t
+
+
+@wp.kernel
+def trace_shadow_ray_packets(
+    offset: int,
+    mesh: wp.uint64,
+    pb: PackedBVH,
+    cut: Surfaces,
+    has_cutouts: int,
+    per: int,
+    origin: wp.array[wp.vec3],
+    dir: wp.array[wp.vec3],
+    tmax: wp.array[float],
+    # outputs
+    hit: wp.array[wp.int32],
+):
+    """Explicit rays ``per`` to a receiver (consecutive, one origin), in packets of :data:`PACKET`."""
+    j = wp.tid() + offset
+    o = origin[j * per]
+    first = int(0)
+    each = int(0)
+    while first < per:
+        dx = packet_f()
+        dy = packet_f()
+        dz = packet_f()
+        tm = packet_f()
+        mask = wp.uint32(0)
+        cnt = wp.min(PACKET, per - first)
+        for k in range(cnt):
+            r = j * per + first + k
+            d = dir[r]
+            dx[k] = d[0]
+            dy[k] = d[1]
+            dz[k] = d[2]
+            tm[k] = tmax[r]
+            mask = mask | (wp.uint32(1) << wp.uint32(k))
+        live = wp.uint32(0)
+        if each == 0:
+            live, each = trace_packet(mesh, pb, cut, has_cutouts, o, dx, dy, dz, tm, mask)
+        else:
+            live = trace_each(mesh, cut, has_cutouts, o, dx, dy, dz, tm, mask)
+        for k in range(cnt):
+            hit[j * per + first + k] = wp.where((live >> wp.uint32(k)) & wp.uint32(1) != wp.uint32(0), 0, 1)
+        first += PACKET
+
+
+def trace_ray_packets(ds: DeviceScene, origin: wp.array, dir: wp.array, tmax: wp.array, per: int) -> wp.array:
+    """Occlusion (1 = blocked) of explicit rays laid out ``per`` to a receiver with one origin
+    (as :func:`shadow_rays` writes them), traced in packets; equal to :func:`trace_rays`."""
+    pb, pstats = packed_bvh(ds)
+    if pb is None:
+        raise ValueError(pstats["error"])
+    hit = wp.empty(origin.shape[0], dtype=wp.int32, device=ds.device)
+    launch_chunked(trace_shadow_ray_packets, origin.shape[0] // per,
+                   inputs=[ds.mesh.id, pb, ds.cutouts, ds.has_cutouts, per, origin, dir, tmax], outputs=[hit],
+                   device=ds.device, min_chunk=256)
+    return hit
 
 
 def trace_rays(ds: DeviceScene, origin: wp.array, dir: wp.array, tmax: wp.array) -> wp.array:

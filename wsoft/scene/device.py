@@ -141,6 +141,7 @@ class DeviceScene:
     diagonal: float
     lo: np.ndarray
     hi: np.ndarray
+    packed: tuple | None = None  # (PackedBVH or None, its stats), built by wsoft.scene.packets.packed_bvh on first use
 
     def arrays(self) -> dict[str, wp.array]:
         c = self.cutouts

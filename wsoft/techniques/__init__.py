@@ -1,31 +1,64 @@
 """Techniques by name. Each module declares its parameters, what it reads and writes, what it
-supports and its quality knobs; :func:`markdown_table` renders the README's table from them."""
+supports and its quality knobs; :func:`markdown_table` renders the README's table from them.
+
+:data:`NAMES` lists the techniques without importing them; ``TECHNIQUES`` (name -> class) imports
+the technique modules, and with them Warp, at first use (``wsoft --help`` needs only the names).
+"""
 
 from __future__ import annotations
 
 import dataclasses
+import importlib
 
 from wsoft.errors import ParameterError
 from wsoft.techniques.base import Quality, Technique, Tolerance
-from wsoft.techniques.esm import ESM
-from wsoft.techniques.essm import ESSM
-from wsoft.techniques.hard import Hard
-from wsoft.techniques.pcf import PCF
-from wsoft.techniques.pcss import PCSS
-from wsoft.techniques.reference import Reference
-from wsoft.techniques.salzman import Salzman
-from wsoft.techniques.ssm import SSM
-from wsoft.techniques.vsm import VSM
-from wsoft.techniques.vssm import VSSM
 
-TECHNIQUES: dict[str, type[Technique]] = {t.name: t for t in (Reference, Hard, PCF, PCSS, VSM, ESM, Salzman, ESSM, VSSM, SSM)}
+# name -> (module, class), in the order of TECHNIQUES
+_REGISTRY = {
+    "reference": ("wsoft.techniques.reference", "Reference"),
+    "hard": ("wsoft.techniques.hard", "Hard"),
+    "pcf": ("wsoft.techniques.pcf", "PCF"),
+    "pcss": ("wsoft.techniques.pcss", "PCSS"),
+    "vsm": ("wsoft.techniques.vsm", "VSM"),
+    "esm": ("wsoft.techniques.esm", "ESM"),
+    "salzman": ("wsoft.techniques.salzman", "Salzman"),
+    "essm": ("wsoft.techniques.essm", "ESSM"),
+    "vssm": ("wsoft.techniques.vssm", "VSSM"),
+    "ssm": ("wsoft.techniques.ssm", "SSM"),
+}
+NAMES: tuple[str, ...] = tuple(_REGISTRY)
+_TECHNIQUES: dict[str, type[Technique]] | None = None
+
+
+def _techniques() -> dict[str, type[Technique]]:
+    """``TECHNIQUES``, imported once; each class docstring gets its parameter table (the manual)."""
+    global _TECHNIQUES
+    if _TECHNIQUES is None:
+        found = {}
+        for name, (module, cls_name) in _REGISTRY.items():
+            cls = getattr(importlib.import_module(module), cls_name)
+            if cls.name != name:
+                raise RuntimeError(f"{module}.{cls_name} is named {cls.name!r}, registered as {name!r}")
+            if "\n\nParameters:\n\n" not in (cls.__doc__ or ""):
+                cls.__doc__ = (cls.__doc__ or "").rstrip() + "\n\nParameters:\n\n" + parameter_table(cls) + "\n"
+            found[name] = cls
+        _TECHNIQUES = found
+    return _TECHNIQUES
+
+
+def __getattr__(name: str):
+    if name == "TECHNIQUES":
+        globals()["TECHNIQUES"] = _techniques()
+        return globals()["TECHNIQUES"]
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def get_technique(name: str) -> type[Technique]:
+    techniques = _techniques()
     try:
-        return TECHNIQUES[name]
+        return techniques[name]
     except KeyError:
-        raise ParameterError(f"unknown technique {name!r}; techniques: {', '.join(sorted(TECHNIQUES))}") from None
+        raise ParameterError(f"unknown technique {name!r}; techniques: {', '.join(sorted(techniques))}") from None
 
 
 def create(name: str, params: dict | None = None) -> Technique:
@@ -45,15 +78,13 @@ def parameter_table(cls: type[Technique]) -> str:
 def markdown_table() -> str:
     """The README's technique table, from the code: name, summary, parameters with defaults, quality knobs."""
     rows = ["| name | what | parameters (default) | quality knobs (sweep values) |", "|---|---|---|---|"]
-    for name in ["reference"] + sorted(n for n in TECHNIQUES if n != "reference"):
-        cls = TECHNIQUES[name]
+    techniques = _techniques()
+    for name in ["reference"] + sorted(n for n in techniques if n != "reference"):
+        cls = techniques[name]
         params = ", ".join(f"`{f.name}` ({f.default!r})" for f in dataclasses.fields(cls.Params))
         quality = "; ".join(f"`{q.param}`: {', '.join(f'{v:g}' if isinstance(v, float) else str(v) for v in q.values)}" for q in cls.quality) or "-"
         rows.append(f"| `{name}` | {cls.summary} | {params} | {quality} |")
     return "\n".join(rows)
 
 
-for _cls in TECHNIQUES.values():  # the class docstring is the manual: append the parameter table
-    _cls.__doc__ = (_cls.__doc__ or "").rstrip() + "\n\nParameters:\n\n" + parameter_table(_cls) + "\n"
-
-__all__ = ["TECHNIQUES", "Quality", "Technique", "Tolerance", "create", "get_technique", "markdown_table", "parameter_table"]
+__all__ = ["NAMES", "TECHNIQUES", "Quality", "Technique", "Tolerance", "create", "get_technique", "markdown_table", "parameter_table"]

@@ -14,7 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from wsoft.lightspace.light import disk_shaped
-from wsoft.reference import ray_epsilon, reference_pattern, trace_reference
+from wsoft.reference import TRAVERSALS, ray_epsilon, reference_pattern, trace_reference
 from wsoft.scene.device import upload_scene
 from wsoft.params import check_ranges
 from wsoft.techniques.base import Quality, Technique, Tolerance, check, param
@@ -26,11 +26,14 @@ class ReferenceParams:
     seed: int = param(0, "random seed", range=(0, 2**31 - 1))
     jitter: bool = param(True, "jitter inside strata (false: stratum centres; one sample = the light's centre)")
     casters: str = param("all", "which prims occlude: all, or dynamic (the ground truth of a dynamic-caster shadow mask)")
+    traversal: str = param("auto", "BVH traversal: packet (a receiver's light samples 32 at a time), ray (one by one), auto (packet on CPU "
+                                   "from 8 samples, else ray); the same answer bit for bit")
 
     def __post_init__(self):
         check_ranges(self)
         check(1 <= self.samples <= 1 << 20, f"samples {self.samples} out of range [1, 1048576]")
         check(self.casters in ("all", "dynamic"), f"casters {self.casters!r} is not all or dynamic")
+        check(self.traversal in TRAVERSALS, f"traversal {self.traversal!r} is not one of {', '.join(TRAVERSALS)}")
 
 
 class Reference(Technique):
@@ -61,12 +64,17 @@ class Reference(Technique):
         pattern = reference_pattern(p.samples, p.seed, p.jitter)
         disk = disk_shaped(light)
 
+        name = ("reference_alpha" if scene.has_cutouts else "reference") + ("_dynamic" if dynamic else "")
+        pass_name = ctx.pass_name(name, light)
+
         def run(res):
             ds = res[scene_key]
             if dynamic:  # occluders: the dynamic casters only (their own BVH, built once per device)
                 ds, _ = scene.dynamic_subset().device_copy(ctx.device, upload_scene)
-            vis, err = trace_reference(ds, L, res[gbuf], pattern, disk, ray_epsilon(res[gbuf], light))
+            counters = ctx.counters(light)
+            vis, err = trace_reference(ds, L, res[gbuf], pattern, disk, ray_epsilon(res[gbuf], light), p.traversal, counters)
+            if "packet_fallback" in counters:
+                ctx.ctx.warn(pass_name, f"traced ray by ray, not in packets: {counters['packet_fallback']}")
             return {out: ctx.visibility(vis, err)}
 
-        name = ("reference_alpha" if scene.has_cutouts else "reference") + ("_dynamic" if dynamic else "")
-        return ctx.add_pass(ctx.pass_name(name, light), inputs=(gbuf, scene_key), outputs=(out,), run=run, light=light)
+        return ctx.add_pass(pass_name, inputs=(gbuf, scene_key), outputs=(out,), run=run, light=light)
