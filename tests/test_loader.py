@@ -353,3 +353,103 @@ def test_lightmapped_bridge_scene():
     assert not any(p.startswith("/World/Static/") for p in s.dynamic_prims())
     assert s.tri_baked is not None and np.isfinite(s.tri_baked[~s.tri_dynamic]).all()
     assert s.time == 1.0 and [l.name for l in s.lights] == ["Sun", "Torch"]
+
+
+def _instancer_stage(*, invisible=(3,), indices=(0, 1, 0, 1), time_samples=False):
+    """A PointInstancer of two prototypes (a box under an Xform with its own translate, and a cube)
+    over a ground: positions, scales, orientations (one turned 90 degrees about z), invisibleIds."""
+    from pxr import Gf, Sdf, UsdGeom, Vt
+
+    from wsoft.bench.stages import add_box
+
+    st = make_stage()
+    add_quad(st, "/World/Ground", (0, 0, 0), 4)
+    pi = UsdGeom.PointInstancer.Define(st, "/World/Trees")
+    UsdGeom.XformCommonAPI(pi).SetTranslate(Gf.Vec3d(0, 0, 0.5))
+    UsdGeom.XformCommonAPI(UsdGeom.Xform.Define(st, "/World/Trees/Protos/Tree")).SetTranslate(Gf.Vec3d(0, 0, 0.25))
+    add_box(st, "/World/Trees/Protos/Tree/Box", (-0.1, -0.3, 0.0), (0.1, 0.3, 0.2))
+    UsdGeom.XformCommonAPI(st.GetPrimAtPath("/World/Trees/Protos/Tree/Box")).SetTranslate(Gf.Vec3d(0.05, 0, 0))
+    add_box(st, "/World/Trees/Protos/Cube", (-0.1, -0.1, -0.1), (0.1, 0.1, 0.1))
+    UsdGeom.XformCommonAPI(st.GetPrimAtPath("/World/Trees/Protos/Cube")).SetTranslate(Gf.Vec3d(0, 0, 1.0))
+    pi.CreatePrototypesRel().SetTargets([Sdf.Path("/World/Trees/Protos/Tree"), Sdf.Path("/World/Trees/Protos/Cube")])
+    pi.CreateProtoIndicesAttr(list(indices))
+    pos = pi.CreatePositionsAttr()
+    if time_samples:
+        pos.Set([(-1, 0, 0), (0, 0, 0), (1, 0, 0), (0, 1, 0)], 1.0)
+        pos.Set([(-1, 0, 0.5), (0, 0, 0.5), (1, 0, 0.5), (0, 1, 0.5)], 2.0)
+    else:
+        pos.Set([(-1, 0, 0), (0, 0, 0), (1, 0, 0), (0, 1, 0)])
+    pi.CreateScalesAttr([(1, 1, 1), (2, 2, 2), (1, 1, 3), (1, 1, 1)])
+    q = Gf.Quath(float(np.cos(np.pi / 4)), 0, 0, float(np.sin(np.pi / 4)))
+    pi.CreateOrientationsAttr(Vt.QuathArray([Gf.Quath(1, 0, 0, 0), Gf.Quath(1, 0, 0, 0), q, Gf.Quath(1, 0, 0, 0)]))
+    pi.CreateInvisibleIdsAttr(list(invisible))
+    add_rect_light(st, "/World/Light", (0, 0, 4), 1, 1)
+    add_camera(st, "/World/Cam", (0, -5, 5), (0, 0, 0))
+    return st, pi
+
+
+def test_point_instancer_places_its_prototypes_where_usd_does():
+    """Issue 11, item 2: a PointInstancer's instances are loaded (flattened: one copy each), at
+    the bounds USD itself computes per instance (positions, scales, orientations, the prototypes'
+    own transforms), without its invisibleIds, and the prototypes are not drawn where they are
+    authored."""
+    from pxr import Usd, UsdGeom
+
+    st, pi = _instancer_stage()
+    s = wsoft.load_scene(st)
+    names = s.prims
+    assert names == ["/World/Ground", "/World/Trees/Protos/Tree/Box@/World/Trees[0]", "/World/Trees/Protos/Cube@/World/Trees[1]",
+                     "/World/Trees/Protos/Tree/Box@/World/Trees[2]"]
+    bc = UsdGeom.BBoxCache(Usd.TimeCode.Default(), ["default"])
+    for k, name in enumerate(names[1:], start=1):
+        i = int(name.split("[")[1].rstrip("]"))
+        r = bc.ComputePointInstanceWorldBound(pi, i).ComputeAlignedRange()
+        p = s.points[np.unique(s.triangles[s.tri_prim == k])]
+        assert np.allclose(p.min(axis=0), np.array(r.GetMin()), atol=1e-5) and np.allclose(p.max(axis=0), np.array(r.GetMax()), atol=1e-5)
+    assert not any(n.startswith("/World/Trees/Protos") and "@" not in n for n in names)
+
+
+def test_point_instancer_casts_the_shadows_of_the_same_meshes_authored_in_place():
+    """The reference's V over an instanced stage equals the one over the same triangles written
+    out as plain meshes (the flattened scene, built from the instancer's own world points)."""
+    from wsoft.bench.stages import make_stage as mk
+
+    st, _ = _instancer_stage()
+    inst = wsoft.load_scene(st)
+    from pxr import UsdGeom
+
+    flat = mk()
+    add_rect_light(flat, "/World/Light", (0, 0, 4), 1, 1)
+    add_camera(flat, "/World/Cam", (0, -5, 5), (0, 0, 0))
+    for k, name in enumerate(inst.prims):
+        t = inst.triangles[inst.tri_prim == k]
+        used, remap = np.unique(t, return_inverse=True)
+        m = UsdGeom.Mesh.Define(flat, f"/World/M{k}")
+        m.CreatePointsAttr([tuple(map(float, p)) for p in inst.points[used]])
+        m.CreateFaceVertexCountsAttr([3] * len(t))
+        m.CreateFaceVertexIndicesAttr([int(x) for x in remap.ravel()])
+        m.CreateDoubleSidedAttr(True)
+    kw = {"width": 64, "height": 48, "samples": 16}
+    a = wsoft.render(inst, "reference", **kw)
+    b = wsoft.render(wsoft.load_scene(flat), "reference", **kw)
+    assert np.array_equal(a.V, b.V)
+    assert (a.V[a["A"] > 0] < 0.5).sum() > 50  # the instances do shadow the ground
+
+
+def test_point_instancer_time_samples_bad_indices_and_missing_prototypes():
+    st, _ = _instancer_stage(time_samples=True)
+    z1 = wsoft.load_scene(st, time=1.0).points[:, 2].max()
+    z2 = wsoft.load_scene(st, time=2.0).points[:, 2].max()
+    assert z2 == pytest.approx(z1 + 0.5, abs=1e-5)
+    assert wsoft.load_scene(st, time=1.0).tri_dynamic[wsoft.load_scene(st, time=1.0).tri_prim > 0].all()  # moving instances
+    st, _ = _instancer_stage(indices=(0, 1, 5, 1))
+    with pytest.raises(SceneError, match=r"/World/Trees.*protoIndices\[2\] = 5 is out of range for 2 prototypes"):
+        wsoft.load_scene(st)
+    st, pi = _instancer_stage()
+    pi.GetPrototypesRel().ClearTargets(True)
+    with pytest.raises(SceneError, match=r"/World/Trees.*no prototypes"):
+        wsoft.load_scene(st)
+    st, pi = _instancer_stage()
+    pi.GetPositionsAttr().Set([(0, 0, 0)])  # one position for four protoIndices
+    with pytest.raises(SceneError, match=r"/World/Trees.*do not match its 4 protoIndices"):
+        wsoft.load_scene(st)

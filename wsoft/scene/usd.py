@@ -124,6 +124,8 @@ class _StageReader:
             self.timecode = Usd.TimeCode(float(time))
         self.time = None if self.timecode.IsDefault() else float(self.timecode.GetValue())
         self.xf = UsdGeom.XformCache(self.timecode)
+        self.world_override = None  # (prototype root prim, its world matrix) while reading a PointInstancer's instance
+        self.instancer_dynamic = False
         self.warnings: list[str] = []
         self.materials: list[Material] = []
         self.material_index: dict[str, int] = {"": 0}
@@ -141,6 +143,9 @@ class _StageReader:
         return SceneError(msg, file=self.file, prim=str(prim.GetPath()) if prim is not None else None)
 
     def world(self, prim) -> np.ndarray:
+        if self.world_override is not None:  # a prototype's mesh, placed by its PointInstancer
+            rel, _ = self.xf.ComputeRelativeTransform(prim, self.world_override[0])
+            return self.world_override[1] @ np.array(rel, dtype=np.float64).T
         m = self.xf.GetLocalToWorldTransform(prim)
         return np.array(m, dtype=np.float64).T  # column-vector convention
 
@@ -182,12 +187,11 @@ class _StageReader:
                     it.PruneChildren()
                     continue
             type_name = prim.GetTypeName()
-            if prim.IsA(UsdGeom.Mesh):
-                mesh = self.read_mesh(prim)
-                if mesh is None:
-                    continue
+
+            def add_mesh(mesh, name: str):
+                nonlocal nverts
                 p, t, m, uv, ds, closed, dynamic, baked = mesh
-                prims.append(str(prim.GetPath()))
+                prims.append(name)
                 pts.append(p)
                 tris.append(t + nverts)
                 nverts += len(p)
@@ -198,6 +202,16 @@ class _StageReader:
                 tri_cl.append(np.full(len(t), closed, np.int8))
                 tri_dyn.append(np.full(len(t), dynamic, bool))
                 tri_bk.append((baked, len(t)))
+
+            if prim.IsA(UsdGeom.PointInstancer):
+                it.PruneChildren()  # its prototypes are drawn only where it places them
+                for mesh, name in self.read_instancer(prim):
+                    add_mesh(mesh, name)
+            elif prim.IsA(UsdGeom.Mesh):
+                mesh = self.read_mesh(prim)
+                if mesh is None:
+                    continue
+                add_mesh(mesh, str(prim.GetPath()))
             elif prim.IsA(UsdGeom.Gprim) and not prim.IsA(UsdGeom.Mesh):
                 self.warn(prim, f"{type_name} is not a Mesh; ignored (convert it to a mesh to cast shadows)")
             elif type_name in _HANDLED_LIGHTS:
@@ -242,6 +256,69 @@ class _StageReader:
             warnings=self.warnings,
         )
         return scene
+
+    # -- point instancers ----------------------------------------------------------
+    def read_instancer(self, prim):
+        """The meshes a ``UsdGeom.PointInstancer`` places, one copy per instance (flattened): the
+        instance transforms from USD's own ``ComputeInstanceTransformsAtTime`` (positions,
+        orientations, scales, the prototypes' own transforms) with the mask of ``invisibleIds``
+        and inactive ids applied to them and to ``protoIndices``, each prototype's meshes read
+        once per instance. Yields (mesh, name) with name ``mesh@instancer[i]``."""
+        Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = _pxr()
+        pi = UsdGeom.PointInstancer(prim)
+        protos = pi.GetPrototypesRel().GetForwardedTargets()
+        indices = self.get(pi.GetProtoIndicesAttr())
+        if indices is None or len(indices) == 0:
+            return
+        indices = np.asarray(indices, np.int64)
+        if not protos:
+            raise self.err(prim, f"PointInstancer has {len(indices)} instances but no prototypes")
+        if indices.min() < 0 or indices.max() >= len(protos):
+            bad = int(np.argmax((indices < 0) | (indices >= len(protos))))
+            raise self.err(prim, f"protoIndices[{bad}] = {int(indices[bad])} is out of range for {len(protos)} prototypes")
+        xforms = pi.ComputeInstanceTransformsAtTime(self.timecode, self.timecode, UsdGeom.PointInstancer.IncludeProtoXform,
+                                                    UsdGeom.PointInstancer.IgnoreMask)
+        if xforms is None or len(xforms) != len(indices):
+            raise self.err(prim, f"PointInstancer's positions/orientations/scales do not match its {len(indices)} protoIndices")
+        mask = pi.ComputeMaskAtTime(self.timecode)  # empty: every instance shows
+        keep = np.ones(len(indices), bool) if mask is None or len(mask) == 0 else np.asarray(mask, bool)
+        M_pi = self.world(prim)
+        # dynamic when the instancer moves its instances over time (or is moved)
+        attrs = (pi.GetPositionsAttr(), pi.GetOrientationsAttr(), pi.GetScalesAttr(), pi.GetProtoIndicesAttr(), pi.GetInvisibleIdsAttr())
+        moving = any(a and a.GetNumTimeSamples() > 1 for a in attrs) or self.is_dynamic(prim, None)
+        meshes_of = {}
+        for j, path in enumerate(protos):
+            root = self.stage.GetPrimAtPath(path)
+            if not root:
+                raise self.err(prim, f"prototype {path} does not exist")
+            found = []
+            sub = iter(Usd.PrimRange(root, Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)))
+            for q in sub:
+                if q.IsA(UsdGeom.Imageable) and UsdGeom.Imageable(q).ComputeVisibility(self.timecode) == UsdGeom.Tokens.invisible:
+                    sub.PruneChildren()
+                    continue
+                if q.IsA(UsdGeom.PointInstancer):
+                    self.warn(q, "a PointInstancer inside a prototype is not expanded; ignored")
+                    sub.PruneChildren()
+                elif q.IsA(UsdGeom.Mesh):
+                    found.append(q)
+                elif q.IsA(UsdGeom.Gprim):
+                    self.warn(q, f"{q.GetTypeName()} is not a Mesh; ignored (convert it to a mesh to cast shadows)")
+            meshes_of[j] = (root, found)
+        for i in np.nonzero(keep)[0]:
+            root, found = meshes_of[int(indices[i])]
+            # the instance transform maps the prototype root's own frame (its xform included) into the
+            # instancer's; the meshes below the root keep their transforms relative to it
+            self.world_override = (root, M_pi @ np.array(xforms[int(i)], dtype=np.float64).T)
+            try:
+                for q in found:
+                    mesh = self.read_mesh(q)
+                    if mesh is not None:
+                        if moving:
+                            mesh = (*mesh[:6], True, mesh[7])
+                        yield mesh, f"{q.GetPath()}@{prim.GetPath()}[{int(i)}]"
+            finally:
+                self.world_override = None
 
     # -- meshes ------------------------------------------------------------------
     def read_mesh(self, prim):
@@ -315,7 +392,7 @@ class _StageReader:
         """A *dynamic caster* (Salzman's sense): time-sampled points, a time-varying transform on the
         prim or an ancestor, or ``wsoft:dynamic = true`` on the prim or an ancestor."""
         Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = _pxr()
-        if mesh.GetPointsAttr().GetNumTimeSamples() > 1:
+        if mesh is not None and mesh.GetPointsAttr().GetNumTimeSamples() > 1:
             return True
         p = prim
         while p and not p.IsPseudoRoot():
