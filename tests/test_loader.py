@@ -453,3 +453,26 @@ def test_point_instancer_time_samples_bad_indices_and_missing_prototypes():
     pi.GetPositionsAttr().Set([(0, 0, 0)])  # one position for four protoIndices
     with pytest.raises(SceneError, match=r"/World/Trees.*do not match its 4 protoIndices"):
         wsoft.load_scene(st)
+
+
+def test_shadow_link_and_shadow_distance_are_warned_not_silently_ignored():
+    """UsdLux controls wsoft does not apply yet (issue 14) are named in a warning: a shadowLink
+    collection that excludes casters (as Usd.CollectionAPI computes membership; instances by their
+    instancer), and a finite inputs:shadow:distance. The defaults (everything included, -1) are
+    silent."""
+    from pxr import Sdf, UsdLux
+
+    from wsoft.bench.stages import add_box
+
+    st = make_stage()
+    add_quad(st, "/World/Ground", (0, 0, 0), 3)
+    add_box(st, "/World/Box", (-0.3, -0.3, 0.2), (0.3, 0.3, 0.8))
+    add_rect_light(st, "/World/Light", (0, 0, 4), 1, 1)
+    add_camera(st, "/World/Cam", (0, -5, 5), (0, 0, 0))
+    assert not [w for w in wsoft.load_scene(st).warnings if "shadow" in w]
+    light = UsdLux.LightAPI(st.GetPrimAtPath("/World/Light"))
+    light.GetShadowLinkCollectionAPI().GetExcludesRel().AddTarget(Sdf.Path("/World/Box"))
+    UsdLux.ShadowAPI.Apply(st.GetPrimAtPath("/World/Light")).CreateShadowDistanceAttr(2.5)
+    w = [x for x in wsoft.load_scene(st).warnings if "/World/Light" in x]
+    assert any("collection:shadowLink excludes 1 of 2" in x and "/World/Box" in x for x in w)
+    assert any("inputs:shadow:distance = 2.5 is not applied" in x for x in w)

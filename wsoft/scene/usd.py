@@ -173,7 +173,7 @@ class _StageReader:
     def read(self) -> Scene:
         Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = _pxr()
         pts, tris, tri_prim, tri_mat, tri_uv, tri_ds, tri_cl, tri_dyn, tri_bk, prims = [], [], [], [], [], [], [], [], [], []
-        lights, unshadowed, skipped, cameras = [], [], [], []
+        lights, unshadowed, skipped, cameras, shadow_lights = [], [], [], [], []
         nverts = 0
         it = iter(Usd.PrimRange.Stage(self.stage, Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)))
         for prim in it:
@@ -220,12 +220,16 @@ class _StageReader:
                     continue
                 enabled = UsdLux.ShadowAPI(prim).GetShadowEnableAttr().Get(self.timecode)
                 (unshadowed if enabled is False else lights).append(light)
+                if enabled is not False:
+                    shadow_lights.append(prim)
             elif prim.HasAPI(UsdLux.LightAPI) or type_name.endswith("Light"):
                 reason = _UNHANDLED_REASONS.get(type_name, f"{type_name or 'this light'} is not handled")
                 skipped.append(SkippedLight(str(prim.GetPath()), type_name or "light", reason))
             elif prim.IsA(UsdGeom.Camera):
                 cameras.append(self.read_camera(prim))
 
+        for lp in shadow_lights:
+            self.check_shadow_controls(lp, prims)
         if pts:
             points = np.concatenate(pts).astype(np.float32)
             triangles = np.concatenate(tris).astype(np.int32)
@@ -256,6 +260,26 @@ class _StageReader:
             warnings=self.warnings,
         )
         return scene
+
+    # -- lights' shadow controls ------------------------------------------------------
+    def check_shadow_controls(self, prim, casters: list[str]) -> None:
+        """UsdLux controls that change who casts a light's shadow and that wsoft does not apply
+        yet: a warning each, so that no shadow is silently wrong. ``collection:shadowLink`` (as
+        ``Usd.CollectionAPI`` computes its membership) excluding loaded casters, and
+        ``inputs:shadow:distance`` other than -1 (unlimited)."""
+        Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = _pxr()
+        link = UsdLux.LightAPI(prim).GetShadowLinkCollectionAPI()
+        if link:
+            query = link.ComputeMembershipQuery()
+            out = [c for c in casters if not query.IsPathIncluded(Sdf.Path(c.split("@")[-1].split("[")[0]))]
+            if out:
+                self.warn(prim, f"collection:shadowLink excludes {len(out)} of {len(casters)} shadow-casting prims (e.g. {out[0]}) "
+                                "from this light's shadow; not applied: they cast it")
+        dist = UsdLux.ShadowAPI(prim).GetShadowDistanceAttr()
+        if dist and dist.HasAuthoredValue():
+            v = dist.Get(self.timecode)
+            if v is not None and float(v) != -1.0:
+                self.warn(prim, f"inputs:shadow:distance = {float(v):g} is not applied: occluders at any distance cast this light's shadow")
 
     # -- point instancers ----------------------------------------------------------
     def read_instancer(self, prim):
