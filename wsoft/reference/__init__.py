@@ -56,6 +56,25 @@ def ray_origin(p: wp.vec3, n: wp.vec3, off: float) -> wp.vec3:
     return p + n * off
 
 
+@wp.func
+def receiver_begin(gb: GBufferGPU, ls: LightSamples, eps: float, i: int):
+    """A receiver's shadow rays begin: (their offset, their origin, and the light-sample stream's
+    state, first table index and rotation)."""
+    p = gb.pos[i]
+    off = ray_offset(p, eps)
+    o = ray_origin(p, gb.nrm[i], off)
+    xy = gb_pixel(gb, i)
+    state, base, rot = sampling_begin(ls, i, xy[0], xy[1])
+    return off, o, state, base, rot
+
+
+@wp.func
+def visible_fraction(visible: int, samples: int):
+    """(V, its standard error) from ``visible`` of ``samples`` rays (pseudo-count estimate)."""
+    pe = (float(visible) + 0.5) / (float(samples) + 1.0)
+    return float(visible) / float(samples), wp.sqrt(pe * (1.0 - pe) / float(samples))
+
+
 @wp.kernel
 def trace_visibility(
     offset: int,
@@ -77,10 +96,7 @@ def trace_visibility(
         return
     p = gb.pos[i]
     n = gb.nrm[i]
-    off = ray_offset(p, eps)
-    o = ray_origin(p, n, off)
-    xy = gb_pixel(gb, i)
-    state, base, rot = sampling_begin(ls, i, xy[0], xy[1])
+    off, o, state, base, rot = receiver_begin(gb, ls, eps, i)
     visible = int(0)
     samples = ls.count
     for s in range(samples):
@@ -90,10 +106,9 @@ def trace_visibility(
         if in_front(n, d):
             if not occluded(mesh, cut, has_cutouts, o, d, r[3] - off):
                 visible += 1
-    v = float(visible) / float(samples)
-    pe = (float(visible) + 0.5) / (float(samples) + 1.0)
+    v, e = visible_fraction(visible, samples)
     vis[i] = v
-    stderr[i] = wp.sqrt(pe * (1.0 - pe) / float(samples))
+    stderr[i] = e
 
 
 @wp.kernel
@@ -124,10 +139,7 @@ def trace_visibility_packets(
         return
     p = gb.pos[i]
     n = gb.nrm[i]
-    off = ray_offset(p, eps)
-    o = ray_origin(p, n, off)
-    xy = gb_pixel(gb, i)
-    state, base, rot = sampling_begin(ls, i, xy[0], xy[1])
+    off, o, state, base, rot = receiver_begin(gb, ls, eps, i)
     visible = int(0)
     samples = ls.count
     first = int(0)
@@ -154,10 +166,9 @@ def trace_visibility_packets(
         else:
             visible += popcount(trace_each(mesh, cut, has_cutouts, o, dx, dy, dz, tm, mask))
         first += PACKET
-    v = float(visible) / float(samples)
-    pe = (float(visible) + 0.5) / (float(samples) + 1.0)
+    v, e = visible_fraction(visible, samples)
     vis[i] = v
-    stderr[i] = wp.sqrt(pe * (1.0 - pe) / float(samples))
+    stderr[i] = e
     given_up[i] = each
 
 
@@ -256,10 +267,7 @@ def generate_shadow_rays(
     i = pix[k]
     p = gb.pos[i]
     n = gb.nrm[i]
-    off = ray_offset(p, eps)
-    o = ray_origin(p, n, off)
-    xy = gb_pixel(gb, i)
-    state, base, rot = sampling_begin(ls, i, xy[0], xy[1])
+    off, o, state, base, rot = receiver_begin(gb, ls, eps, i)
     samples = ls.count
     for s in range(samples):
         c, state = sample_coords(ls, state, base, rot, s)

@@ -412,6 +412,32 @@ def leaf_hits(
 
 
 @wp.func
+def visit_child(
+    pb: PackedBVH,
+    cut: Surfaces,
+    has_cutouts: int,
+    child: wp.vec2i,
+    t: float,
+    o: wp.vec3,
+    dx: packet_f,
+    dy: packet_f,
+    dz: packet_f,
+    tm: packet_f,
+    live: wp.uint32,
+    work: int,
+):
+    """One child of a record whose box the packet enters at ``t`` (1e30: never): a leaf's
+    triangles are tested on the spot, an inner child is returned to descend into (else -1);
+    returns (live, inner record or -1, work done so far)."""
+    if t >= 1.0e30:
+        return live, -1, work
+    if child[1] >= 0:
+        work += (child[1] - child[0]) * wp.bit_count(live)
+        return leaf_hits(pb, cut, has_cutouts, child[0], child[1], o, dx, dy, dz, tm, live), -1, work
+    return live, child[0], work
+
+
+@wp.func
 def trace_packet(
     mesh: wp.uint64,
     pb: PackedBVH,
@@ -453,54 +479,28 @@ def trace_packet(
             break
         q = pb.pairs[rec]
         work += 1
-        tl = packet_entry(pk, q.lo_l, q.hi_l)
-        tr = packet_entry(pk, q.lo_r, q.hi_r)
-        kids = q.kids
-        # leaf children are tested on the spot, nearer first; inner ones descended into
-        nl = int(-1)
-        nr = int(-1)
-        if tl <= tr:
-            if tl < 1.0e30:
-                if kids[1] >= 0:
-                    work += (kids[1] - kids[0]) * wp.bit_count(live)
-                    live = leaf_hits(pb, cut, has_cutouts, kids[0], kids[1], o, dx, dy, dz, tm, live)
-                else:
-                    nl = kids[0]
-            if tr < 1.0e30:
-                if kids[3] >= 0:
-                    work += (kids[3] - kids[2]) * wp.bit_count(live)
-                    live = leaf_hits(pb, cut, has_cutouts, kids[2], kids[3], o, dx, dy, dz, tm, live)
-                else:
-                    nr = kids[2]
-        else:
-            if tr < 1.0e30:
-                if kids[3] >= 0:
-                    work += (kids[3] - kids[2]) * wp.bit_count(live)
-                    live = leaf_hits(pb, cut, has_cutouts, kids[2], kids[3], o, dx, dy, dz, tm, live)
-                else:
-                    nr = kids[2]
-            if tl < 1.0e30:
-                if kids[1] >= 0:
-                    work += (kids[1] - kids[0]) * wp.bit_count(live)
-                    live = leaf_hits(pb, cut, has_cutouts, kids[0], kids[1], o, dx, dy, dz, tm, live)
-                else:
-                    nl = kids[0]
+        # the nearer child first (the left one on a tie)
+        near = wp.vec2i(q.kids[0], q.kids[1])
+        far = wp.vec2i(q.kids[2], q.kids[3])
+        t_near = packet_entry(pk, q.lo_l, q.hi_l)
+        t_far = packet_entry(pk, q.lo_r, q.hi_r)
+        if t_far < t_near:
+            near, far = far, near
+            t_near, t_far = t_far, t_near
+        live, n0, work = visit_child(pb, cut, has_cutouts, near, t_near, o, dx, dy, dz, tm, live, work)
+        live, n1, work = visit_child(pb, cut, has_cutouts, far, t_far, o, dx, dy, dz, tm, live, work)
         if live == wp.uint32(0):
             return live, 0
-        if nl >= 0 and nr >= 0:
-            if tl <= tr:
-                stack[sp] = nr
-                rec = nl
-            else:
-                stack[sp] = nl
-                rec = nr
+        if n0 >= 0 and n1 >= 0:
+            stack[sp] = n1
             sp += 1
+            rec = n0
             continue
-        if nl >= 0:
-            rec = nl
+        if n0 >= 0:
+            rec = n0
             continue
-        if nr >= 0:
-            rec = nr
+        if n1 >= 0:
+            rec = n1
             continue
         if sp == 0:
             return live, 0
