@@ -227,6 +227,7 @@ def _throughput(case: dict, ctx: dict) -> dict:
     from wsoft.parallel import cpu_threads
     from wsoft.lightspace.light import disk_shaped
     from wsoft.reference import ray_epsilon, reference_pattern, shadow_rays, trace_ray_packets, trace_reference, trace_rays
+    from wsoft.scene.packets import packed_bvh
     from wsoft.render import RenderContext
     from wsoft.raster.camera import camera_gpu
     from wsoft.raster.gbuffer import render_gbuffer
@@ -247,7 +248,7 @@ def _throughput(case: dict, ctx: dict) -> dict:
     disk = disk_shaped(light)
     threads = cpu_threads() if dev == "cpu" else None
     o, d, t = shadow_rays(ds, L, gb, pattern, disk, eps)
-    packed_stats = __import__("wsoft.scene.packets", fromlist=["packed_bvh"]).packed_bvh(ds)[1]  # built once, outside the timings
+    packed_stats = packed_bvh(ds)[1]  # built once, outside the timings
     row = {"scene": case["scene"], "light": light.path, "device": dev, "rays": nrays, "threads": threads, "samples": n,
            "packed_bvh": packed_stats}
     # the reference pass (ray generation included) and the explicit rays (tracing only), per ray and in packets

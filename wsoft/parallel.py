@@ -183,6 +183,12 @@ def run_tasks(tasks: list[Callable[[], None]], device: str) -> None:
         fut.result()
 
 
+def run_row_blocks(n: int, block: Callable[[int, int], None], min_rows: int = 65536) -> None:
+    """``block(start, end)`` over row blocks of ``range(n)``, one block a CPU thread (host NumPy
+    work: its loops release the GIL)."""
+    run_tasks([lambda a=a, c=c: block(a, a + c) for a, c in chunk_ranges(n, "cpu", min_chunk=min_rows, per_thread=1)], "cpu")
+
+
 def chunk_ranges(n: int, device: str, min_chunk: int = 1024, per_thread: int = 4) -> list[tuple[int, int]]:
     """Split ``range(n)`` into (start, count) chunks: one on CUDA, several per CPU thread."""
     if n <= 0:

@@ -54,9 +54,9 @@ def to_frame(p: np.ndarray, origin: np.ndarray, axes: np.ndarray, threads: bool 
     if not threads:
         block(0, len(p))
         return out
-    from wsoft.parallel import chunk_ranges, run_tasks
+    from wsoft.parallel import run_row_blocks
 
-    run_tasks([lambda a=a, n=n: block(a, a + n) for a, n in chunk_ranges(len(p), "cpu", min_chunk=65536, per_thread=1)], "cpu")
+    run_row_blocks(len(p), block)
     return out
 
 
@@ -163,7 +163,7 @@ def _prism_depth_min(v: np.ndarray, window, default: float) -> float:
     if v is None or len(v) == 0:
         return default
     l, r, b, t = window
-    from wsoft.parallel import chunk_ranges, run_tasks
+    from wsoft.parallel import run_row_blocks
 
     found = []
 
@@ -173,7 +173,7 @@ def _prism_depth_min(v: np.ndarray, window, default: float) -> float:
         if inside.any():
             found.append(float(w[inside, 2].min()))
 
-    run_tasks([lambda a=a, n=n: block(a, a + n) for a, n in chunk_ranges(len(v), "cpu", min_chunk=65536, per_thread=1)], "cpu")
+    run_row_blocks(len(v), block)
     return min(found + [default])
 
 
@@ -184,7 +184,7 @@ def _local_fit_stats(rec: np.ndarray, origin: np.ndarray, axes: np.ndarray, faci
     light's emission axis) is given, those also in front of its plane (``front``): their count,
     the window (l, r, b, t: tangents widened by ``margin`` at each one's depth), depth range and
     how many lie beyond the ±80° window (``outside``, never counting those behind the plane)."""
-    from wsoft.parallel import chunk_ranges, run_tasks
+    from wsoft.parallel import run_row_blocks
 
     parts: list[dict] = []
 
@@ -212,7 +212,7 @@ def _local_fit_stats(rec: np.ndarray, origin: np.ndarray, axes: np.ndarray, faci
                         "outside": int(np.count_nonzero(~sel & ~behind)) + int(np.count_nonzero(~inside & ~behind[sel]))}
         parts.append(out)
 
-    run_tasks([lambda a=a, n=n: block(a, a + n) for a, n in chunk_ranges(len(rec), "cpu", min_chunk=32768, per_thread=1)], "cpu")
+    run_row_blocks(len(rec), block, min_rows=32768)
     res = {}
     for key in ("all", "front"):
         ps = [p[key] for p in parts]

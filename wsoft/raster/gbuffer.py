@@ -228,11 +228,8 @@ class GBuffer:
             launch_chunked(reduce_receiver_bounds, chunks, inputs=[n, chunks, self.pos, self.prim], outputs=[lo, hi, found],
                            device=str(dev), min_chunk=1)
             f = found.numpy() > 0
-            if not f.any():
-                self._bounds = (None,)
-            else:
-                self._bounds = (lo.numpy()[f].astype(np.float64).min(axis=0), hi.numpy()[f].astype(np.float64).max(axis=0))
-        return None if self._bounds[0] is None else self._bounds
+            self._bounds = (lo.numpy()[f].astype(np.float64).min(axis=0), hi.numpy()[f].astype(np.float64).max(axis=0)) if f.any() else ()
+        return self._bounds or None
 
     def arrays(self) -> dict[str, wp.array]:
         return {"pos": self.pos, "nrm": self.nrm, "dist": self.dist, "prim": self.prim, "uv": self.uv, "bary": self.bary}

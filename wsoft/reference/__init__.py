@@ -33,7 +33,7 @@ from wsoft.parallel import launch_chunked
 from wsoft.raster.gbuffer import GBufferGPU, gb_covered, gb_pixel
 from wsoft.lightspace.bitmask import popcount
 from wsoft.scene.device import DeviceScene, Surfaces, occluded
-from wsoft.scene.packets import PACKET, PackedBVH, packed_bvh, packet_f, trace_each, trace_packet
+from wsoft.scene.packets import PACKET, PackedBVH, packed_bvh, packet_f, trace_receiver_packet
 
 TRAVERSALS = ("auto", "packet", "ray")
 
@@ -160,11 +160,8 @@ def trace_visibility_packets(
                 dz[k] = d[2]
                 tm[k] = r[3] - off
                 mask = mask | (wp.uint32(1) << wp.uint32(k))
-        if each == 0:
-            live, each = trace_packet(mesh, pb, cut, has_cutouts, o, dx, dy, dz, tm, mask)
-            visible += popcount(live)
-        else:
-            visible += popcount(trace_each(mesh, cut, has_cutouts, o, dx, dy, dz, tm, mask))
+        live, each = trace_receiver_packet(mesh, pb, cut, has_cutouts, o, dx, dy, dz, tm, mask, each)
+        visible += popcount(live)
         first += PACKET
     v, e = visible_fraction(visible, samples)
     vis[i] = v
@@ -347,11 +344,7 @@ def trace_shadow_ray_packets(
             dz[k] = d[2]
             tm[k] = tmax[r]
             mask = mask | (wp.uint32(1) << wp.uint32(k))
-        live = wp.uint32(0)
-        if each == 0:
-            live, each = trace_packet(mesh, pb, cut, has_cutouts, o, dx, dy, dz, tm, mask)
-        else:
-            live = trace_each(mesh, cut, has_cutouts, o, dx, dy, dz, tm, mask)
+        live, each = trace_receiver_packet(mesh, pb, cut, has_cutouts, o, dx, dy, dz, tm, mask, each)
         for k in range(cnt):
             hit[j * per + first + k] = wp.where((live >> wp.uint32(k)) & wp.uint32(1) != wp.uint32(0), 0, 1)
         first += PACKET

@@ -530,3 +530,25 @@ def trace_each(
         if occluded(mesh, cut, has_cutouts, o, wp.vec3(dx[k], dy[k], dz[k]), tm[k]):
             live = live & ~(wp.uint32(1) << wp.uint32(k))
     return live
+
+
+@wp.func
+def trace_receiver_packet(
+    mesh: wp.uint64,
+    pb: PackedBVH,
+    cut: Surfaces,
+    has_cutouts: int,
+    o: wp.vec3,
+    dx: packet_f,
+    dy: packet_f,
+    dz: packet_f,
+    tm: packet_f,
+    mask: wp.uint32,
+    each: int,
+):
+    """One packet of a receiver's rays: through :func:`trace_packet` until one of the receiver's
+    packets has given up (``each`` = 1), then ray by ray (:func:`trace_each`). Returns (the bits
+    of the rays unblocked, ``each`` for the receiver's next packet)."""
+    if each != 0:
+        return trace_each(mesh, cut, has_cutouts, o, dx, dy, dz, tm, mask), 1
+    return trace_packet(mesh, pb, cut, has_cutouts, o, dx, dy, dz, tm, mask)
