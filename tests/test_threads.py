@@ -74,6 +74,7 @@ CASES = {
     "depth_min": [dict(persp=True, strategy="private"), dict(persp=False, strategy="private"), dict(persp=True, strategy="bands"),
                   dict(persp=True, strategy="private", conservative=True)],
     "gated_depth_min": [dict(persp=True, strategy="private", gate=True)],
+    "izb_test": [],  # the irregular z-buffer's light pass: tests/test_izb.py::test_one_and_eight_threads_agree
 }
 
 

@@ -6,9 +6,10 @@ Usage::
     python usd_scenes/generate.py [--out DIR] [--only NAME ...]
 
 NAME is one of: box_plane, contact, multi_light, cutout, city, penumbra_ramp,
-lightmapped_bridge, ogre, plants, dinosaurs, fig1_plant, fig8_tree, palm_dino
-(a file name with extension is accepted too).  The last six (organic
-paper-analog scenes: creatures, plants, trees) are built by ``organic.py``.
+lightmapped_bridge, tower, tunnel_fan, ogre, plants, dinosaurs, fig1_plant,
+fig8_tree, palm_dino (a file name with extension is accepted too).  The last
+six (organic paper-analog scenes: creatures, plants, trees) are built by
+``organic.py``.
 The default output folder is the folder holding this script.  Every run with
 the same arguments writes byte-identical files: all randomness uses fixed
 seeds and nothing time-dependent is written.
@@ -54,6 +55,41 @@ def box_mesh(lo: Sequence[float], hi: Sequence[float]) -> MeshData:
         (1, 3, 7, 5),  # +X
     ]
     return pts, [4] * 6, [i for f in faces for i in f]
+
+
+def frame_box_mesh(origin: Sequence[float], ex: Sequence[float], ey: Sequence[float],
+                   ez: Sequence[float]) -> MeshData:
+    """Parallelepiped origin + [0, 1] * ex + [0, 1] * ey + [0, 1] * ez as 6 quads (8 points).
+
+    It uses `box_mesh`'s point order and faces, so it is wound outward when
+    (ex, ey, ez) is right-handed (det > 0), as for the axis-aligned box.
+    """
+    o = np.asarray(origin, dtype=np.float64)
+    e = [np.asarray(v, dtype=np.float64) for v in (ex, ey, ez)]
+    if float(np.dot(np.cross(e[0], e[1]), e[2])) <= 0.0:
+        raise ValueError("frame_box_mesh: edges must be right-handed")
+    pts = np.empty((8, 3), dtype=np.float64)
+    for i in range(8):  # bit 0 -> ex, bit 1 -> ey, bit 2 -> ez
+        pts[i] = o + (i & 1) * e[0] + ((i >> 1) & 1) * e[1] + ((i >> 2) & 1) * e[2]
+    _, counts, idx = box_mesh((0.0, 0.0, 0.0), (1.0, 1.0, 1.0))
+    return pts, counts, idx
+
+
+def bar_mesh(p0: Sequence[float], p1: Sequence[float], thickness: float) -> MeshData:
+    """Thin closed box with a square thickness x thickness cross-section whose axis runs
+    from p0 to p1 (its end faces lie in the planes through p0 and p1).  8 points, 6 quads,
+    wound outward.  The cross-section is turned so that one side is horizontal (for a
+    nearly vertical bar: perpendicular to X)."""
+    p0 = np.asarray(p0, dtype=np.float64)
+    p1 = np.asarray(p1, dtype=np.float64)
+    d = p1 - p0
+    u = d / math.sqrt(float(np.dot(d, d)))
+    ref = np.array([1.0, 0.0, 0.0]) if abs(u[2]) > 0.9 else np.array([0.0, 0.0, 1.0])
+    a = np.cross(u, ref)
+    a /= math.sqrt(float(np.dot(a, a)))
+    b = np.cross(u, a)  # a x b = u: (a, b, d) is right-handed
+    t = float(thickness)
+    return frame_box_mesh(p0 - 0.5 * t * (a + b), t * a, t * b, d)
 
 
 def quad_mesh(corners: Sequence[Sequence[float]]) -> MeshData:
@@ -1038,6 +1074,237 @@ def scene_lightmapped_bridge(out_dir: str) -> Dict[str, object]:
     return {"file": path, "triangles": tris}
 
 
+# --- irregular z-buffer scenes (Galoppo, "Eye-View Pixel Anti-Aliasing for Irregular
+#     Shadow Mapping", figs. 1.6.4 and 1.6.11): hard shadows of thin geometry --------
+
+
+def point_light(stage: Usd.Stage, path: str, position: Sequence[float],
+                intensity: float) -> UsdLux.SphereLight:
+    """A SphereLight of radius 0 with treatAsPoint = true (hard shadows)."""
+    light = UsdLux.SphereLight.Define(stage, path)
+    light.CreateRadiusAttr(0.0)
+    light.CreateTreatAsPointAttr(True)
+    light.CreateIntensityAttr(float(intensity))
+    light.AddTranslateOp().Set(Gf.Vec3d(*map(float, position)))
+    return light
+
+
+TOWER_HEIGHT = 4.0
+TOWER_BASE_HALF = 0.8  # the legs stand on a 1.6 x 1.6 square
+TOWER_TOP_HALF = 0.25  # and meet the top ring on a 0.5 x 0.5 square
+TOWER_LEVELS = 10  # a ring every 0.4
+TOWER_APEX = 4.5  # the spire's tip
+TOWER_LEG_THICK = 0.035
+TOWER_RING_THICK = 0.025
+TOWER_BRACE_THICK = 0.02
+# crossarms: (ring level of the arm's bottom chords, |x| of the tip); the top chord starts
+# on the next ring up
+TOWER_ARMS = [(7, 1.5), (9, 1.2)]
+TOWER_ARM_CELLS = 4
+TOWER_LIGHT = (2.5, -2.0, 7.0)
+TOWER_GROUND_HALF = 8.0
+
+
+def tower_corner(k: int, z: float) -> np.ndarray:
+    """Point of leg k (counter-clockwise from (-, -)) at height z."""
+    sx, sy = [(-1, -1), (1, -1), (1, 1), (-1, 1)][k % 4]
+    h = TOWER_BASE_HALF + (TOWER_TOP_HALF - TOWER_BASE_HALF) * z / TOWER_HEIGHT
+    return np.array([sx * h, sy * h, z])
+
+
+def tower_parts() -> Dict[str, List[MeshData]]:
+    """Bars of the lattice tower by group: Legs, Rings, Braces, Arms."""
+    dz = TOWER_HEIGHT / TOWER_LEVELS
+    zs = [dz * i for i in range(TOWER_LEVELS + 1)]
+    legs: List[MeshData] = []
+    rings: List[MeshData] = []
+    braces: List[MeshData] = []
+    arms: List[MeshData] = []
+    for k in range(4):
+        for i in range(TOWER_LEVELS):  # one leg member per panel
+            legs.append(bar_mesh(tower_corner(k, zs[i]), tower_corner(k, zs[i + 1]),
+                                 TOWER_LEG_THICK))
+        legs.append(bar_mesh(tower_corner(k, TOWER_HEIGHT), (0.0, 0.0, TOWER_APEX),
+                             TOWER_LEG_THICK))  # spire
+    for i in range(1, TOWER_LEVELS + 1):
+        for k in range(4):  # horizontal ring
+            rings.append(bar_mesh(tower_corner(k, zs[i]), tower_corner(k + 1, zs[i]),
+                                  TOWER_RING_THICK))
+        for k in range(2):  # plan bracing across the ring
+            rings.append(bar_mesh(tower_corner(k, zs[i]), tower_corner(k + 2, zs[i]),
+                                  TOWER_BRACE_THICK))
+    for i in range(TOWER_LEVELS):
+        zm = 0.5 * (zs[i] + zs[i + 1])
+        for k in range(4):
+            # X-bracing of the face (k, k + 1) between two rings, and a secondary
+            # horizontal through the middle of the panel
+            braces.append(bar_mesh(tower_corner(k, zs[i]), tower_corner(k + 1, zs[i + 1]),
+                                   TOWER_BRACE_THICK))
+            braces.append(bar_mesh(tower_corner(k + 1, zs[i]), tower_corner(k, zs[i + 1]),
+                                   TOWER_BRACE_THICK))
+            rings.append(bar_mesh(tower_corner(k, zm), tower_corner(k + 1, zm),
+                                  TOWER_BRACE_THICK))
+    n = TOWER_ARM_CELLS
+    for level, reach in TOWER_ARMS:
+        z0, z1 = zs[level], zs[level + 1]
+        for side in (1, -1):  # +X arm from the face of legs 1, 2; -X from legs 3, 0
+            b1 = tower_corner(1 if side > 0 else 3, z0)
+            b2 = tower_corner(2 if side > 0 else 0, z0)
+            top = np.array([side * tower_corner(1, z1)[0], 0.0, z1])
+            tip = np.array([side * reach, 0.0, z0])
+
+            def at(p: np.ndarray, j: int) -> np.ndarray:
+                return p + (tip - p) * (j / n)
+
+            for p in (b1, b2, top):  # three chords
+                arms.append(bar_mesh(p, tip, TOWER_RING_THICK))
+            for j in range(1, n):  # web: cross bar and two diagonals to the top chord
+                arms.append(bar_mesh(at(b1, j), at(b2, j), TOWER_BRACE_THICK))
+                arms.append(bar_mesh(at(b1, j), at(top, j), TOWER_BRACE_THICK))
+                arms.append(bar_mesh(at(b2, j), at(top, j), TOWER_BRACE_THICK))
+            for j in range(n - 1):  # zig-zag in the bottom plane
+                arms.append(bar_mesh(at(b1, j), at(b2, j + 1), TOWER_BRACE_THICK))
+    return {"Legs": legs, "Rings": rings, "Braces": braces, "Arms": arms}
+
+
+def scene_tower(out_dir: str) -> Dict[str, object]:
+    path = os.path.join(out_dir, "tower.usda")
+    stage = new_stage(path, "Z")
+    world = stage.GetPrimAtPath("/World")
+    g = TOWER_GROUND_HALF
+    ground = quad_mesh([(-g, -g, 0), (g, -g, 0), (g, g, 0), (-g, g, 0)])
+    make_mesh(stage, "/World/Ground", ground, False,
+              make_material(stage, "/World/Looks/GroundMat", (0.8, 0.8, 0.78)))
+    tris = triangle_count(ground[1])
+
+    steel = make_material(stage, "/World/Looks/SteelMat", (0.45, 0.47, 0.5), roughness=0.5)
+    stage.DefinePrim("/World/Tower", "Xform")
+    counts = {}
+    for name, bars in tower_parts().items():
+        m = merge_meshes(bars)  # bars overlap at the joints; each is closed on its own
+        check_closed(m, "Tower/" + name)
+        make_mesh(stage, "/World/Tower/" + name, m, False, steel)
+        counts[name] = len(bars)
+        tris += triangle_count(m[1])
+
+    point_light(stage, "/World/Light", TOWER_LIGHT, 60.0)
+    set_doc_string(world, "wsoft:doc", (
+        "Lattice tower for irregular z-buffer (Galoppo, 'Eye-View Pixel Anti-Aliasing for "
+        "Irregular Shadow Mapping', fig. 1.6.4): high-frequency hard shadows of thin bars on "
+        "the ground. Four slightly inclined legs rise from a 1.6 x 1.6 square at z = 0 to a "
+        "0.5 x 0.5 square at z = 4, with a spire to (0, 0, 4.5). Rings every 0.4 with plan "
+        "bracing, X-braces and a middle horizontal on every face panel, and two levels of "
+        "truss crossarms (z = 2.8 to |x| = 1.5, z = 3.6 to |x| = 1.2). Every bar is a closed "
+        "box of square cross-section (legs 0.035, rings and chords 0.025, braces 0.02), merged "
+        "per group into /World/Tower/{Legs, Rings, Braces, Arms} (%d, %d, %d, %d bars). The "
+        "light /World/Light is a point light (SphereLight, radius 0, treatAsPoint) at "
+        "(%g, %g, %g); the shadow falls on the single-sided 16 x 16 ground toward -x, +y."
+        % ((counts["Legs"], counts["Rings"], counts["Braces"], counts["Arms"]) + TOWER_LIGHT)))
+
+    # raised 3/4 view from the side of the shadow, which runs from the base toward (-5, 3.5)
+    make_camera(stage, (-7.5, -1.5, 6.5), (-1.5, 1.5, 0.9), (0.0, 0.0, 1.0), clip=(0.1, 100.0))
+    stage.GetRootLayer().Save()
+    return {"file": path, "triangles": tris}
+
+
+TUNNEL_LENGTH = 12.0
+TUNNEL_HALF = 1.0  # square cross-section y in [-1, 1], z in [0, 2]; axis at y = 0, z = 1
+TUNNEL_CELL = 0.25  # grid spacing of the walls
+FAN_X = 11.8  # plane of the blades' centres, inside the open end
+FAN_BLADES = 6
+FAN_BLADE = (0.08, 0.98, 0.06, 0.25, 0.02)  # root and tip radius, root and tip width, thickness
+FAN_PITCH = 25.0  # degrees: each blade is turned about its own radial axis
+FAN_PHASE = 15.0  # degrees: angle of blade 0 from +Y
+FAN_HUB = (0.1, 0.2, 12)  # radius, length along X, sides
+TUNNEL_LIGHT = (13.5, 0.0, 1.0)
+
+
+def fan_blade(k: int) -> MeshData:
+    """Blade k: a thin closed tapered box along its radial axis in the plane x = FAN_X, from
+    the root to the tip radius, its width growing linearly from the root to the tip, with its
+    chord turned by FAN_PITCH about the radial axis out of that plane (8 points, 6 quads)."""
+    r0, r1, w0, w1, t = FAN_BLADE
+    th = math.radians(FAN_PHASE + 360.0 * k / FAN_BLADES)
+    p = math.radians(FAN_PITCH)
+    e_x = np.array([1.0, 0.0, 0.0])
+    e_r = np.array([0.0, math.cos(th), math.sin(th)])
+    e_t = np.array([0.0, -math.sin(th), math.cos(th)])  # e_r x e_t = e_x
+    chord = math.cos(p) * e_t + math.sin(p) * e_x
+    normal = -math.sin(p) * e_t + math.cos(p) * e_x  # (chord, normal, e_r) right-handed
+    hub = np.array([FAN_X, 0.0, TUNNEL_HALF])
+    pts = np.empty((8, 3), dtype=np.float64)
+    for i in range(8):  # box_mesh's order: bit 0 -> chord, bit 1 -> normal, bit 2 -> radius
+        r, w = (r1, w1) if i & 4 else (r0, w0)
+        pts[i] = (hub + r * e_r + (0.5 * w if i & 1 else -0.5 * w) * chord
+                  + (0.5 * t if i & 2 else -0.5 * t) * normal)
+    _, counts, idx = box_mesh((0.0, 0.0, 0.0), (1.0, 1.0, 1.0))
+    return pts, counts, idx
+
+
+def scene_tunnel_fan(out_dir: str) -> Dict[str, object]:
+    path = os.path.join(out_dir, "tunnel_fan.usda")
+    stage = new_stage(path, "Z")
+    world = stage.GetPrimAtPath("/World")
+    L, h = TUNNEL_LENGTH, TUNNEL_HALF
+    nl, nw = int(round(L / TUNNEL_CELL)), int(round(2 * h / TUNNEL_CELL))
+    tris = 0
+
+    # Single-sided surfaces, wound so that their normals face into the tunnel.
+    stage.DefinePrim("/World/Tunnel", "Xform")
+    floor_mat = make_material(stage, "/World/Looks/FloorMat", (0.75, 0.73, 0.7))
+    wall_mat = make_material(stage, "/World/Looks/WallMat", (0.7, 0.72, 0.78))
+    surfaces = [
+        ("Floor", grid_quad_mesh((0, -h, 0), (L, 0, 0), (0, 2 * h, 0), nl, nw), floor_mat),
+        ("Ceiling", grid_quad_mesh((0, h, 2 * h), (L, 0, 0), (0, -2 * h, 0), nl, nw), wall_mat),
+        ("WallRight", grid_quad_mesh((0, -h, 0), (0, 0, 2 * h), (L, 0, 0), nw, nl), wall_mat),
+        ("WallLeft", grid_quad_mesh((0, h, 0), (L, 0, 0), (0, 0, 2 * h), nl, nw), wall_mat),
+    ]
+    inward = {"Floor": (0, 0, 1), "Ceiling": (0, 0, -1),
+              "WallRight": (0, 1, 0), "WallLeft": (0, -1, 0)}
+    for name, m, mat in surfaces:
+        if not np.allclose(face_normals(m), inward[name]):
+            raise RuntimeError("Tunnel/%s: normals do not face into the tunnel" % name)
+        make_mesh(stage, "/World/Tunnel/" + name, m, False, mat)
+        tris += triangle_count(m[1])
+
+    stage.DefinePrim("/World/Fan", "Xform")
+    fan_mat = make_material(stage, "/World/Looks/FanMat", (0.25, 0.3, 0.35), roughness=0.4)
+    hr, hl, hn = FAN_HUB
+    hub = prism_z(hn, hr, -0.5 * hl, 0.5 * hl)
+    # (x, y, z) -> (z, x, y) is a rotation (a cyclic permutation): the prism's axis becomes X
+    hub = translate_mesh((hub[0][:, [2, 0, 1]], hub[1], hub[2]), (FAN_X, 0.0, h))
+    check_closed(hub, "Fan/Hub")
+    make_mesh(stage, "/World/Fan/Hub", hub, False, fan_mat)
+    tris += triangle_count(hub[1])
+    blades = merge_meshes([fan_blade(k) for k in range(FAN_BLADES)])
+    check_closed(blades, "Fan/Blades")
+    make_mesh(stage, "/World/Fan/Blades", blades, False, fan_mat)
+    tris += triangle_count(blades[1])
+
+    point_light(stage, "/World/Light", TUNNEL_LIGHT, 60.0)
+    r0, r1, w0, w1, t = FAN_BLADE
+    set_doc_string(world, "wsoft:doc", (
+        "Fan at the end of a tunnel, for irregular z-buffer (Galoppo, 'Eye-View Pixel "
+        "Anti-Aliasing for Irregular Shadow Mapping', fig. 1.6.11): the walls are nearly "
+        "parallel to both the eye and the light directions, the hard case for shadow maps. "
+        "The tunnel runs along +X from x = 0 to %g with a square cross-section y in [-%g, %g], "
+        "z in [0, %g], open at both ends: single-sided floor, ceiling and walls "
+        "(/World/Tunnel/*, grids of %g x %g quads) whose normals face inward. The fan "
+        "(/World/Fan) in the plane x = %g on the axis (y = 0, z = %g): a %d-sided hub "
+        "(radius %g, length %g along X) and %d closed tapered blades (radius %g to %g, width "
+        "%g at the root to %g at the tip, thickness %g, pitched %g deg about their radial "
+        "axes; the tapering keeps lit gaps between the blades' shadows near the hub). The "
+        "light /World/Light is a point light (SphereLight, radius 0, treatAsPoint) at (%g, %g, %g), just beyond the "
+        "fan on the axis, so the blades' shadows stream along the inside walls at grazing "
+        "angles toward the camera near x = 0.5."
+        % ((L, h, h, 2 * h, TUNNEL_CELL, TUNNEL_CELL, FAN_X, h, hn, hr, hl, FAN_BLADES, r0, r1,
+            w0, w1, t, FAN_PITCH) + TUNNEL_LIGHT)))
+
+    make_camera(stage, (0.5, 0.3, 1.25), (12.0, -0.15, 0.9), (0.0, 0.0, 1.0), clip=(0.05, 100.0))
+    stage.GetRootLayer().Save()
+    return {"file": path, "triangles": tris}
+
+
 SCENES: Dict[str, Callable[[str], Dict[str, object]]] = {
     "box_plane": scene_box_plane,
     "contact": scene_contact,
@@ -1046,6 +1313,8 @@ SCENES: Dict[str, Callable[[str], Dict[str, object]]] = {
     "city": scene_city,
     "penumbra_ramp": scene_penumbra_ramp,
     "lightmapped_bridge": scene_lightmapped_bridge,
+    "tower": scene_tower,
+    "tunnel_fan": scene_tunnel_fan,
 }
 
 

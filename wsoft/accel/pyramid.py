@@ -102,6 +102,67 @@ def build_minmax_pyramid(depth: wp.array, device: str, *, skip_empty: bool) -> t
     return pyr, offs
 
 
+@wp.kernel
+def moments_base(
+    offset: int,
+    depth: wp.array2d[float],
+    near: float,
+    far: float,
+    # outputs
+    pyr: wp.array[wp.vec2],
+):
+    i = wp.tid() + offset
+    n = depth.shape[1]
+    y = i // n
+    x = i - y * n
+    d = depth[y, x]
+    t = float(1.0)  # empty: nothing between the light and anything mapped (the far end of the range)
+    if d < DEPTH_CLEAR:
+        t = wp.clamp((d - near) / (far - near), 0.0, 1.0)
+    pyr[i] = wp.vec2(t, t * t)
+
+
+@wp.kernel
+def moments_level(
+    offset: int,
+    src_off: int,
+    dst_off: int,
+    n: int,
+    # outputs
+    pyr: wp.array[wp.vec2],
+):
+    """Level of ``n`` per side: the mean of the 2 x 2 texels below (the moments of their union)."""
+    i = wp.tid() + offset
+    y = i // n
+    x = i - y * n
+    m = 2 * n
+    a = pyr[src_off + (2 * y) * m + 2 * x]
+    b = pyr[src_off + (2 * y) * m + 2 * x + 1]
+    c = pyr[src_off + (2 * y + 1) * m + 2 * x]
+    d = pyr[src_off + (2 * y + 1) * m + 2 * x + 1]
+    pyr[dst_off + i] = (a + b + c + d) * 0.25
+
+
+def build_moments_pyramid(depth: wp.array, near: float, far: float, device: str) -> tuple[wp.array, np.ndarray]:
+    """The mip chain of a variance shadow map: per texel the first two moments (E[x], E[x^2]) of the
+    depth normalised to ``[near, far]`` (empty texels at 1), each level the mean of the 2 x 2 below,
+    so a texel of level k holds the moments of the depths of its 2^k x 2^k base texels exactly.
+    Returns (flat vec2 levels, offsets) in the layout of :func:`build_minmax_pyramid`."""
+    n = depth.shape[1]
+    if depth.shape[0] != n:
+        raise ValueError("the map must be square")
+    log2_exact(n)
+    offs = level_offsets(n)
+    pyr = wp.empty(int(offs[-1]), dtype=wp.vec2, device=device)
+    launch_chunked(moments_base, n * n, inputs=[depth, float(near), float(far if far > near else near + 1.0)], outputs=[pyr], device=device)
+    k, m = 0, n // 2
+    while m >= 1:
+        launch_chunked(moments_level, m * m, inputs=[int(offs[k]), int(offs[k + 1]), m], outputs=[pyr], device=device)
+        k += 1
+        m //= 2
+    return pyr, offs
+
+
 def minmax_range(depth: wp.array, device: str) -> tuple[float, float]:
     """(z_min, z_max) of the covered texels of a square depth map from its pyramid's top;
     ``(inf, -inf)`` for an empty map."""

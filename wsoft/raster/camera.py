@@ -42,3 +42,30 @@ def fit_aspect(cam: Camera, width: int, height: int) -> Camera:
 
     th = cam.tan_half[0]
     return replace(cam, tan_half=(th, th * height / width))
+
+
+# --------------------------------------------------------------------------- sub-pixel sample patterns
+
+SUBPIXEL_PATTERNS = ("rotated_grid", "jittered")
+ROTATED_GRID_4 = ((0.375, 0.125), (0.875, 0.375), (0.125, 0.625), (0.625, 0.875))  # RGSS 4x: one sample per row and column of a 4x4 grid
+
+
+def subpixel_pattern(n: int, kind: str, seed: int = 0) -> np.ndarray:
+    """``n`` sample offsets inside a pixel, ``[n, 2]`` float32 in ``[0, 1)^2`` ((0, 0) the pixel's
+    top-left corner), the same for every pixel.
+
+    ``rotated_grid``: the 4x rotated-grid pattern (``n = 4`` only); ``jittered``: one uniform point
+    per cell of an ``a x b`` grid with ``a b = n`` and ``a`` the largest divisor of ``n`` not above
+    its square root (2 x 4 for 8, 4 x 4 for 16), from a fixed seed."""
+    if kind == "rotated_grid":
+        if n != 4:
+            raise ValueError(f"the rotated grid has 4 samples, not {n}")
+        return np.asarray(ROTATED_GRID_4, np.float32)
+    if kind != "jittered":
+        raise ValueError(f"sub-pixel pattern {kind!r} is not one of {', '.join(SUBPIXEL_PATTERNS)}")
+    a = max(d for d in range(1, int(np.sqrt(n)) + 1) if n % d == 0)
+    b = n // a
+    rng = np.random.default_rng(seed)
+    cells = np.array([(i % b, i // b) for i in range(n)], np.float64)
+    pts = (cells + rng.random((n, 2))) / np.array([b, a], np.float64)
+    return np.minimum(pts, np.nextafter(1.0, 0.0)).astype(np.float32)

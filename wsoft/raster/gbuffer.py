@@ -37,37 +37,12 @@ def radical_inverse2(i: int) -> float:
     return r
 
 
-@wp.kernel
-def trace_gbuffer(
-    offset: int,
-    mesh: wp.uint64,
-    cut: Surfaces,
-    has_cutouts: int,
-    cam: CameraGPU,
-    width: int,
-    height: int,
-    spp: int,
-    # outputs
-    pos: wp.array[wp.vec3],
-    nrm: wp.array[wp.vec3],
-    dist: wp.array[float],
-    prim: wp.array[wp.int32],
-    uv: wp.array[wp.vec2],
-    bary: wp.array[wp.vec2],
-):
-    idx = wp.tid() + offset
-    npix = width * height
-    s = idx // npix
-    pix = idx - s * npix
-    row = pix // width
-    col = pix - row * width
-    sx = float(0.5)
-    sy = float(0.5)
-    if spp > 1:
-        sx = (float(s) + 0.5) / float(spp)
-        sy = wp.mod(radical_inverse2(s) + 0.5 / float(spp), 1.0)
-    ndc_x = (float(col) + sx) / float(width) * 2.0 - 1.0
-    ndc_y = 1.0 - (float(row) + sy) / float(height) * 2.0
+@wp.func
+def camera_ray(cam: CameraGPU, width: int, height: int, fx: float, fy: float):
+    """The camera ray through image point (``fx``, ``fy``) (pixel units, (0, 0) the top-left corner
+    of the image): (origin, unit direction, distance to the near plane, to the far plane)."""
+    ndc_x = fx / float(width) * 2.0 - 1.0
+    ndc_y = 1.0 - fy / float(height) * 2.0
     wx = ndc_x * cam.tan_half[0] + cam.offset[0]
     wy = ndc_y * cam.tan_half[1] + cam.offset[1]
     o = cam.origin
@@ -79,6 +54,15 @@ def trace_gbuffer(
         d = -cam.az
         t0 = cam.near
         t1 = cam.far
+    return o, d, t0, t1
+
+
+@wp.func
+def cast_primary(mesh: wp.uint64, cut: Surfaces, has_cutouts: int, cam: CameraGPU, width: int, height: int, fx: float, fy: float):
+    """The camera ray through image point (``fx``, ``fy``) (:func:`camera_ray`) against the scene:
+    (found 0/1, world point, viewer-facing normal, triangle, u, v, camera distance). Alpha-tested
+    through cutouts; back faces of single-sided meshes skipped."""
+    o, d, t0, t1 = camera_ray(cam, width, height, fx, fy)
     start = o + d * t0
     remaining = t1 - t0
     travelled = t0
@@ -108,13 +92,50 @@ def trace_gbuffer(
                     start = start + d * step
                     travelled += step
                     remaining -= step
+    p = o + d * travelled
+    if wp.dot(n, d) > 0.0:
+        n = -n
+    return found, p, n, face, bu, bv, wp.length(p - o)
+
+
+@wp.func
+def pixel_sample_offset(s: int, spp: int) -> wp.vec2:
+    """Where the ``s``-th of ``spp`` G-buffer samples lies in its pixel ([0, 1)^2; the centre for one)."""
+    if spp > 1:
+        return wp.vec2((float(s) + 0.5) / float(spp), wp.mod(radical_inverse2(s) + 0.5 / float(spp), 1.0))
+    return wp.vec2(0.5, 0.5)
+
+
+@wp.kernel
+def trace_gbuffer(
+    offset: int,
+    mesh: wp.uint64,
+    cut: Surfaces,
+    has_cutouts: int,
+    cam: CameraGPU,
+    width: int,
+    height: int,
+    spp: int,
+    # outputs
+    pos: wp.array[wp.vec3],
+    nrm: wp.array[wp.vec3],
+    dist: wp.array[float],
+    prim: wp.array[wp.int32],
+    uv: wp.array[wp.vec2],
+    bary: wp.array[wp.vec2],
+):
+    idx = wp.tid() + offset
+    npix = width * height
+    s = idx // npix
+    pix = idx - s * npix
+    row = pix // width
+    col = pix - row * width
+    so = pixel_sample_offset(s, spp)
+    found, p, n, face, bu, bv, d = cast_primary(mesh, cut, has_cutouts, cam, width, height, float(col) + so[0], float(row) + so[1])
     if found == 1:
-        p = o + d * travelled
-        if wp.dot(n, d) > 0.0:
-            n = -n
         pos[idx] = p
         nrm[idx] = n
-        dist[idx] = wp.length(p - o)
+        dist[idx] = d
         prim[idx] = face
         uv[idx] = cut.tri_uv[3 * face] * bu + cut.tri_uv[3 * face + 1] * bv + cut.tri_uv[3 * face + 2] * (1.0 - bu - bv)
         bary[idx] = wp.vec2(bu, bv)

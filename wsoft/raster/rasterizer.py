@@ -14,8 +14,10 @@ warp.fem builds its kernels): nothing unused is compiled in.
   :func:`gated_depth_min` (Salzman's inverted depth test: only surfaces behind a gate map) are
   the two fragments here; an irregular z-buffer tests the eye samples of a cell, a shadow
   volume ORs bits into a pixel's mask.
-* **conservative** — every texel a triangle touches, with the nearest depth over the texel
-  (clamped to the triangle's range), instead of the texel centres it covers.
+* **conservative** — every texel a triangle touches (and those within
+  :data:`CONSERVATIVE_MARGIN` of a texel's edge, so that rounding never drops one), with the
+  nearest depth over the texel (clamped to the triangle's range), instead of the texel centres it
+  covers.
 * **alpha** — triangles with a cutout material are alpha-tested per texel (perspective-correct
   uv at the texel centre).
 
@@ -50,6 +52,7 @@ from wsoft.scene.device import DeviceScene, Surfaces, surface_present, view_surf
 GPU_BAND_ROWS = 64  # CUDA: rows per band (one thread per triangle and band)
 SMALL_BOX_TEXELS = wp.constant(8)  # triangles whose texel box is this small take the flat loop
 CPU_CHUNK = 32768  # CPU: triangles per launch; a worker's chunks are interleaved with the others'
+CONSERVATIVE_MARGIN = wp.constant(1.0e-3)  # texels: conservative coverage reaches this far past a texel, against rounding
 BIG_TRIANGLE_TEXELS = 4096  # CPU: triangles with a larger texel bounding box go to the banded pass
 PRIVATE_BUDGET = 1 << 30  # CPU: bytes allowed for per-worker private targets
 PERSPECTIVE = "perspective"
@@ -255,10 +258,10 @@ def _make_raster_triangle(persp: bool, spec: FragmentSpec, conservative: bool, a
         y0 = int(0)
         y1 = int(0)
         if wp.static(conservative):
-            x0 = int(wp.floor(xmin))
-            x1 = int(wp.floor(xmax))
-            y0 = int(wp.floor(ymin))
-            y1 = int(wp.floor(ymax))
+            x0 = int(wp.floor(xmin - CONSERVATIVE_MARGIN))
+            x1 = int(wp.floor(xmax + CONSERVATIVE_MARGIN))
+            y0 = int(wp.floor(ymin - CONSERVATIVE_MARGIN))
+            y1 = int(wp.floor(ymax + CONSERVATIVE_MARGIN))
         else:
             x0 = int(wp.ceil(xmin - 0.5))
             x1 = int(wp.floor(xmax - 0.5))
@@ -300,9 +303,9 @@ def _make_raster_triangle(persp: bool, spec: FragmentSpec, conservative: bool, a
         if wp.static(conservative):
             qmin = wp.min(qa, wp.min(qb, qc))
             qmax = wp.max(qa, wp.max(qb, qc))
-            hx0 = 0.5 * (wp.abs(g0x) + wp.abs(g0y))
-            hx1 = 0.5 * (wp.abs(g1x) + wp.abs(g1y))
-            hx2 = 0.5 * (wp.abs(g2x) + wp.abs(g2y))
+            hx0 = (0.5 + CONSERVATIVE_MARGIN) * (wp.abs(g0x) + wp.abs(g0y))
+            hx1 = (0.5 + CONSERVATIVE_MARGIN) * (wp.abs(g1x) + wp.abs(g1y))
+            hx2 = (0.5 + CONSERVATIVE_MARGIN) * (wp.abs(g2x) + wp.abs(g2y))
         nx = x1 - x0 + 1
         if wp.static(not conservative):
             if alpha_on == 0 and nx * (yb1 - yb0 + 1) <= SMALL_BOX_TEXELS:

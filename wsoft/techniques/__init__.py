@@ -25,6 +25,7 @@ _REGISTRY = {
     "essm": ("wsoft.techniques.essm", "ESSM"),
     "vssm": ("wsoft.techniques.vssm", "VSSM"),
     "ssm": ("wsoft.techniques.ssm", "SSM"),
+    "izb": ("wsoft.techniques.izb", "IZB"),
 }
 NAMES: tuple[str, ...] = tuple(_REGISTRY)
 _TECHNIQUES: dict[str, type[Technique]] | None = None

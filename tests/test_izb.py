@@ -1,0 +1,225 @@
+"""``izb``: the irregular z-buffer's grid, its conservative light pass, exactness against a brute
+force over every triangle, the shadow-edge stencil and the anti-aliasing modes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import warp as wp
+
+import wsoft
+from wsoft.accel.izb_grid import build_grid, no_cull
+from wsoft.errors import ParameterError
+from wsoft.lightspace.view import LightView
+from wsoft.raster.camera import subpixel_pattern
+from wsoft.render import build_graph, execute
+from wsoft.scene.device import Surfaces, surface_present
+from wsoft.scene.packets import ray_triangle
+
+
+def _ortho_view(size: int) -> LightView:
+    return LightView(light_path="/L", persp=False, origin=np.zeros(3), axes=np.eye(3), window=(0.0, 1.0, 0.0, 1.0),
+                     near=-10.0, far=10.0, width=size, height=size)
+
+
+def test_grid_lists_every_sample_once_in_its_cell(monkeypatch):
+    """Grid build against a brute force on random points, with many worker threads."""
+    import wsoft.parallel as par
+
+    monkeypatch.setattr(par, "cpu_threads", lambda: 7)
+    rng = np.random.default_rng(3)
+    n, size = 20000, 256
+    pts = rng.random((n, 3)).astype(np.float32) * np.float32(1.2) - np.float32(0.1)  # some outside the view
+    pts[::7, :2] = np.floor(pts[::7, :2] * size) / size  # exactly on cell corners
+    insert = (rng.random(n) < 0.9).astype(np.int32)
+    dev = "cpu"
+    origin = wp.array(pts, dtype=wp.vec3, device=dev)
+    zeros = wp.zeros(n, dtype=wp.vec3, device=dev)
+    tmax = wp.zeros(n, dtype=float, device=dev)
+    tri = wp.zeros(3, dtype=wp.vec3, device=dev)
+    idx = wp.array([0, 1, 2], dtype=wp.int32, device=dev)
+    g = build_grid(_ortho_view(size), origin, zeros, tmax, wp.array(insert, dtype=wp.int32, device=dev), tri, idx,
+                   Surfaces(), 0, dev)
+    start, end = g.target.start.numpy(), g.target.end.numpy()
+    rank = g.rank.numpy()
+    order = np.full(g.inserted, -1)
+    for i in np.flatnonzero(rank >= 0):
+        order[rank[i]] = i
+    seen = np.zeros(n, int)
+    for y, x in zip(*np.nonzero(end > start)):
+        for k in range(start[y, x], end[y, x]):
+            i = order[k]
+            seen[i] += 1
+            assert int(np.floor(pts[i, 0] * size)) == x and int(np.floor(pts[i, 1] * size)) == y
+    cx, cy = np.floor(pts[:, 0] * size), np.floor(pts[:, 1] * size)
+    inside = (cx >= 0) & (cy >= 0) & (cx < size) & (cy < size)
+    expected = (insert != 0) & inside
+    assert np.array_equal(seen, expected.astype(int))  # every inserted sample in exactly one list; lists complete
+    assert g.inserted == expected.sum() and g.outside == ((insert != 0) & ~inside).sum()
+    assert np.array_equal(np.sort(g.list_lengths), np.sort((end - start)[end > start]))
+
+
+@wp.kernel
+def _brute_force(
+    origin: wp.array[wp.vec3], dir: wp.array[wp.vec3], tmax: wp.array[float], state: wp.array[wp.int32],
+    points: wp.array[wp.vec3], indices: wp.array[wp.int32], cut: Surfaces, has_cutouts: int,
+    blocked: wp.array[wp.int32],
+):
+    i = wp.tid()
+    blocked[i] = 0
+    if state[i] != 1:
+        return
+    for t in range(indices.shape[0] // 3):
+        h = ray_triangle(origin[i], dir[i], points[indices[3 * t]], points[indices[3 * t + 1]], points[indices[3 * t + 2]])
+        if h[0] != 0.0 and h[1] >= 0.0 and h[1] < tmax[i]:
+            if has_cutouts == 0 or surface_present(cut, t, h[2], h[3], 1.0 - h[2] - h[3]):
+                blocked[i] = 1
+
+
+def _izb_resources(scene, params, w=96, h=72):
+    b = build_graph(scene, "izb", width=w, height=h, device="cpu", params=params)
+    extra = [k for p in b.ctx.graph.passes.values() for k in p.outputs]
+    res, _, _ = execute(b, "cpu", extra=extra)
+    get = lambda prefix: next(v for k, v in res.items() if str(k).startswith(prefix))  # noqa: E731
+    return res, get, b
+
+
+@pytest.mark.parametrize("scene_name", ["box_plane", "cutout", "tower"])
+@pytest.mark.parametrize("aa", ["none", "supersample"])
+def test_every_sample_equals_a_brute_force_trace(scene_name, aa):
+    """Each sample's answer equals its ray tested against every triangle of the scene (Warp's
+    ray-triangle test, alpha-tested at the hit), bit for bit, edges included."""
+    from wsoft.bench.harness import load
+
+    scene = load(scene_name)
+    res, get, _ = _izb_resources(scene, {"aa": aa, "grid_size": 256})
+    smp, grid, ds = get("izb_samples"), get("izb_grid"), get("scene")
+    n = smp["origin"].shape[0]
+    brute = wp.empty(n, dtype=wp.int32, device="cpu")
+    wp.launch(_brute_force, dim=n, inputs=[smp["origin"], smp["dir"], smp["tmax"], smp["state"], ds.points, ds.indices,
+                                           ds.cutouts, int(ds.has_cutouts)], outputs=[brute], device="cpu")
+    state, rank, ins = smp["state"].numpy(), grid.rank.numpy(), smp["insert"].numpy()
+    blocked = get("izb_blocked").numpy()
+    tested = (state == 1) & (ins != 0)
+    got = np.where(rank >= 0, blocked[np.maximum(rank, 0)], 0)
+    b = brute.numpy()
+    assert tested.sum() > 1000 and b[tested].sum() > 50  # shadowed and lit samples both
+    assert grid.outside == 0
+    assert np.array_equal(got[tested], b[tested])
+
+
+def test_conservative_light_pass_reaches_every_cell_a_triangle_touches():
+    """Dense points on a triangle, each its own sample: every one is listed in a cell the triangle's
+    conservative footprint reaches (the fragment counts the cells it visits)."""
+    from wsoft.accel.izb_grid import izb_test
+    from wsoft.bench.harness import load
+    from wsoft.raster.rasterizer import make_rasterizer
+    from wsoft.scene.device import upload_scene
+
+    size = 64
+    view = _ortho_view(size)
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        tri = (rng.random((3, 3)) * np.array([0.6, 0.6, 0.0]) + np.array([0.2, 0.2, 1.0])).astype(np.float32)
+        if rng.random() < 0.3:
+            tri[2] = tri[0] + (tri[1] - tri[0]) * 0.5 + np.float32(1e-3)  # a sliver
+        u = rng.random((4000, 2))
+        u = np.where(u.sum(1, keepdims=True) > 1, 1 - u, u)
+        pts = (tri[0] + u[:, :1] * (tri[1] - tri[0]) + u[:, 1:] * (tri[2] - tri[0])).astype(np.float32)
+        pts[:, 2] = 2.0  # behind the triangle (deeper), so every cell holding a point is tested
+        dev = "cpu"
+        P = wp.array(tri, dtype=wp.vec3, device=dev)
+        I = wp.array([0, 1, 2], dtype=wp.int32, device=dev)
+        n = len(pts)
+        ds, _ = load("box_plane").device_copy(dev, upload_scene)
+        cut = no_cull(ds.cutouts, 1, dev)
+        dirs = wp.array(np.tile([0, 0, -1], (n, 1)).astype(np.float32), dtype=wp.vec3, device=dev)
+        g = build_grid(view, wp.array(pts, dtype=wp.vec3, device=dev), dirs, wp.full(n, 10.0, dtype=float, device=dev),
+                       wp.ones(n, dtype=wp.int32, device=dev), P, I, cut, 0, dev)
+        make_rasterizer(view, izb_test, conservative=True).run(P, I, cut, view, g.target, dev, initialized=False)
+        occupied = g.target.end.numpy() > g.target.start.numpy()
+        pairs = g.target.pairs.numpy()
+        assert np.all(pairs[occupied] == 1), "a cell holding a point of the triangle was not reached"
+        assert g.target.blocked.numpy()[: g.inserted].sum() == g.inserted  # the points' rays all hit it
+
+
+def test_adaptive_equals_supersample_on_flagged_pixels_and_none_elsewhere():
+    from wsoft.bench.harness import load
+
+    scene = load("tower")
+    kw = {"width": 96, "height": 72, "device": "cpu"}
+    ad = wsoft.render(scene, "izb", aa="adaptive", **kw)
+    ss = wsoft.render(scene, "izb", aa="supersample", **kw)
+    no = wsoft.render(scene, "izb", aa="none", **kw)
+    res, get, _ = _izb_resources(scene, {"aa": "adaptive"})
+    flagged = get("izb_stencil").numpy().reshape(72, 96).astype(bool)
+    assert 0 < flagged.mean() < 0.6
+    assert np.array_equal(ad.V[flagged], ss.V[flagged])
+    assert np.array_equal(ad.V[~flagged], no.V[~flagged])
+
+
+def test_stencil_flags_every_pixel_whose_sub_samples_disagree():
+    """On ``tower`` every pixel whose 4 rotated-grid samples disagree (supersampled V strictly
+    between 0 and 1) is a potential edge of the conservative stencil at a 0.1% threshold. (At the
+    paper's 1% it misses some: measured in reports/izb.md; issue 12 stays open on it.)"""
+    from wsoft.bench.harness import load
+
+    scene = load("tower")
+    ss = wsoft.render(scene, "izb", aa="supersample", width=96, height=72, device="cpu")
+    _, get, _ = _izb_resources(scene, {"aa": "adaptive", "edge_threshold": 0.001})
+    flagged = get("izb_stencil").numpy().reshape(72, 96).astype(bool)
+    aliased = (ss.V > 0) & (ss.V < 1)
+    assert aliased.sum() > 20
+    assert not np.any(aliased & ~flagged), f"{int((aliased & ~flagged).sum())} of {int(aliased.sum())} aliased pixels missed"
+
+
+def test_subpixel_patterns():
+    rg = subpixel_pattern(4, "rotated_grid")
+    assert sorted(np.round(rg[:, 0] * 8)) == [1, 3, 5, 7] and sorted(np.round(rg[:, 1] * 8)) == [1, 3, 5, 7]
+    for n in (8, 16):
+        p = subpixel_pattern(n, "jittered", 1)
+        assert p.shape == (n, 2) and np.all((p >= 0) & (p < 1))
+        assert np.array_equal(p, subpixel_pattern(n, "jittered", 1))
+    with pytest.raises(ValueError):
+        subpixel_pattern(8, "rotated_grid")
+
+
+@pytest.mark.parametrize("params, message", [
+    ({"aa": "msaa"}, "aa"),
+    ({"samples": 5}, "samples"),
+    ({"pattern": "rotated_grid", "samples": 8}, "rotated grid"),
+    ({"shadow_map_size": 500}, "power of two"),
+    ({"grid_size": 100}, "grid_size"),
+    ({"edge_threshold": 2.0}, "edge_threshold"),
+    ({"stencil_rule": "maybe"}, "stencil_rule"),
+    ({"bogus": 1}, "no parameter"),
+])
+def test_bad_parameters_are_one_line_errors(params, message):
+    with pytest.raises(ParameterError, match=message) as e:
+        wsoft.techniques.create("izb", params)
+    assert "\n" not in str(e.value)
+
+
+def test_adaptive_needs_one_gbuffer_sample_per_pixel():
+    from wsoft.bench.harness import load
+
+    with pytest.raises(ParameterError, match="pixel_samples=1"):
+        wsoft.render(load("box_plane"), "izb", width=32, height=24, device="cpu", pixel_samples=4)
+    fr = wsoft.render(load("box_plane"), "izb", width=32, height=24, device="cpu", pixel_samples=4, aa="none")
+    assert np.isfinite(fr.V).all()
+
+
+def test_one_and_eight_threads_agree(monkeypatch):
+    """The light pass's private targets (CPU workers) merge to the same flags and counters."""
+    from wsoft.bench.harness import load
+
+    scene = load("tower")
+    out = []
+    for threads in ("1", "8"):
+        monkeypatch.setenv("WSOFT_THREADS", threads)
+        _, get, _ = _izb_resources(scene, {"aa": "supersample", "grid_size": 256})
+        g = get("izb_grid")
+        out.append((get("izb_blocked").numpy()[: g.inserted].copy(), g.target.pairs.numpy().copy(), g.target.tests.numpy().copy()))
+    assert out[0][0].sum() > 100
+    for a, b in zip(*out):
+        assert np.array_equal(a, b)

@@ -1,0 +1,575 @@
+"""``izb``: irregular z-buffer shadows (Johnson et al.) with adaptive eye-view anti-aliasing
+(Galoppo, "Eye-View Pixel Anti-Aliasing for Irregular Shadow Mapping", GPU Pro 1.6).
+
+Hard shadows of the light's centre (a point light exactly; an area light from its centre, as
+``hard``), pixel-exact: the shadow is decided per eye sample by an exact ray-triangle test, not
+by a depth map, so there is no light-view aliasing at any grid size.
+
+Steps of one light (the paper's eight, as passes):
+
+1. ``izb_stencil`` (``aa=adaptive``) — the *conservative shadow-edge stencil*: a variance shadow
+   map from a light depth map rendered with conservative rasterization (``stencil_raster=
+   ordinary`` renders it with ordinary rasterization, the paper's Fig. 1.6.7), mip-mapped
+   (:func:`~wsoft.accel.pyramid.build_moments_pyramid`). Per pixel: the pixel's footprint on
+   its tangent plane (the camera rays through its four corners) projected into the map, widened
+   by one texel, picks the mip level whose texels are at least as large; the moments of the
+   (at most 2 x 2) texels it overlaps; the nearest light depth t of the footprint less a slack
+   (the receiver's own depth change over two texels, plus ``stencil_bias``); the one-tailed
+   Chebyshev bounds of the occluder mass below t (``certainly lit`` when below
+   ``edge_threshold``) and of the mass at or beyond t (``certainly shadowed``). A potential edge
+   is a pixel that is neither (``stencil_rule=cull``: the paper's text, "bounds ... to cull
+   eye-view pixels"); Listing 1.6.1 returns *true* when either bound is below the threshold,
+   which read literally flags the certain pixels instead (``stencil_rule=listing``, kept to
+   measure it).
+2. ``izb_samples`` — the shadow samples: one per pixel (the G-buffer's, at the pixel centre),
+   and for potential-edge pixels (``adaptive``) or every pixel (``supersample``) ``samples``
+   sub-pixel samples (rotated grid 4x, or jittered 8x / 16x) whose eye rays are *re-cast* through
+   the scene at their sub-pixel offsets (:func:`~wsoft.raster.gbuffer.cast_primary`): exact
+   surface points even where a pixel straddles a silhouette, which a reconstruction from the
+   depth buffer (a plane through the centre sample) gets wrong. A multi-sampled pixel's
+   visibility is the mean over its sub-samples that hit a surface (its centre sample is not
+   inserted unless none did).
+3. ``izb_grid`` — the irregular z-buffer: a light view fitted to the inserted samples
+   (``grid_size`` cells per side) and a grid of lists (:mod:`wsoft.accel.izb_grid`).
+4. ``izb_light`` — occluder triangles rasterized conservatively over the grid; every sample of a
+   touched cell is tested exactly (:func:`~wsoft.accel.izb_grid.izb_test`).
+5. ``izb_resolve`` — per pixel, the mean over its samples.
+
+Every sample's shadow ray starts at its surface point moved off the surface along the normal (as
+the reference's) and goes to the light's centre; where the light's centre lies behind the tangent
+plane the sample is shadowed without a test (the receiver's own horizon, applied per sample).
+
+Example::
+
+    frame = wsoft.render(scene, "izb", width=640, height=480, aa="adaptive", samples=4)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+
+from wsoft.accel.izb_grid import build_grid, izb_test, no_cull
+from wsoft.accel.pyramid import build_moments_pyramid
+from wsoft.errors import ParameterError
+from wsoft.lightspace.light import LightGPU, in_front, light_center_dir
+from wsoft.lightspace.view import ViewGPU, fit_light_view, texel_of, view_of
+from wsoft.params import check_ranges
+from wsoft.parallel import launch_chunked
+from wsoft.raster.camera import CameraGPU, camera_gpu, subpixel_pattern
+from wsoft.raster.gbuffer import GBufferGPU, camera_ray, cast_primary, gb_covered, gb_pixel
+from wsoft.raster.rasterizer import make_rasterizer
+from wsoft.reference import ray_epsilon, ray_offset, ray_origin
+from wsoft.scene.device import Surfaces
+from wsoft.scene.types import LIGHT_DISTANT, LIGHT_KIND_NAMES, LIGHT_POINT
+from wsoft.techniques.base import Quality, Technique, Tolerance, check, param
+
+AA_MODES = ("none", "adaptive", "supersample")
+PATTERNS = ("auto", "rotated_grid", "jittered")
+STENCIL_RASTER = ("conservative", "ordinary")
+STENCIL_RULES = ("cull", "listing")
+
+RECEIVER_SLACK = wp.constant(3.5)  # the stencil's slack in receiver depth ranges over the texels read
+
+# sample states
+BACKGROUND, TEST, HORIZON = 0, 1, 2
+
+
+@dataclass(frozen=True)
+class IZBParams:
+    grid_size: int = param(1024, "cells per side of the irregular z-buffer's grid (its light view)", range=(256, 8192))
+    aa: str = param("adaptive", "eye-view anti-aliasing: none (one sample per pixel), adaptive (sub-samples on potential shadow-edge "
+                                "pixels, the paper), supersample (sub-samples on every pixel)")
+    samples: int = param(4, "sub-pixel samples of a multi-sampled pixel: 4, 8 or 16", range=(4, 16))
+    pattern: str = param("auto", "sub-pixel pattern: rotated_grid (4 only), jittered, auto (rotated grid at 4, else jittered)")
+    seed: int = param(0, "seed of the jittered pattern", range=(0, 2**31 - 1))
+    edge_threshold: float = param(0.01, "stencil: a Chebyshev bound below this marks a pixel certainly lit or certainly shadowed",
+                                  range=(1e-6, 0.5))
+    shadow_map_size: int = param(512, "texels per side of the stencil's variance shadow map (a power of two)", range=(256, 4096))
+    stencil_raster: str = param("conservative", "stencil: rasterization of its depth map: conservative (the paper) or ordinary (Fig. 1.6.7)")
+    stencil_rule: str = param("cull", "stencil: cull (a potential edge is neither certainly lit nor certainly shadowed, the paper's text) "
+                                      "or listing (Listing 1.6.1 read literally: either bound below the threshold)")
+    stencil_bias: float = param(0.015, "stencil: depth offset (fraction of the map's depth range) an occluder must lie in front of a "
+                                       "receiver; at least 10 sqrt(min_variance) for a receiver ever to be certainly lit", range=(0.0, 0.5))
+    min_variance: float = param(1e-6, "stencil: the variance floor of the Chebyshev bounds (normalised depth)", range=(0.0, 0.01))
+
+    def __post_init__(self):
+        check_ranges(self)
+        check(self.aa in AA_MODES, f"aa {self.aa!r} is not one of {', '.join(AA_MODES)}")
+        check(self.samples in (4, 8, 16), f"samples {self.samples} is not 4, 8 or 16")
+        check(self.pattern in PATTERNS, f"pattern {self.pattern!r} is not one of {', '.join(PATTERNS)}")
+        check(not (self.pattern == "rotated_grid" and self.samples != 4), f"the rotated grid has 4 samples, not {self.samples}")
+        check(256 <= self.grid_size <= 8192, f"grid_size {self.grid_size} out of range [256, 8192]")
+        m = self.shadow_map_size
+        check(256 <= m <= 4096 and m & (m - 1) == 0, f"shadow_map_size {m} is not a power of two in [256, 4096]")
+        check(self.stencil_raster in STENCIL_RASTER, f"stencil_raster {self.stencil_raster!r} is not one of {', '.join(STENCIL_RASTER)}")
+        check(self.stencil_rule in STENCIL_RULES, f"stencil_rule {self.stencil_rule!r} is not one of {', '.join(STENCIL_RULES)}")
+
+    @property
+    def pattern_kind(self) -> str:
+        if self.pattern != "auto":
+            return self.pattern
+        return "rotated_grid" if self.samples == 4 else "jittered"
+
+
+# --------------------------------------------------------------------------- kernels
+
+
+@wp.func
+def shadow_ray(L: LightGPU, p: wp.vec3, n: wp.vec3, eps: float):
+    """A sample's ray toward the light's centre: (origin off the surface, unit direction, length,
+    state TEST, or HORIZON where the centre lies behind the tangent plane)."""
+    o = ray_origin(p, n, ray_offset(p, eps))
+    c = light_center_dir(L, o)
+    d = wp.vec3(c[0], c[1], c[2])
+    state = int(1)
+    if not in_front(n, d):
+        state = 2
+    return o, d, c[3], state
+
+
+@wp.kernel
+def centre_samples(
+    offset: int,
+    L: LightGPU,
+    gb: GBufferGPU,
+    eps: float,
+    multi: wp.array[wp.int32],
+    # outputs
+    origin: wp.array[wp.vec3],
+    dir: wp.array[wp.vec3],
+    tmax: wp.array[float],
+    state: wp.array[wp.int32],
+    insert: wp.array[wp.int32],
+):
+    """The G-buffer's samples (pixel centres); inserted unless their pixel is multi-sampled."""
+    i = wp.tid() + offset
+    if not gb_covered(gb, i):
+        state[i] = 0
+        insert[i] = 0
+        origin[i] = wp.vec3(0.0)
+        dir[i] = wp.vec3(0.0)
+        tmax[i] = 0.0
+        return
+    o, d, t, s = shadow_ray(L, gb.pos[i], gb.nrm[i], eps)
+    origin[i] = o
+    dir[i] = d
+    tmax[i] = t
+    state[i] = s
+    insert[i] = wp.where(s == 1 and multi[i] < 0, 1, 0)
+
+
+@wp.kernel
+def sub_samples(
+    offset: int,
+    base: int,
+    n_sub: int,
+    pixels: wp.array[wp.int32],
+    pattern: wp.array[wp.vec2],
+    mesh: wp.uint64,
+    cut: Surfaces,
+    has_cutouts: int,
+    cam: CameraGPU,
+    width: int,
+    height: int,
+    L: LightGPU,
+    eps: float,
+    # outputs
+    origin: wp.array[wp.vec3],
+    dir: wp.array[wp.vec3],
+    tmax: wp.array[float],
+    state: wp.array[wp.int32],
+    insert: wp.array[wp.int32],
+):
+    """Sub-sample s of multi-sampled pixel j: its eye ray re-cast at the sub-pixel offset."""
+    k = wp.tid() + offset
+    j = k / n_sub
+    s = k - j * n_sub
+    pix = pixels[j]
+    row = pix / width
+    col = pix - row * width
+    off = pattern[s]
+    found, p, n, face, bu, bv, dist = cast_primary(mesh, cut, has_cutouts, cam, width, height, float(col) + off[0], float(row) + off[1])
+    i = base + k
+    if found == 0:
+        state[i] = 0
+        insert[i] = 0
+        origin[i] = wp.vec3(0.0)
+        dir[i] = wp.vec3(0.0)
+        tmax[i] = 0.0
+        return
+    o, d, t, st = shadow_ray(L, p, n, eps)
+    origin[i] = o
+    dir[i] = d
+    tmax[i] = t
+    state[i] = st
+    insert[i] = wp.where(st == 1, 1, 0)
+
+
+@wp.kernel
+def centre_fallback(
+    offset: int,
+    base: int,
+    n_sub: int,
+    pixels: wp.array[wp.int32],
+    state: wp.array[wp.int32],
+    # outputs
+    insert: wp.array[wp.int32],
+    fallback: wp.array[wp.int32],
+):
+    """A multi-sampled pixel none of whose sub-samples hit a surface keeps its centre sample."""
+    j = wp.tid() + offset
+    hit = int(0)
+    for s in range(n_sub):
+        if state[base + j * n_sub + s] != 0:
+            hit = 1
+    pix = pixels[j]
+    fallback[j] = 0
+    if hit == 0 and state[pix] != 0:
+        fallback[j] = 1
+        insert[pix] = wp.where(state[pix] == 1, 1, 0)
+
+
+@wp.func
+def sample_visible(state: int, r: int, blocked: wp.array[wp.int32]) -> float:
+    if state == 1:
+        if r >= 0:
+            if blocked[r] != 0:
+                return 0.0
+        return 1.0
+    return 0.0
+
+
+@wp.kernel
+def resolve_izb(
+    offset: int,
+    gb: GBufferGPU,
+    multi: wp.array[wp.int32],
+    fallback: wp.array[wp.int32],
+    base: int,
+    n_sub: int,
+    state: wp.array[wp.int32],
+    rank: wp.array[wp.int32],
+    blocked: wp.array[wp.int32],
+    # outputs
+    vis: wp.array[float],
+):
+    """A pixel's visibility: its centre sample's, or the mean over its sub-samples that hit a surface."""
+    i = wp.tid() + offset
+    if not gb_covered(gb, i):
+        vis[i] = 1.0
+        return
+    j = multi[i]
+    if j >= 0 and fallback[j] == 0:
+        total = float(0.0)
+        hits = int(0)
+        for s in range(n_sub):
+            q = base + j * n_sub + s
+            st = state[q]
+            if st != 0:
+                hits += 1
+                total += sample_visible(st, rank[q], blocked)
+        vis[i] = total / float(hits)
+        return
+    vis[i] = sample_visible(state[i], rank[i], blocked)
+
+
+@wp.func
+def moments_at(pyr: wp.array[wp.vec2], off: int, size: int, x: int, y: int) -> wp.vec2:
+    return pyr[off + y * size + x]
+
+
+@wp.func
+def chebyshev(m: wp.vec2, t: float, min_var: float, lower: int) -> float:
+    """One-tailed Chebyshev bound of the mass below t (``lower``) or at/above t of the distribution
+    with moments m; 1 where t lies on the far side of the mean."""
+    mu = m[0]
+    var = wp.max(min_var, m[1] - mu * mu)
+    d = mu - t
+    if lower != 0:
+        if d <= 0.0:
+            return 1.0
+    else:
+        if d >= 0.0:
+            return 1.0
+    return var / (var + d * d)
+
+
+@wp.kernel
+def edge_stencil(
+    offset: int,
+    gb: GBufferGPU,
+    cam: CameraGPU,
+    lv: ViewGPU,
+    pyr: wp.array[wp.vec2],
+    level_off: wp.array[wp.int32],
+    levels: int,
+    map_size: int,
+    depth_scale: float,
+    threshold: float,
+    min_var: float,
+    bias: float,
+    listing: int,
+    # outputs
+    edge: wp.array[wp.int32],
+    level_used: wp.array[wp.int32],
+):
+    """Potential shadow-edge pixels (1), from the mip-mapped variance shadow map."""
+    i = wp.tid() + offset
+    edge[i] = 0
+    level_used[i] = -1
+    if not gb_covered(gb, i):
+        return
+    p = gb.pos[i]
+    n = gb.nrm[i]
+    xy = gb_pixel(gb, i)
+    # the pixel's footprint on its tangent plane: the camera rays through its corners
+    xmin = float(1.0e30)
+    xmax = float(-1.0e30)
+    ymin = float(1.0e30)
+    ymax = float(-1.0e30)
+    zmin = float(1.0e30)
+    zmax = float(-1.0e30)
+    bounded = int(1)
+    for c in range(5):
+        q = p
+        if c < 4:
+            o, d, t0, t1 = camera_ray(cam, gb.width, gb.height, float(xy[0] + c % 2), float(xy[1] + c / 2))
+            den = wp.dot(d, n)
+            if wp.abs(den) < 1.0e-8:
+                bounded = 0
+            else:
+                s = wp.dot(p - o, n) / den
+                if s <= 0.0:
+                    bounded = 0
+                q = o + d * s
+        v = view_of(lv, q)
+        if lv.persp != 0 and v[2] <= lv.near:
+            bounded = 0
+        else:
+            tx = texel_of(lv, v)
+            xmin = wp.min(xmin, tx[0])
+            xmax = wp.max(xmax, tx[0])
+            ymin = wp.min(ymin, tx[1])
+            ymax = wp.max(ymax, tx[1])
+            zmin = wp.min(zmin, v[2])
+            zmax = wp.max(zmax, v[2])
+    if bounded == 0 or not (xmax - xmin < 1.0e6 and ymax - ymin < 1.0e6):
+        edge[i] = 1  # a grazing or unbounded footprint: nothing can be ruled out
+        return
+    extent = wp.max(wp.max(xmax - xmin, ymax - ymin), 1.0e-6)
+    slope = (zmax - zmin) * depth_scale / extent  # the receiver's normalised depth change per texel
+    xmin -= 1.0
+    ymin -= 1.0
+    xmax += 1.0
+    ymax += 1.0
+    e = wp.max(xmax - xmin, ymax - ymin)
+    lev = int(wp.ceil(wp.log2(wp.max(e, 1.0))))
+    lev = wp.clamp(lev, 0, levels - 1)
+    level_used[i] = lev
+    # t: the footprint's nearest depth less a slack. The texels read span up to 2^(lev+1) base texels,
+    # over which the receiver's own depth (in the map as its nearest depth per texel) spreads by
+    # r = slope 2^(lev+1); a receiver alone then has mean >= t_lo - r and standard deviation <= r / sqrt(12),
+    # and its Chebyshev bound stays above 1% unless the mean lies 10 deviations past t: slack 3.5 r
+    slack = RECEIVER_SLACK * slope * float(2 << lev) + bias
+    tn = (zmin - lv.near) * depth_scale - slack
+    size = map_size >> lev
+    sc = 1.0 / float(1 << lev)
+    x0 = int(wp.floor(xmin * sc))
+    x1 = int(wp.floor(xmax * sc))
+    y0 = int(wp.floor(ymin * sc))
+    y1 = int(wp.floor(ymax * sc))
+    if x1 < 0 or y1 < 0 or x0 >= size or y0 >= size:
+        edge[i] = 1  # outside the map: nothing known
+        return
+    x0 = wp.clamp(x0, 0, size - 1)
+    x1 = wp.clamp(x1, 0, size - 1)
+    y0 = wp.clamp(y0, 0, size - 1)
+    y1 = wp.clamp(y1, 0, size - 1)
+    m = wp.vec2(0.0)
+    cnt = float(0.0)
+    for y in range(y0, y1 + 1):
+        for x in range(x0, x1 + 1):
+            m += moments_at(pyr, level_off[lev], size, x, y)
+            cnt += 1.0
+    m = m / cnt
+    lit = chebyshev(m, tn, min_var, 1) < threshold  # occluder mass in front of the footprint: almost none
+    shadowed = chebyshev(m, tn, min_var, 0) < threshold  # mass at or beyond it: almost none
+    if listing != 0:
+        if lit or shadowed:
+            edge[i] = 1
+    elif not lit and not shadowed:
+        edge[i] = 1
+
+
+# --------------------------------------------------------------------------- the technique
+
+
+class IZB(Technique):
+    """Irregular z-buffer hard shadows (exact per eye sample) with adaptive eye-view anti-aliasing."""
+
+    name = "izb"
+    summary = "irregular z-buffer: exact hard shadows of the light's centre per eye sample, adaptive eye-view anti-aliasing (Galoppo)"
+    Params = IZBParams
+    reads = ("gbuffer", "scene.triangles", "scene.textures", "light_depth_conservative")
+    writes = ("visibility",)
+    quality = (
+        Quality("aa", ("none", "adaptive", "supersample"), "sub-pixel samples on no pixel, on potential shadow edges, on every pixel"),
+        Quality("samples", (4, 8, 16), "sub-samples of a multi-sampled pixel"),
+    )
+    # a binary shadow of the light's centre (as hard): exact where the light is a point
+    tolerance = Tolerance(mae=0.009, mae_penumbra=0.36)
+    horizon = "exact"  # per sample: the light's centre behind the tangent plane is shadowed
+
+    def supports(self, scene, light) -> str | None:
+        return None  # every kind: a point light exactly, the others from their centre
+
+    @staticmethod
+    def treatment(light) -> str:
+        kind = LIGHT_KIND_NAMES.get(light.kind, str(light.kind))
+        return "exact (point light)" if light.kind == LIGHT_POINT else f"from the light's centre ({kind} light: the hard shadow of its centre)"
+
+    def add_passes(self, ctx, light):
+        p = self.params
+        if p.aa != "none" and ctx.pixel_samples != 1:
+            raise ParameterError(f"izb: aa={p.aa} places its own sub-pixel samples and needs pixel_samples=1 "
+                                 f"(got {ctx.pixel_samples}); use aa=none with G-buffer multi-sampling")
+        gbuf = ctx.gbuffer()
+        sk = ctx.scene_arrays()
+        L = ctx.light_gpu(light)
+        cam = camera_gpu(ctx.camera)
+        dev = ctx.device
+        scene = ctx.scene
+        counters = ctx.counters(light)
+        counters["light"] = self.treatment(light)
+        n_sub = p.samples if p.aa != "none" else 0
+
+        stencil = None
+        if p.aa == "adaptive":
+            depth = ctx.light_depth(light, size=p.shadow_map_size, conservative=p.stencil_raster == "conservative")
+            stencil = ctx.key("izb_stencil", light)
+
+            def run_stencil(res):
+                gb, dm = res[gbuf], res[depth]
+                v = dm.view
+                pyr, offs = build_moments_pyramid(dm.depth, v.near, v.far, dev)
+                edge = wp.empty(gb.count, dtype=wp.int32, device=dev)
+                lev = wp.empty(gb.count, dtype=wp.int32, device=dev)
+                scale = 1.0 / (v.far - v.near) if v.far > v.near else 1.0
+                launch_chunked(edge_stencil, gb.count,
+                               inputs=[gb.gpu(), cam, v.gpu(), pyr, wp.array(offs, dtype=wp.int32, device=dev), len(offs) - 1,
+                                       p.shadow_map_size, scale, p.edge_threshold, p.min_variance, p.stencil_bias,
+                                       int(p.stencil_rule == "listing")],
+                               outputs=[edge, lev], device=dev)
+                e = edge.numpy()
+                covered = int((gb.prim.numpy() >= 0).sum())
+                counters["edge_pixels"] = int(e.sum())
+                counters["edge_fraction"] = float(e.sum() / covered) if covered else 0.0
+                return {stencil: edge}
+
+            ctx.add_pass(ctx.pass_name("izb_stencil", light), inputs=(gbuf, depth), outputs=(stencil,), run=run_stencil, light=light)
+
+        samples_key = ctx.key("izb_samples", light)
+
+        def run_samples(res):
+            gb, ds = res[gbuf], res[sk]
+            n0 = gb.count
+            covered = gb.prim.numpy() >= 0
+            if p.aa == "adaptive":
+                pixels = np.flatnonzero(res[stencil].numpy() & covered).astype(np.int32)
+            elif p.aa == "supersample":
+                pixels = np.flatnonzero(covered).astype(np.int32)
+            else:
+                pixels = np.zeros(0, np.int32)
+            multi_h = np.full(n0, -1, np.int32)
+            multi_h[pixels] = np.arange(len(pixels), dtype=np.int32)
+            total = n0 + len(pixels) * n_sub
+            eps = ray_epsilon(gb, light)
+            arr = {
+                "origin": wp.empty(total, dtype=wp.vec3, device=dev), "dir": wp.empty(total, dtype=wp.vec3, device=dev),
+                "tmax": wp.empty(total, dtype=float, device=dev), "state": wp.empty(total, dtype=wp.int32, device=dev),
+                "insert": wp.empty(total, dtype=wp.int32, device=dev),
+            }
+            outs = [arr["origin"], arr["dir"], arr["tmax"], arr["state"], arr["insert"]]
+            multi = wp.array(multi_h, dtype=wp.int32, device=dev)
+            pix = wp.array(pixels if len(pixels) else np.zeros(1, np.int32), dtype=wp.int32, device=dev)
+            fallback = wp.zeros(max(len(pixels), 1), dtype=wp.int32, device=dev)
+            launch_chunked(centre_samples, n0, inputs=[L, gb.gpu(), eps, multi], outputs=outs, device=dev)
+            if len(pixels):
+                pat = subpixel_pattern(n_sub, p.pattern_kind, p.seed)
+                launch_chunked(sub_samples, len(pixels) * n_sub,
+                               inputs=[n0, n_sub, pix, wp.array(pat, dtype=wp.vec2, device=dev), ds.mesh.id, ds.cutouts,
+                                       int(ds.has_cutouts), cam, gb.width, gb.height, L, eps],
+                               outputs=outs, device=dev)
+                launch_chunked(centre_fallback, len(pixels), inputs=[n0, n_sub, pix, arr["state"]], outputs=[arr["insert"], fallback], device=dev)
+            st = arr["state"].numpy()
+            counters["multisampled_pixels"] = int(len(pixels))
+            counters["extra_samples"] = int(len(pixels) * n_sub)
+            counters["centre_fallbacks"] = int(fallback.numpy()[: len(pixels)].sum())
+            counters["horizon_samples"] = int((st == HORIZON).sum())
+            arr.update(multi=multi, fallback=fallback, base=n0, pixels=len(pixels))
+            return {samples_key: arr}
+
+        ins = (gbuf, sk) + ((stencil,) if stencil is not None else ())
+        ctx.add_pass(ctx.pass_name("izb_samples", light), inputs=ins, outputs=(samples_key,), run=run_samples, light=light)
+
+        grid_key = ctx.key("izb_grid", light)
+        grid_pass = ctx.pass_name("izb_grid", light)
+
+        def run_grid(res):
+            ds, smp = res[sk], res[samples_key]
+            ins_h = smp["insert"].numpy() != 0
+            pts = smp["origin"].numpy()[ins_h]
+            lo, hi = scene.bounds
+            view = fit_light_view(light, pts if len(pts) else np.zeros((1, 3)), lo, hi, p.grid_size,
+                                  casters=scene.caster_points if light.kind == LIGHT_DISTANT else None)
+            T = ds.indices.shape[0] // 3
+            grid = build_grid(view, smp["origin"], smp["dir"], smp["tmax"], smp["insert"], ds.points, ds.indices,
+                              no_cull(ds.cutouts, T, dev), ds.has_cutouts, dev)
+            ll = grid.list_lengths
+            counters.update(
+                samples_inserted=grid.inserted, samples_outside=grid.outside, cells=view.width * view.height,
+                cells_occupied=int(len(ll)), list_max=int(ll.max()) if len(ll) else 0,
+                list_mean=float(ll.mean()) if len(ll) else 0.0, list_p99=float(np.percentile(ll, 99)) if len(ll) else 0.0,
+                grid_bytes=grid.grid_bytes, list_bytes=grid.list_bytes,
+            )
+            if grid.outside:
+                ctx.ctx.warn(grid_pass, f"light {light.path}: {grid.outside} shadow samples lie outside its single-frustum view "
+                                        f"(more than 80 degrees off its axis) and are left unshadowed")
+            return {grid_key: grid}
+
+        ctx.add_pass(grid_pass, inputs=(sk, samples_key), outputs=(grid_key,), run=run_grid, light=light)
+
+        lit_key = ctx.key("izb_blocked", light)
+
+        def run_light(res):
+            ds, grid = res[sk], res[grid_key]
+            if grid.inserted:
+                r = make_rasterizer(grid.view, izb_test, conservative=True)
+                st = r.run(ds.points, ds.indices, grid.target.cut, grid.view, grid.target, dev, initialized=False)
+                counters["cpu_private_targets"] = st.private_targets
+                t = grid.target
+                counters["triangle_cell_pairs"] = int(t.pairs.numpy().sum(dtype=np.int64))
+                counters["sample_tests"] = int(t.tests.numpy().sum(dtype=np.int64))
+                counters["samples_blocked"] = int(t.blocked.numpy()[: grid.inserted].sum())
+            else:
+                grid.target.blocked.zero_()
+                counters.update(triangle_cell_pairs=0, sample_tests=0, samples_blocked=0)
+            return {lit_key: grid.target.blocked}
+
+        ctx.add_pass(ctx.pass_name("izb_light", light), inputs=(sk, grid_key), outputs=(lit_key,), run=run_light, light=light)
+
+        out = ctx.visibility_key(light)
+
+        def run_resolve(res):
+            gb, smp, grid, blocked = res[gbuf], res[samples_key], res[grid_key], res[lit_key]
+            vis = wp.empty(gb.count, dtype=float, device=dev)
+            launch_chunked(resolve_izb, gb.count,
+                           inputs=[gb.gpu(), smp["multi"], smp["fallback"], smp["base"], max(n_sub, 1), smp["state"], grid.rank, blocked],
+                           outputs=[vis], device=dev)
+            return {out: ctx.visibility(vis)}
+
+        return ctx.add_pass(ctx.pass_name("izb_resolve", light), inputs=(gbuf, samples_key, grid_key, lit_key), outputs=(out,),
+                            run=run_resolve, light=light)
