@@ -537,7 +537,8 @@ class IZB(Technique):
             )
             if grid.outside:
                 ctx.ctx.warn(grid_pass, f"light {light.path}: {grid.outside} shadow samples lie outside its single-frustum view "
-                                        f"(more than 80 degrees off its axis) and are left unshadowed")
+                                        f"(more than 80 degrees off its axis) and are left unshadowed; a light that surrounds its receivers "
+                                        f"needs a cube map, which this technique does not build")
             return {grid_key: grid}
 
         ctx.add_pass(grid_pass, inputs=(sk, samples_key), outputs=(grid_key,), run=run_grid, light=light)
