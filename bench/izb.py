@@ -89,6 +89,7 @@ def run_case(case: dict, ctx: dict) -> dict:
         "mae_edge": float(np.abs(V - ref)[edge].mean()) if edge.any() else 0.0, "edge_pixels_reference": int(edge.sum()),
     }
     p = case["params"]
+    flagged = None
     if case["technique"] == "izb" and p.get("aa") == "adaptive":
         ss = wsoft.render(scene, "izb", width=w, height=h, device=dev, aa="supersample", samples=p.get("samples", 4))
         aliased = (ss.V > 0) & (ss.V < 1)
@@ -101,9 +102,7 @@ def run_case(case: dict, ctx: dict) -> dict:
         name = f"{case['scene']}_{p['aa']}.png"
         _png(V, out / name)
         row["image"] = f"izb/{name}"
-        if p["aa"] == "adaptive":
-            res = _resources(scene, p, w, h, dev)
-            flagged = next(v for k, v in res.items() if str(k).startswith("izb_stencil")).numpy().reshape(h, w).astype(bool)
+        if flagged is not None:
             rgb = np.repeat(V[..., None], 3, -1) * 0.8
             rgb[flagged] = rgb[flagged] * 0.5 + np.array([0.5, 0.1, 0.1])
             _png(rgb, out / f"{case['scene']}_stencil.png")

@@ -28,7 +28,7 @@ import warp as wp
 from wsoft.lightspace.view import LightView, ViewGPU, texel_of, view_of
 from wsoft.parallel import ensure_loaded, launch_chunked
 from wsoft.raster.rasterizer import fragment
-from wsoft.scene.device import Surfaces, surface_present
+from wsoft.scene.device import Surfaces, surface_present, surfaces_with_cull
 from wsoft.scene.packets import ray_triangle
 
 
@@ -300,8 +300,4 @@ def build_grid(view: LightView, origin: wp.array, dir: wp.array, tmax: wp.array,
 def no_cull(cut: Surfaces, triangles: int, device: str) -> Surfaces:
     """``cut`` with every triangle kept by the light pass (no far-face skipping: the test is exact
     on every triangle a ray can meet)."""
-    s = Surfaces()
-    for name in Surfaces.vars:
-        setattr(s, name, getattr(cut, name))
-    s.cull = wp.zeros(max(triangles, 1), dtype=wp.int32, device=device)
-    return s
+    return surfaces_with_cull(cut, wp.zeros(max(triangles, 1), dtype=wp.int32, device=device))

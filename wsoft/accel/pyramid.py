@@ -28,6 +28,16 @@ def merge_range(a: wp.vec2, b: wp.vec2) -> wp.vec2:
     return wp.vec2(wp.min(a[0], b[0]), wp.max(a[1], b[1]))
 
 
+@wp.func
+def texels_below(pyr: wp.array[wp.vec2], src_off: int, n: int, i: int):
+    """The 2 x 2 texels of the level below (2n per side, at ``src_off``) under texel ``i`` of a level of ``n`` per side."""
+    y = i // n
+    x = i - y * n
+    m = 2 * n
+    return (pyr[src_off + (2 * y) * m + 2 * x], pyr[src_off + (2 * y) * m + 2 * x + 1],
+            pyr[src_off + (2 * y + 1) * m + 2 * x], pyr[src_off + (2 * y + 1) * m + 2 * x + 1])
+
+
 @wp.kernel
 def pyramid_base(
     offset: int,
@@ -58,13 +68,7 @@ def pyramid_level(
 ):
     """Level of ``n`` per side from the level below (2n per side)."""
     i = wp.tid() + offset
-    y = i // n
-    x = i - y * n
-    m = 2 * n
-    a = pyr[src_off + (2 * y) * m + 2 * x]
-    b = pyr[src_off + (2 * y) * m + 2 * x + 1]
-    c = pyr[src_off + (2 * y + 1) * m + 2 * x]
-    d = pyr[src_off + (2 * y + 1) * m + 2 * x + 1]
+    a, b, c, d = texels_below(pyr, src_off, n, i)
     pyr[dst_off + i] = merge_range(merge_range(a, b), merge_range(c, d))
 
 
@@ -94,12 +98,17 @@ def build_minmax_pyramid(depth: wp.array, device: str, *, skip_empty: bool) -> t
     offs = level_offsets(n)
     pyr = wp.empty(int(offs[-1]), dtype=wp.vec2, device=device)
     launch_chunked(pyramid_base, n * n, inputs=[depth, int(skip_empty)], outputs=[pyr], device=device)
+    _build_levels(pyramid_level, pyr, offs, n, device)
+    return pyr, offs
+
+
+def _build_levels(level_kernel, pyr: wp.array, offs: np.ndarray, n: int, device: str) -> None:
+    """Levels 1.. of a pyramid whose base (level 0, ``n`` per side) is written, each from the one below."""
     k, m = 0, n // 2
     while m >= 1:
-        launch_chunked(pyramid_level, m * m, inputs=[int(offs[k]), int(offs[k + 1]), m], outputs=[pyr], device=device)
+        launch_chunked(level_kernel, m * m, inputs=[int(offs[k]), int(offs[k + 1]), m], outputs=[pyr], device=device)
         k += 1
         m //= 2
-    return pyr, offs
 
 
 @wp.kernel
@@ -133,13 +142,7 @@ def moments_level(
 ):
     """Level of ``n`` per side: the mean of the 2 x 2 texels below (the moments of their union)."""
     i = wp.tid() + offset
-    y = i // n
-    x = i - y * n
-    m = 2 * n
-    a = pyr[src_off + (2 * y) * m + 2 * x]
-    b = pyr[src_off + (2 * y) * m + 2 * x + 1]
-    c = pyr[src_off + (2 * y + 1) * m + 2 * x]
-    d = pyr[src_off + (2 * y + 1) * m + 2 * x + 1]
+    a, b, c, d = texels_below(pyr, src_off, n, i)
     pyr[dst_off + i] = (a + b + c + d) * 0.25
 
 
@@ -155,11 +158,7 @@ def build_moments_pyramid(depth: wp.array, near: float, far: float, device: str)
     offs = level_offsets(n)
     pyr = wp.empty(int(offs[-1]), dtype=wp.vec2, device=device)
     launch_chunked(moments_base, n * n, inputs=[depth, float(near), float(far if far > near else near + 1.0)], outputs=[pyr], device=device)
-    k, m = 0, n // 2
-    while m >= 1:
-        launch_chunked(moments_level, m * m, inputs=[int(offs[k]), int(offs[k + 1]), m], outputs=[pyr], device=device)
-        k += 1
-        m //= 2
+    _build_levels(moments_level, pyr, offs, n, device)
     return pyr, offs
 
 

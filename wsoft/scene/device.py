@@ -262,8 +262,13 @@ def view_surfaces(ds: "DeviceScene", origin: np.ndarray | None) -> Surfaces:
         return ds.cutouts
     cull = ds.cull_host.copy()
     cull[np.isin(ds.tri_prim, inside)] = 0
+    return surfaces_with_cull(ds.cutouts, wp.array(cull, dtype=wp.int32, device=ds.device))
+
+
+def surfaces_with_cull(cut: Surfaces, cull: wp.array) -> Surfaces:
+    """``cut`` (every field shared) with other far-face culling flags."""
     s = Surfaces()
-    for name in Surfaces.vars:  # the scene's surfaces, every field but the culling flags
-        setattr(s, name, getattr(ds.cutouts, name))
-    s.cull = wp.array(cull, dtype=wp.int32, device=ds.device)
+    for name in Surfaces.vars:
+        setattr(s, name, getattr(cut, name))
+    s.cull = cull
     return s

@@ -130,6 +130,38 @@ def shadow_ray(L: LightGPU, p: wp.vec3, n: wp.vec3, eps: float):
     return o, d, c[3], state
 
 
+@wp.func
+def store_sample(
+    i: int,
+    found: bool,
+    L: LightGPU,
+    p: wp.vec3,
+    n: wp.vec3,
+    eps: float,
+    may_insert: bool,
+    origin: wp.array[wp.vec3],
+    dir: wp.array[wp.vec3],
+    tmax: wp.array[float],
+    state: wp.array[wp.int32],
+    insert: wp.array[wp.int32],
+):
+    """Sample i: its shadow ray and state (BACKGROUND where ``found`` is false); inserted when it
+    needs a test and ``may_insert``."""
+    if not found:
+        state[i] = 0
+        insert[i] = 0
+        origin[i] = wp.vec3(0.0)
+        dir[i] = wp.vec3(0.0)
+        tmax[i] = 0.0
+        return
+    o, d, t, st = shadow_ray(L, p, n, eps)
+    origin[i] = o
+    dir[i] = d
+    tmax[i] = t
+    state[i] = st
+    insert[i] = wp.where(st == 1 and may_insert, 1, 0)
+
+
 @wp.kernel
 def centre_samples(
     offset: int,
@@ -146,19 +178,7 @@ def centre_samples(
 ):
     """The G-buffer's samples (pixel centres); inserted unless their pixel is multi-sampled."""
     i = wp.tid() + offset
-    if not gb_covered(gb, i):
-        state[i] = 0
-        insert[i] = 0
-        origin[i] = wp.vec3(0.0)
-        dir[i] = wp.vec3(0.0)
-        tmax[i] = 0.0
-        return
-    o, d, t, s = shadow_ray(L, gb.pos[i], gb.nrm[i], eps)
-    origin[i] = o
-    dir[i] = d
-    tmax[i] = t
-    state[i] = s
-    insert[i] = wp.where(s == 1 and multi[i] < 0, 1, 0)
+    store_sample(i, gb_covered(gb, i), L, gb.pos[i], gb.nrm[i], eps, multi[i] < 0, origin, dir, tmax, state, insert)
 
 
 @wp.kernel
@@ -192,20 +212,7 @@ def sub_samples(
     col = pix - row * width
     off = pattern[s]
     found, p, n, face, bu, bv, dist = cast_primary(mesh, cut, has_cutouts, cam, width, height, float(col) + off[0], float(row) + off[1])
-    i = base + k
-    if found == 0:
-        state[i] = 0
-        insert[i] = 0
-        origin[i] = wp.vec3(0.0)
-        dir[i] = wp.vec3(0.0)
-        tmax[i] = 0.0
-        return
-    o, d, t, st = shadow_ray(L, p, n, eps)
-    origin[i] = o
-    dir[i] = d
-    tmax[i] = t
-    state[i] = st
-    insert[i] = wp.where(st == 1, 1, 0)
+    store_sample(base + k, found != 0, L, p, n, eps, True, origin, dir, tmax, state, insert)
 
 
 @wp.kernel
@@ -422,9 +429,6 @@ class IZB(Technique):
     # a binary shadow of the light's centre (as hard): exact where the light is a point
     tolerance = Tolerance(mae=0.009, mae_penumbra=0.36)
     horizon = "exact"  # per sample: the light's centre behind the tangent plane is shadowed
-
-    def supports(self, scene, light) -> str | None:
-        return None  # every kind: a point light exactly, the others from their centre
 
     @staticmethod
     def treatment(light) -> str:
