@@ -72,6 +72,30 @@ def test_conservative_covers_every_touched_texel(device, file, light):
     assert np.all(d <= v[inside, 2] * (1 + 1e-4) + 1e-6)
 
 
+@pytest.mark.parametrize("file,light", [("multi_light.usda", "Rect"), ("multi_light.usda", "Sun"), ("cutout.usda", "Light")])
+def test_inner_coverage_blocks_every_ray_of_its_texels(device, file, light):
+    """An inner-coverage map's texel (covered whole by one triangle, at its farthest depth) blocks
+    every ray through the texel: rays at the texel's four corners (a hair inside) and its centre
+    meet a surface no farther than the texel's value (alpha-tested rays: a cutout counted as a
+    blocker would let some of them through its holes)."""
+    import dataclasses
+
+    scene = wsoft.load_scene(scene_path(file))
+    ds = upload_scene(scene, device)
+    view = _view(scene, light)
+    inner = rasterize(ds, view, alpha_tested=True, inner=True).depth.numpy()
+    std = rasterize(ds, view, alpha_tested=False).depth.numpy()
+    hi, hs = inner < DEPTH_CLEAR, std < DEPTH_CLEAR
+    assert hi.sum() > 0.5 * hs.sum()  # most covered texels are covered whole
+    assert np.all(hs[hi]) and np.all(inner[hi] >= std[hi] * (1 - 1e-5))  # a subset, never nearer
+    l, r, b, t = view.window
+    sx, sy = (r - l) / view.width, (t - b) / view.height
+    for fx, fy in ((0.0, 0.0), (-0.49, -0.49), (0.49, -0.49), (-0.49, 0.49), (0.49, 0.49)):
+        shifted = dataclasses.replace(view, window=(l + fx * sx, r + fx * sx, b + fy * sy, t + fy * sy))
+        ray = raycast_depth(ds, shifted, alpha_tested=True).depth.numpy()
+        assert np.all(ray[hi] <= inner[hi] * (1 + 1e-4) + 1e-6), (fx, fy)
+
+
 def test_light_inside_the_scene_stays_finite(device):
     """A point light between objects: triangles behind it are clipped at the near plane."""
     from pxr import Gf, UsdGeom, UsdLux

@@ -164,17 +164,21 @@ class RenderContext:
 
         return self.add(Pass(name, (gk,), (key,), run, kind="light_map", light=self.label(light)))
 
-    def light_depth(self, light: Light, size: int, conservative: bool = False, soft: bool = False) -> Key:
-        """Resource: a :class:`~wsoft.raster.rasterizer.DepthMap` (alpha-tested only if the scene has cutouts)."""
+    def light_depth(self, light: Light, size: int, conservative: bool = False, soft: bool = False, inner: bool = False,
+                    opaque: bool = False) -> Key:
+        """Resource: a :class:`~wsoft.raster.rasterizer.DepthMap` (alpha-tested only if the scene has
+        cutouts); ``inner``: the map of depths that certainly block a whole texel (inner coverage);
+        ``opaque``: cutouts not alpha-tested (each covers every texel it touches: with
+        ``conservative``, a map no occluder escapes)."""
         sk = self.scene_arrays()
         vk = self.light_view(light, size, soft)
-        alpha = self.scene.has_cutouts
-        kind = "light_depth" + ("_alpha" if alpha else "") + ("_conservative" if conservative else "")
+        alpha = self.scene.has_cutouts and not opaque
+        kind = "light_depth" + ("_alpha" if alpha else "") + ("_inner" if inner else "_conservative" if conservative else "")
         key = Key(kind, self.label(light), variant=f"@{size}" + ("+soft" if soft else ""))
         name = str(key)
 
         def run(res):
-            dm = rasterize(res[sk], res[vk], alpha_tested=alpha, conservative=conservative)
+            dm = rasterize(res[sk], res[vk], alpha_tested=alpha, conservative=conservative, inner=inner)
             if dm.private_maps:
                 c = self.pass_counters(name)
                 c["cpu_private_maps"] = dm.private_maps
@@ -247,8 +251,9 @@ class TechniqueContext:
     def light_view(self, light: Light, size: int, soft: bool = False) -> Key:
         return self.ctx.light_view(light, size, soft)
 
-    def light_depth(self, light: Light, size: int, conservative: bool = False, soft: bool = False) -> Key:
-        return self.ctx.light_depth(light, size, conservative, soft)
+    def light_depth(self, light: Light, size: int, conservative: bool = False, soft: bool = False, inner: bool = False,
+                    opaque: bool = False) -> Key:
+        return self.ctx.light_depth(light, size, conservative, soft, inner, opaque)
 
     def label(self, light: Light) -> str:
         return self.ctx.label(light)

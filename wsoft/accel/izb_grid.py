@@ -28,7 +28,7 @@ import warp as wp
 from wsoft.lightspace.view import LightView, ViewGPU, texel_of, view_of
 from wsoft.parallel import ensure_loaded, launch_chunked
 from wsoft.raster.rasterizer import fragment
-from wsoft.scene.device import Surfaces, surface_present, surfaces_with_cull
+from wsoft.scene.device import Surfaces, surface_present
 from wsoft.scene.packets import ray_triangle
 
 
@@ -295,9 +295,3 @@ def build_grid(view: LightView, origin: wp.array, dir: wp.array, tmax: wp.array,
     t.tests = wp.empty((h, w), dtype=wp.int32, device=device)
     lengths = np.diff(np.flatnonzero(np.r_[True, k_host[1:inserted] != k_host[:inserted - 1], True])) if inserted else np.zeros(0, np.int64)
     return IzbGrid(view=view, target=t, rank=rank, inserted=inserted, outside=outside, list_lengths=lengths)
-
-
-def no_cull(cut: Surfaces, triangles: int, device: str) -> Surfaces:
-    """``cut`` with every triangle kept by the light pass (no far-face skipping: the test is exact
-    on every triangle a ray can meet)."""
-    return surfaces_with_cull(cut, wp.zeros(max(triangles, 1), dtype=wp.int32, device=device))

@@ -72,6 +72,21 @@ def pyramid_level(
     pyr[dst_off + i] = merge_range(merge_range(a, b), merge_range(c, d))
 
 
+@wp.kernel
+def pyramid_base_pair(
+    offset: int,
+    nearest: wp.array2d[float],
+    farthest: wp.array2d[float],
+    # outputs
+    pyr: wp.array[wp.vec2],
+):
+    i = wp.tid() + offset
+    n = nearest.shape[1]
+    y = i // n
+    x = i - y * n
+    pyr[i] = wp.vec2(nearest[y, x], farthest[y, x])
+
+
 def log2_exact(n: int) -> int:
     k = int(round(math.log2(n))) if n > 0 else -1
     if k < 0 or 1 << k != n:
@@ -102,11 +117,26 @@ def build_minmax_pyramid(depth: wp.array, device: str, *, skip_empty: bool) -> t
     return pyr, offs
 
 
+def build_bounds_pyramid(nearest: wp.array, farthest: wp.array, device: str) -> tuple[wp.array, np.ndarray]:
+    """One pyramid of two square power-of-two maps of the same view: per texel of every level, the
+    min of ``nearest`` and the max of ``farthest`` over the texels below (empty texels are
+    ``DEPTH_CLEAR`` surfaces, as ``skip_empty = False``)."""
+    n = nearest.shape[1]
+    if nearest.shape != farthest.shape or nearest.shape[0] != n:
+        raise ValueError("the maps must be square and of one size")
+    log2_exact(n)
+    offs = level_offsets(n)
+    pyr = wp.empty(int(offs[-1]), dtype=wp.vec2, device=device)
+    launch_chunked(pyramid_base_pair, n * n, inputs=[nearest, farthest], outputs=[pyr], device=device, min_chunk=1 << 14)
+    _build_levels(pyramid_level, pyr, offs, n, device)
+    return pyr, offs
+
+
 def _build_levels(level_kernel, pyr: wp.array, offs: np.ndarray, n: int, device: str) -> None:
     """Levels 1.. of a pyramid whose base (level 0, ``n`` per side) is written, each from the one below."""
     k, m = 0, n // 2
     while m >= 1:
-        launch_chunked(level_kernel, m * m, inputs=[int(offs[k]), int(offs[k + 1]), m], outputs=[pyr], device=device)
+        launch_chunked(level_kernel, m * m, inputs=[int(offs[k]), int(offs[k + 1]), m], outputs=[pyr], device=device, min_chunk=1 << 14)
         k += 1
         m //= 2
 

@@ -177,51 +177,145 @@ def _prism_depth_min(v: np.ndarray, window, default: float) -> float:
     return min(found + [default])
 
 
-def _local_fit_stats(rec: np.ndarray, origin: np.ndarray, axes: np.ndarray, facing: np.ndarray | None, zmin_ok: float, margin: float) -> dict:
-    """What a local light's view fit needs of the receivers, in row blocks over the CPU thread
-    pool (elementwise the same operations, exact minima and maxima: the same numbers as whole
-    arrays): for the receivers in front of the light's origin (``all``) and, when ``facing`` (the
-    light's emission axis) is given, those also in front of its plane (``front``): their count,
-    the window (l, r, b, t: tangents widened by ``margin`` at each one's depth), depth range and
-    how many lie beyond the ±80° window (``outside``, never counting those behind the plane)."""
-    from wsoft.parallel import run_row_blocks
+FIT_BLOCK = 8192  # points a thread of the fit's reduction kernels walks (one row of partial results each)
+F64_BIG = wp.constant(wp.float64(1.0e300))
 
-    parts: list[dict] = []
 
-    def block(a: int, e: int) -> None:
-        v = to_frame(rec[a:e], origin, axes, threads=False)
-        ok = v[:, 2] > zmin_ok
-        if facing is not None:
-            d = rec[a:e] - origin
-            behind = (d[:, 0] * facing[0] + d[:, 1] * facing[1] + d[:, 2] * facing[2]) >= 0.0
-        else:
-            behind = np.zeros(e - a, bool)
-        out = {}
-        for key, sel in (("all", ok), ("front", ok & ~behind)):
-            n = int(np.count_nonzero(sel))
-            if n == 0:
-                out[key] = {"n": 0, "outside": int(np.count_nonzero(~sel & ~behind))}
-                continue
-            z = v[sel, 2]
-            tx = v[sel, 0] / z
-            ty = v[sel, 1] / z
-            mz = margin / np.maximum(z, zmin_ok) if margin > 0 else 0.0
-            inside = (np.abs(tx) <= MAX_TAN) & (np.abs(ty) <= MAX_TAN)
-            out[key] = {"n": n, "l": float(np.min(tx - mz)), "r": float(np.max(tx + mz)), "b": float(np.min(ty - mz)),
-                        "t": float(np.max(ty + mz)), "zmin": float(z.min()), "zmax": float(z.max()),
-                        "outside": int(np.count_nonzero(~sel & ~behind)) + int(np.count_nonzero(~inside & ~behind[sel]))}
-        parts.append(out)
+@wp.kernel
+def bounds_partials(
+    offset: int,
+    n: int,
+    pts: wp.array[wp.vec3],
+    # outputs
+    part: wp.array2d[wp.float64],
+):
+    """Per block of :data:`FIT_BLOCK` points: min (3), max (3) and sum (3) of the coordinates, in float64."""
+    b = wp.tid() + offset
+    lo = wp.vec3d(F64_BIG, F64_BIG, F64_BIG)
+    hi = wp.vec3d(-F64_BIG, -F64_BIG, -F64_BIG)
+    sm = wp.vec3d(wp.float64(0.0), wp.float64(0.0), wp.float64(0.0))
+    for i in range(b * FIT_BLOCK, wp.min(b * FIT_BLOCK + FIT_BLOCK, n)):
+        p = pts[i]
+        q = wp.vec3d(wp.float64(p[0]), wp.float64(p[1]), wp.float64(p[2]))
+        lo = wp.min(lo, q)
+        hi = wp.max(hi, q)
+        sm = sm + q
+    for k in range(3):
+        part[b, k] = lo[k]
+        part[b, 3 + k] = hi[k]
+        part[b, 6 + k] = sm[k]
 
-    run_row_blocks(len(rec), block, min_rows=32768)
+
+@wp.kernel
+def local_fit_partials(
+    offset: int,
+    n: int,
+    pts: wp.array[wp.vec3],
+    origin: wp.vec3d,
+    axes: wp.mat33d,
+    facing: wp.vec3d,
+    use_facing: int,
+    zmin_ok: wp.float64,
+    margin: wp.float64,
+    max_tan: wp.float64,
+    # outputs
+    part: wp.array2d[wp.float64],
+):
+    """Per block of :data:`FIT_BLOCK` receivers, what a local light's fit needs (see
+    :func:`_local_fit_stats`): for ``all`` (columns 0-6) and ``front`` (7-13) the count, l, r, b, t,
+    zmin, zmax; column 14 the receivers outside the ±80° window (never those behind the plane)."""
+    b = wp.tid() + offset
+    zero = wp.float64(0.0)
+    cnt = wp.vec2d(zero, zero)
+    l = wp.vec2d(F64_BIG, F64_BIG)
+    r = wp.vec2d(-F64_BIG, -F64_BIG)
+    bo = wp.vec2d(F64_BIG, F64_BIG)
+    t = wp.vec2d(-F64_BIG, -F64_BIG)
+    zlo = wp.vec2d(F64_BIG, F64_BIG)
+    zhi = wp.vec2d(-F64_BIG, -F64_BIG)
+    outside = zero
+    for i in range(b * FIT_BLOCK, wp.min(b * FIT_BLOCK + FIT_BLOCK, n)):
+        p = pts[i]
+        d = wp.vec3d(wp.float64(p[0]), wp.float64(p[1]), wp.float64(p[2])) - origin
+        # (p - origin) @ axes, in to_frame's order
+        vx = d[0] * axes[0, 0] + d[1] * axes[1, 0] + d[2] * axes[2, 0]
+        vy = d[0] * axes[0, 1] + d[1] * axes[1, 1] + d[2] * axes[2, 1]
+        z = d[0] * axes[0, 2] + d[1] * axes[1, 2] + d[2] * axes[2, 2]
+        behind = False
+        if use_facing != 0:
+            behind = (d[0] * facing[0] + d[1] * facing[1] + d[2] * facing[2]) >= zero
+        if z > zmin_ok:
+            tx = vx / z
+            ty = vy / z
+            mz = zero
+            if margin > zero:
+                mz = margin / wp.max(z, zmin_ok)
+            if not behind and (wp.abs(tx) > max_tan or wp.abs(ty) > max_tan):
+                outside += wp.float64(1.0)
+            for k in range(2):
+                if k == 0 or not behind:
+                    cnt[k] = cnt[k] + wp.float64(1.0)
+                    l[k] = wp.min(l[k], tx - mz)
+                    r[k] = wp.max(r[k], tx + mz)
+                    bo[k] = wp.min(bo[k], ty - mz)
+                    t[k] = wp.max(t[k], ty + mz)
+                    zlo[k] = wp.min(zlo[k], z)
+                    zhi[k] = wp.max(zhi[k], z)
+        elif not behind:
+            outside += wp.float64(1.0)
+    for k in range(2):
+        part[b, 7 * k] = cnt[k]
+        part[b, 7 * k + 1] = l[k]
+        part[b, 7 * k + 2] = r[k]
+        part[b, 7 * k + 3] = bo[k]
+        part[b, 7 * k + 4] = t[k]
+        part[b, 7 * k + 5] = zlo[k]
+        part[b, 7 * k + 6] = zhi[k]
+    part[b, 14] = outside
+
+
+def _fit_points(rec: np.ndarray) -> wp.array:
+    """Receivers as a float32 vec3 array on the CPU (no copy when they already are float32)."""
+    return wp.array(np.ascontiguousarray(rec, np.float32).reshape(-1, 3), dtype=wp.vec3, device="cpu", copy=False)
+
+
+def _partials(kernel, pts: wp.array, columns: int, inputs: list) -> np.ndarray:
+    """Run a per-block reduction kernel over the thread pool (each block writes its own row)."""
+    from wsoft.parallel import launch_chunked
+
+    n = pts.shape[0]
+    blocks = max(1, (n + FIT_BLOCK - 1) // FIT_BLOCK)
+    part = wp.empty((blocks, columns), dtype=wp.float64, device="cpu")
+    launch_chunked(kernel, blocks, inputs=[n, pts] + inputs, outputs=[part], device="cpu", min_chunk=1, per_thread=2)
+    return part.numpy()
+
+
+def receiver_bounds(pts: wp.array) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(min, max, mean) of the receivers (float64), by :func:`bounds_partials`."""
+    pr = _partials(bounds_partials, pts, 9, [])
+    return pr[:, 0:3].min(axis=0), pr[:, 3:6].max(axis=0), pr[:, 6:9].sum(axis=0) / max(pts.shape[0], 1)
+
+
+def _local_fit_stats(pts: wp.array, origin: np.ndarray, axes: np.ndarray, facing: np.ndarray | None, zmin_ok: float, margin: float) -> dict:
+    """What a local light's view fit needs of the receivers (:func:`local_fit_partials` over the
+    CPU thread pool, in float64): for the receivers in front of the light's origin (``all``) and,
+    when ``facing`` (the light's emission axis) is given, those also in front of its plane
+    (``front``): their count, the window (l, r, b, t: tangents widened by ``margin`` at each one's
+    depth), depth range and how many lie beyond the ±80° window (``outside``, never counting those
+    behind the plane)."""
+    f = np.zeros(3) if facing is None else np.asarray(facing, np.float64)
+    pr = _partials(local_fit_partials, pts, 15,
+                   [wp.vec3d(*np.asarray(origin, np.float64)), wp.mat33d(*np.asarray(axes, np.float64).ravel()), wp.vec3d(*f),
+                    int(facing is not None), wp.float64(zmin_ok), wp.float64(margin), wp.float64(MAX_TAN)])
+    outside = int(pr[:, 14].sum())
     res = {}
-    for key in ("all", "front"):
-        ps = [p[key] for p in parts]
-        full = [p for p in ps if p["n"]]
-        r = {"n": sum(p["n"] for p in ps), "outside": sum(p["outside"] for p in ps)}
-        if full:
-            r.update(l=min(p["l"] for p in full), r=max(p["r"] for p in full), b=min(p["b"] for p in full), t=max(p["t"] for p in full),
-                     zmin=min(p["zmin"] for p in full), zmax=max(p["zmax"] for p in full))
-        res[key] = r
+    for k, key in enumerate(("all", "front")):
+        c = pr[:, 7 * k: 7 * k + 7]
+        n = int(c[:, 0].sum())
+        res[key] = {"n": n, "outside": outside}
+        if n:
+            res[key].update(l=float(c[:, 1].min()), r=float(c[:, 2].max()), b=float(c[:, 3].min()), t=float(c[:, 4].max()),
+                            zmin=float(c[:, 5].min()), zmax=float(c[:, 6].max()))
     return res
 
 
@@ -254,10 +348,11 @@ def fit_light_view(
         from wsoft.errors import ParameterError
 
         raise ParameterError(f"shadow_map_size {size} out of range [256, 8192]")
-    rec = np.asarray(receivers, np.float64).reshape(-1, 3)
+    rec = np.asarray(receivers).reshape(-1, 3)
     if len(rec) == 0:
         rec = np.stack([scene_lo, scene_hi])
-    rlo, rhi = rec.min(axis=0), rec.max(axis=0)
+    pts = _fit_points(rec)
+    rlo, rhi, rmean = receiver_bounds(pts)
     ext = frame_extent_of_bounds(rlo, rhi, light)
     if light.kind == LIGHT_DISTANT:
         axes = np.stack([light.frame[:, 0], light.frame[:, 1], -light.frame[:, 2]], axis=1)  # view along emission
@@ -289,7 +384,7 @@ def fit_light_view(
     else:
         origin = np.asarray(light.position, np.float64)
         if light.kind in (LIGHT_SPHERE, LIGHT_POINT):
-            d = rec.mean(axis=0) - origin
+            d = rmean - origin
             axes = _basis_from_axis(d if np.linalg.norm(d) > 1e-9 * ext else -light.frame[:, 2])
         else:
             axes = np.stack([light.frame[:, 0], -light.frame[:, 1], -light.frame[:, 2]], axis=1)  # right-handed, view along −Z
@@ -297,7 +392,7 @@ def fit_light_view(
         # a rect or disk light emits forward only: receivers behind its plane see nothing of it
         # (the horizon rule darkens them), so they are neither fitted nor counted outside
         one_sided = light.kind not in (LIGHT_SPHERE, LIGHT_POINT)
-        st = _local_fit_stats(rec, origin, axes, np.asarray(light.frame, np.float64)[:, 2] if one_sided else None, zmin_ok, margin)
+        st = _local_fit_stats(pts, origin, axes, np.asarray(light.frame, np.float64)[:, 2] if one_sided else None, zmin_ok, margin)
         s = st["front"] if one_sided and st["front"]["n"] else st["all"]
         if s["n"]:
             l, r, b, t = s["l"], s["r"], s["b"], s["t"]
@@ -454,6 +549,36 @@ def receiver_plane_depth(lv: ViewGPU, pv: wp.vec3, nv: wp.vec3, m: wp.vec2) -> f
     if wp.abs(nv[2]) < 1.0e-6:
         return MISS
     return pv[2] - (nv[0] * (m[0] - pv[0]) + nv[1] * (m[1] - pv[1])) / nv[2]
+
+
+@wp.func
+def receiver_plane_affine(lv: ViewGPU, pv: wp.vec3, nv: wp.vec3):
+    """The receiver's tangent plane (point ``pv``, normal ``nv``, view space) over the map's texel
+    coordinates, where it is affine in q = depth (orthographic) or q = 1 / depth (perspective):
+    (ok, texel of ``pv``, q there, dq/dx, dq/dy). Not ok where the light sees the plane edge-on."""
+    xp = texel_of(lv, pv)
+    if lv.persp != 0:
+        npv = wp.dot(nv, pv)
+        if pv[2] <= 0.0 or wp.abs(npv) < 1.0e-6 * wp.length(pv):
+            return False, xp, 0.0, 0.0, 0.0
+        k = 1.0 / npv  # q(m) = k (nv . (m, 1)) over window coordinates m
+        return True, xp, 1.0 / pv[2], k * nv[0] / lv.scale[0], k * nv[1] / lv.scale[1]
+    if wp.abs(nv[2]) < 1.0e-6:
+        return False, xp, 0.0, 0.0, 0.0
+    return True, xp, pv[2], -nv[0] / (nv[2] * lv.scale[0]), -nv[1] / (nv[2] * lv.scale[1])
+
+
+@wp.func
+def receiver_plane_nearest(lv: ViewGPU, xp: wp.vec2, qp: float, gx: float, gy: float, xa: float, ya: float, xb: float, yb: float) -> float:
+    """The nearest depth of a plane (:func:`receiver_plane_affine`) over the texel rectangle
+    [xa, xb] x [ya, yb]; -1 where it passes behind a perspective view's origin there (no bound)."""
+    qc = qp + gx * (0.5 * (xa + xb) - xp[0]) + gy * (0.5 * (ya + yb) - xp[1])
+    h = 0.5 * ((xb - xa) * wp.abs(gx) + (yb - ya) * wp.abs(gy))
+    if lv.persp != 0:
+        if qc - h <= 0.0:
+            return -1.0
+        return 1.0 / (qc + h)
+    return qc - h
 
 
 @wp.func

@@ -17,7 +17,9 @@ warp.fem builds its kernels): nothing unused is compiled in.
 * **conservative** — every texel a triangle touches (and those within
   :data:`CONSERVATIVE_MARGIN` of a texel's edge, so that rounding never drops one), with the
   nearest depth over the texel (clamped to the triangle's range), instead of the texel centres it
-  covers.
+  covers. **inner** (with conservative) is its opposite: only texels the triangle covers whole
+  (within the same margin), with the *farthest* depth over the texel, and never a cutout triangle
+  (its holes may let light through): a map of depths that certainly block every ray of the texel.
 * **alpha** — triangles with a cutout material are alpha-tested per texel (perspective-correct
   uv at the texel centre).
 
@@ -47,7 +49,7 @@ import warp as wp
 
 from wsoft.lightspace.view import DEPTH_CLEAR, LightView, ViewGPU, texel_of, view_of
 from wsoft.parallel import cpu_threads, ensure_loaded, launch_chunked, run_tasks
-from wsoft.scene.device import DeviceScene, Surfaces, surface_present, view_surfaces
+from wsoft.scene.device import DeviceScene, Surfaces, surface_present, view_surfaces, without_culling
 
 GPU_BAND_ROWS = 64  # CUDA: rows per band (one thread per triangle and band)
 SMALL_BOX_TEXELS = wp.constant(8)  # triangles whose texel box is this small take the flat loop
@@ -220,7 +222,7 @@ def corner_weights(l0: float, l1: float, l2: float, qa: float, qb: float, qc: fl
 # --------------------------------------------------------------------------- the factory
 
 
-def _make_raster_triangle(persp: bool, spec: FragmentSpec, conservative: bool, alpha: bool):
+def _make_raster_triangle(persp: bool, spec: FragmentSpec, conservative: bool, alpha: bool, inner: bool = False):
     """The scan conversion of one (clipped) triangle, specialised; calls the fragment per texel."""
     Target = spec.target
     frag = spec.func
@@ -249,6 +251,9 @@ def _make_raster_triangle(persp: bool, spec: FragmentSpec, conservative: bool, a
         area = edge(ta[0], ta[1], tb[0], tb[1], tc[0], tc[1])
         if wp.abs(area) < 1.0e-12:
             return
+        if wp.static(inner):
+            if alpha_on != 0:  # a cutout may have a hole anywhere: it blocks no texel for certain
+                return
         xmin = wp.min(ta[0], wp.min(tb[0], tc[0]))
         xmax = wp.max(ta[0], wp.max(tb[0], tc[0]))
         ymin = wp.min(ta[1], wp.min(tb[1], tc[1]))
@@ -412,7 +417,15 @@ def _make_raster_triangle(persp: bool, spec: FragmentSpec, conservative: bool, a
                     l1 = edge(tc[0], tc[1], ta[0], ta[1], px, py) * inv_area
                     l2 = 1.0 - l0 - l1
                     if not spans:
-                        if wp.static(conservative):
+                        if wp.static(inner):
+                            covered = l0 - hx0 >= 0.0 and l1 - hx1 >= 0.0 and l2 - hx2 >= 0.0
+                            # farthest depth over the texel square (q = 1/z: the smallest q)
+                            if wp.static(persp):
+                                q = q - 0.5 * (wp.abs(qx) + wp.abs(qy))
+                            else:
+                                q = q + 0.5 * (wp.abs(qx) + wp.abs(qy))
+                            q = wp.clamp(q, qmin, qmax)
+                        elif wp.static(conservative):
                             covered = l0 + hx0 >= 0.0 and l1 + hx1 >= 0.0 and l2 + hx2 >= 0.0
                             # nearest depth over the texel square, kept within the triangle's range
                             if wp.static(persp):
@@ -438,10 +451,10 @@ def _make_raster_triangle(persp: bool, spec: FragmentSpec, conservative: bool, a
     return wp.func(raster_triangle, module="unique")
 
 
-def _make_kernel(persp: bool, spec: FragmentSpec, conservative: bool, alpha: bool, listed: bool, defer_big: bool):
+def _make_kernel(persp: bool, spec: FragmentSpec, conservative: bool, alpha: bool, listed: bool, defer_big: bool, inner: bool = False):
     """One thread per (band of rows, triangle): project, cull, clip at the near plane, scan-convert."""
     Target = spec.target
-    raster_triangle = _make_raster_triangle(persp, spec, conservative, alpha)
+    raster_triangle = _make_raster_triangle(persp, spec, conservative, alpha, inner)
 
     def rasterize_triangles(
         offset: int,
@@ -574,19 +587,20 @@ class RasterStats:
 
 @dataclass(eq=False)
 class Rasterizer:
-    """Kernels of one (projection, fragment, conservative, alpha) combination and their scheduling.
-    Made by :func:`make_rasterizer`; kernels are generated on first use."""
+    """Kernels of one (projection, fragment, conservative, alpha, inner) combination and their
+    scheduling. Made by :func:`make_rasterizer`; kernels are generated on first use."""
 
     persp: bool
     spec: FragmentSpec
     conservative: bool
     alpha: bool
+    inner: bool = False
     _kernels: dict = field(default_factory=dict)
 
     def kernel(self, listed: bool, defer_big: bool):
         key = (listed, defer_big)
         if key not in self._kernels:
-            self._kernels[key] = _make_kernel(self.persp, self.spec, self.conservative, self.alpha, listed, defer_big)
+            self._kernels[key] = _make_kernel(self.persp, self.spec, self.conservative, self.alpha, listed, defer_big, self.inner)
         return self._kernels[key]
 
     def run(self, points: wp.array, indices: wp.array, cut: Surfaces, view, target, device: str, *,
@@ -677,10 +691,13 @@ class Rasterizer:
 _RASTERIZERS: dict[tuple, Rasterizer] = {}
 
 
-def make_rasterizer(view, fragment_func, *, conservative: bool = False, alpha: bool = False) -> Rasterizer:
+def make_rasterizer(view, fragment_func, *, conservative: bool = False, alpha: bool = False, inner: bool = False) -> Rasterizer:
     """The rasterizer of ``view``'s projection (``"perspective"``, ``"orthographic"``, a
     :class:`LightView` or a :class:`ViewGPU`) that calls ``fragment_func`` (a fragment made with
-    :func:`fragment`) per covered texel, conservative or not, alpha-tested or not. Cached."""
+    :func:`fragment`) per covered texel, conservative or not (``inner``: only texels covered whole,
+    at their farthest depth; needs ``conservative``), alpha-tested or not. Cached."""
+    if inner and not conservative:
+        raise ValueError("inner coverage is a conservative mode: pass conservative=True")
     if isinstance(view, str):
         if view not in (PERSPECTIVE, ORTHOGRAPHIC):
             raise ValueError(f"view {view!r} is not {PERSPECTIVE} or {ORTHOGRAPHIC}")
@@ -690,9 +707,9 @@ def make_rasterizer(view, fragment_func, *, conservative: bool = False, alpha: b
     spec = FRAGMENTS.get(getattr(fragment_func, "key", None))
     if spec is None or spec.func is not fragment_func:
         raise ValueError(f"{fragment_func!r} is not a registered fragment (make it with @fragment)")
-    key = (persp, spec.name, bool(conservative), bool(alpha))
+    key = (persp, spec.name, bool(conservative), bool(alpha), bool(inner))
     if key not in _RASTERIZERS:
-        _RASTERIZERS[key] = Rasterizer(persp, spec, bool(conservative), bool(alpha))
+        _RASTERIZERS[key] = Rasterizer(persp, spec, bool(conservative), bool(alpha), bool(inner))
     return _RASTERIZERS[key]
 
 
@@ -707,6 +724,7 @@ class DepthMap:
     depth: wp.array
     alpha_tested: bool
     conservative: bool
+    inner: bool = False  # texels certainly blocked (inner coverage, farthest depth), else DEPTH_CLEAR
     private_maps: int = 0  # CPU worker maps merged into ``depth`` (temporaries, freed)
     big_triangles: int = 0  # CPU: triangles rasterized in the banded second pass
 
@@ -721,14 +739,18 @@ def rasterize(
     conservative: bool = False,
     triangles: np.ndarray | None = None,
     behind: wp.array | None = None,
+    inner: bool = False,
 ) -> DepthMap:
     """Rasterize the scene (or only ``triangles``, an index array) into a depth map for ``view``.
 
     ``behind``: a depth map of the same size; only surfaces behind it are written (the
-    inverted depth test, :func:`gated_depth_min`; texels where it is empty receive nothing)."""
+    inverted depth test, :func:`gated_depth_min`; texels where it is empty receive nothing).
+    ``inner``: per texel the nearest of the farthest depths of the triangles that cover it whole
+    (cutouts never do), far faces included (each adds coverage): a depth every ray through the
+    texel is certainly blocked at; ``DEPTH_CLEAR`` where no triangle covers the texel whole."""
     dev = ds.device
     shape = (view.height, view.width)
-    alpha = bool(alpha_tested and ds.has_cutouts)
+    alpha = bool((alpha_tested or inner) and ds.has_cutouts)
     subset = None if triangles is None else wp.array(np.asarray(triangles, np.int32), dtype=wp.int32, device=dev)
     if behind is None:
         target = DepthTarget()
@@ -738,8 +760,11 @@ def rasterize(
         target.gate = behind
         frag = gated_depth_min
     target.depth = wp.empty(shape, dtype=float, device=dev)
-    r = make_rasterizer(view, frag, conservative=conservative, alpha=alpha)
-    surfaces = view_surfaces(ds, view.origin if view.persp else None)  # no far-face skipping around a light inside a closed mesh
+    r = make_rasterizer(view, frag, conservative=conservative or inner, alpha=alpha, inner=inner)
+    if inner:
+        surfaces = without_culling(ds.cutouts, ds.indices.shape[0] // 3, dev)
+    else:
+        surfaces = view_surfaces(ds, view.origin if view.persp else None)  # no far-face skipping around a light inside a closed mesh
     st = r.run(ds.points, ds.indices, surfaces, view, target, dev, triangles=subset, initialized=False)
-    return DepthMap(view=view, depth=target.depth, alpha_tested=alpha, conservative=conservative,
+    return DepthMap(view=view, depth=target.depth, alpha_tested=alpha, conservative=conservative or inner, inner=inner,
                     private_maps=st.private_targets, big_triangles=st.big_triangles)

@@ -265,6 +265,12 @@ def view_surfaces(ds: "DeviceScene", origin: np.ndarray | None) -> Surfaces:
     return surfaces_with_cull(ds.cutouts, wp.array(cull, dtype=wp.int32, device=ds.device))
 
 
+def without_culling(cut: Surfaces, triangles: int, device: str) -> Surfaces:
+    """``cut`` with every triangle kept (no far-face skipping): for passes that must meet every
+    triangle a ray can (an irregular z-buffer's exact tests, an inner-coverage map)."""
+    return surfaces_with_cull(cut, wp.zeros(max(triangles, 1), dtype=wp.int32, device=device))
+
+
 def surfaces_with_cull(cut: Surfaces, cull: wp.array) -> Surfaces:
     """``cut`` (every field shared) with other far-face culling flags."""
     s = Surfaces()

@@ -46,31 +46,35 @@ Example::
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 import warp as wp
 
-from wsoft.accel.izb_grid import build_grid, izb_test, no_cull
-from wsoft.accel.pyramid import build_moments_pyramid
+from wsoft.accel.izb_grid import build_grid, izb_test
+from wsoft.accel.pyramid import build_bounds_pyramid, build_moments_pyramid
 from wsoft.errors import ParameterError
 from wsoft.lightspace.light import LightGPU, in_front, light_center_dir
-from wsoft.lightspace.view import ViewGPU, fit_light_view, texel_of, view_of
+from wsoft.lightspace.view import ViewGPU, fit_light_view, receiver_plane_affine, receiver_plane_nearest, texel_of, view_dir, view_of
 from wsoft.params import check_ranges
 from wsoft.parallel import launch_chunked
 from wsoft.raster.camera import CameraGPU, camera_gpu, subpixel_pattern
 from wsoft.raster.gbuffer import GBufferGPU, camera_ray, cast_primary, gb_covered, gb_pixel
 from wsoft.raster.rasterizer import make_rasterizer
 from wsoft.reference import ray_epsilon, ray_offset, ray_origin
-from wsoft.scene.device import Surfaces
+from wsoft.scene.device import Surfaces, without_culling
 from wsoft.scene.types import LIGHT_DISTANT, LIGHT_KIND_NAMES, LIGHT_POINT
 from wsoft.techniques.base import Quality, Technique, Tolerance, check, param
 
 AA_MODES = ("none", "adaptive", "supersample")
 PATTERNS = ("auto", "rotated_grid", "jittered")
+STENCILS = ("bounds", "vsm")
+SUBSAMPLES = ("auto", "recast", "plane")
 STENCIL_RASTER = ("conservative", "ordinary")
 STENCIL_RULES = ("cull", "listing")
 
+STENCIL_PARAMS = {"vsm": ("edge_threshold", "stencil_raster", "stencil_rule", "stencil_bias", "min_variance"),
+                  "bounds": ("bounds_bias", "bounds_texels")}
 RECEIVER_SLACK = wp.constant(3.5)  # the stencil's slack in receiver depth ranges over the texels read
 
 # sample states
@@ -85,25 +89,45 @@ class IZBParams:
     samples: int = param(4, "sub-pixel samples of a multi-sampled pixel: 4, 8 or 16", range=(4, 16))
     pattern: str = param("auto", "sub-pixel pattern: rotated_grid (4 only), jittered, auto (rotated grid at 4, else jittered)")
     seed: int = param(0, "seed of the jittered pattern", range=(0, 2**31 - 1))
-    edge_threshold: float = param(0.01, "stencil: a Chebyshev bound below this marks a pixel certainly lit or certainly shadowed",
+    subsamples: str = param("auto", "where sub-samples lie: auto (on the centre's plane, where the camera ray meets it, in pixels "
+                                    "whose 8 neighbours see that plane too and whose centre is not a cutout; re-cast through the scene "
+                                    "elsewhere), recast (every sub-sample's eye ray re-cast: exact surface points everywhere) or plane "
+                                    "(always on the centre's plane, as a reconstruction from depth: no scene query, wrong across "
+                                    "silhouettes)")
+    stencil: str = param("bounds", "adaptive's shadow-edge stencil: bounds (exact depth bounds from a conservative and an "
+                                   "inner-coverage map, per pixel plane: certain only where the maps prove it) or vsm (the paper: "
+                                   "one-tailed Chebyshev bounds of a mip-mapped variance shadow map, probabilistic)")
+    shadow_map_size: int = param(512, "texels per side of the stencil's light maps (a power of two)", range=(256, 4096))
+    bounds_bias: float = param(1e-4, "stencil=bounds: depth tolerance (fraction of the map's depth range) between a map and the "
+                                     "receiver's plane, for rounding", range=(0.0, 0.05))
+    bounds_texels: int = param(8, "stencil=bounds: texels per side compared per footprint (the finest pyramid level that covers "
+                                  "the pixel's footprint in as many)", range=(1, 64))
+    edge_threshold: float = param(0.01, "stencil=vsm: a Chebyshev bound below this marks a pixel certainly lit or certainly shadowed",
                                   range=(1e-6, 0.5))
-    shadow_map_size: int = param(512, "texels per side of the stencil's variance shadow map (a power of two)", range=(256, 4096))
-    stencil_raster: str = param("conservative", "stencil: rasterization of its depth map: conservative (the paper) or ordinary (Fig. 1.6.7)")
-    stencil_rule: str = param("cull", "stencil: cull (a potential edge is neither certainly lit nor certainly shadowed, the paper's text) "
-                                      "or listing (Listing 1.6.1 read literally: either bound below the threshold)")
-    stencil_bias: float = param(0.015, "stencil: depth offset (fraction of the map's depth range) an occluder must lie in front of a "
-                                       "receiver; at least 10 sqrt(min_variance) for a receiver ever to be certainly lit", range=(0.0, 0.5))
-    min_variance: float = param(1e-6, "stencil: the variance floor of the Chebyshev bounds (normalised depth)", range=(0.0, 0.01))
+    stencil_raster: str = param("conservative", "stencil=vsm: rasterization of its depth map: conservative (the paper) or ordinary "
+                                                "(Fig. 1.6.7)")
+    stencil_rule: str = param("cull", "stencil=vsm: cull (a potential edge is neither certainly lit nor certainly shadowed, the paper's "
+                                      "text) or listing (Listing 1.6.1 read literally: either bound below the threshold)")
+    stencil_bias: float = param(0.015, "stencil=vsm: depth offset (fraction of the map's depth range) an occluder must lie in front of "
+                                       "a receiver; at least 10 sqrt(min_variance) for a receiver ever to be certainly lit", range=(0.0, 0.5))
+    min_variance: float = param(1e-6, "stencil=vsm: the variance floor of the Chebyshev bounds (normalised depth)", range=(0.0, 0.01))
 
     def __post_init__(self):
         check_ranges(self)
         check(self.aa in AA_MODES, f"aa {self.aa!r} is not one of {', '.join(AA_MODES)}")
         check(self.samples in (4, 8, 16), f"samples {self.samples} is not 4, 8 or 16")
+        check(self.subsamples in SUBSAMPLES, f"subsamples {self.subsamples!r} is not one of {', '.join(SUBSAMPLES)}")
         check(self.pattern in PATTERNS, f"pattern {self.pattern!r} is not one of {', '.join(PATTERNS)}")
         check(not (self.pattern == "rotated_grid" and self.samples != 4), f"the rotated grid has 4 samples, not {self.samples}")
         check(256 <= self.grid_size <= 8192, f"grid_size {self.grid_size} out of range [256, 8192]")
         m = self.shadow_map_size
         check(256 <= m <= 4096 and m & (m - 1) == 0, f"shadow_map_size {m} is not a power of two in [256, 4096]")
+        check(self.stencil in STENCILS, f"stencil {self.stencil!r} is not one of {', '.join(STENCILS)}")
+        for other, names in STENCIL_PARAMS.items():
+            if other != self.stencil:
+                stray = [f.name for f in fields(self) if f.name in names and getattr(self, f.name) != f.default]
+                check(not stray, f"{', '.join(stray)}: only stencil={other} reads {'it' if len(stray) == 1 else 'them'}, "
+                                 f"and this is stencil={self.stencil}")
         check(self.stencil_raster in STENCIL_RASTER, f"stencil_raster {self.stencil_raster!r} is not one of {', '.join(STENCIL_RASTER)}")
         check(self.stencil_rule in STENCIL_RULES, f"stencil_rule {self.stencil_rule!r} is not one of {', '.join(STENCIL_RULES)}")
 
@@ -192,8 +216,9 @@ def sub_samples(
     cut: Surfaces,
     has_cutouts: int,
     cam: CameraGPU,
-    width: int,
-    height: int,
+    gb: GBufferGPU,
+    mixed: wp.array[wp.int32],
+    mode: int,
     L: LightGPU,
     eps: float,
     # outputs
@@ -202,17 +227,35 @@ def sub_samples(
     tmax: wp.array[float],
     state: wp.array[wp.int32],
     insert: wp.array[wp.int32],
+    recast: wp.array[wp.int32],
 ):
-    """Sub-sample s of multi-sampled pixel j: its eye ray re-cast at the sub-pixel offset."""
+    """Sub-sample s of multi-sampled pixel j at its sub-pixel offset: on the plane of the pixel's
+    centre (where the camera ray meets it: no scene query) or by re-casting its eye ray through the
+    scene. ``mode`` (:data:`SUBSAMPLES`): 0 auto — on the plane where the pixel sees that plane
+    alone (``mixed`` 0, :func:`other_surface_near`), else re-cast; 1 recast — always; 2 plane —
+    always on the plane (re-cast only where the ray misses it). ``recast`` = 1 where re-cast."""
     k = wp.tid() + offset
     j = k / n_sub
     s = k - j * n_sub
     pix = pixels[j]
-    row = pix / width
-    col = pix - row * width
+    xy = gb_pixel(gb, pix)
     off = pattern[s]
-    found, p, n, face, bu, bv, dist = cast_primary(mesh, cut, has_cutouts, cam, width, height, float(col) + off[0], float(row) + off[1])
-    store_sample(base + k, found != 0, L, p, n, eps, True, origin, dir, tmax, state, insert)
+    fx = float(xy[0]) + off[0]
+    fy = float(xy[1]) + off[1]
+    recast[k] = 1
+    if mode == 2 or (mode == 0 and mixed[pix] == 0):
+        o, d, t0, t1 = camera_ray(cam, gb.width, gb.height, fx, fy)
+        pc = gb.pos[pix]
+        nc = gb.nrm[pix]
+        den = wp.dot(d, nc)
+        if den < -1.0e-8:  # the plane faces the camera (its normal is viewer-facing)
+            t = wp.dot(pc - o, nc) / den
+            if t >= t0 and t <= t1:
+                recast[k] = 0
+                store_sample(base + k, True, L, o + d * t, nc, eps, True, origin, dir, tmax, state, insert)
+    if recast[k] != 0:
+        found, p, n, face, bu, bv, dist = cast_primary(mesh, cut, has_cutouts, cam, gb.width, gb.height, fx, fy)
+        store_sample(base + k, found != 0, L, p, n, eps, True, origin, dir, tmax, state, insert)
 
 
 @wp.kernel
@@ -411,6 +454,196 @@ def edge_stencil(
         edge[i] = 1
 
 
+@wp.func
+def same_plane(p: wp.vec3, n: wp.vec3, q: wp.vec3, m: wp.vec3) -> bool:
+    """Does the surface point (q, m) lie on the plane (p, n), to float precision?"""
+    return wp.dot(m, n) >= 0.9999 and wp.abs(wp.dot(q - p, n)) <= 1.0e-4 * wp.length(q - p)
+
+
+@wp.func
+def other_surface_near(gb: GBufferGPU, cut: Surfaces, i: int) -> int:
+    """1 where pixel i may see more than its centre's plane: a neighbour (of 8) on another plane or
+    on nothing, or a cutout under its centre (a hole may open anywhere in the pixel); else 0."""
+    if cut.tri_cut[gb.prim[i]] >= 0:
+        return 1
+    p = gb.pos[i]
+    n = gb.nrm[i]
+    xy = gb_pixel(gb, i)
+    for k in range(9):
+        nx = xy[0] + k % 3 - 1
+        ny = xy[1] + k / 3 - 1
+        if k != 4 and nx >= 0 and ny >= 0 and nx < gb.width and ny < gb.height:
+            j = ny * gb.width + nx
+            pr = gb.prim[j]
+            if pr < 0:
+                return 1
+            if pr != gb.prim[i] and not same_plane(p, n, gb.pos[j], gb.nrm[j]):  # another triangle, maybe coplanar
+                return 1
+    return 0
+
+
+@wp.kernel
+def mixed_pixels(
+    offset: int,
+    gb: GBufferGPU,
+    cut: Surfaces,
+    # outputs
+    mixed: wp.array[wp.int32],
+):
+    """:func:`other_surface_near` for every covered pixel (0 elsewhere)."""
+    i = wp.tid() + offset
+    mixed[i] = 0
+    if gb_covered(gb, i):
+        mixed[i] = other_surface_near(gb, cut, i)
+
+
+@wp.func
+def footprint_certainty(
+    lv: ViewGPU,
+    cam: CameraGPU,
+    width: int,
+    height: int,
+    xy: wp.vec2i,
+    L: LightGPU,
+    p: wp.vec3,
+    n: wp.vec3,
+    bounds: wp.array[wp.vec2],
+    level_off: wp.array[wp.int32],
+    levels: int,
+    map_size: int,
+    bias: float,
+    max_texels: int,
+) -> wp.vec2i:
+    """Is the part of pixel ``xy`` on the plane (``p``, ``n``) certainly lit, certainly shadowed
+    (1 / 0 each)? Exact bounds, no probability: every texel of the finest pyramid level that
+    covers the footprint in at most ``max_texels`` per side is compared with the plane's own depth
+    over it. Certainly lit: the nearest depth of anything touching the texel (conservative map)
+    is no nearer than the plane anywhere in the texel. Certainly shadowed: the texel is covered
+    whole by a blocker (inner map) nearer than the plane anywhere in the footprint part of the
+    texel."""
+    c = light_center_dir(L, p)
+    if not in_front(n, wp.vec3(c[0], c[1], c[2])):
+        return wp.vec2i(0, 1)  # the light's centre is behind the plane: every sample on it is shadowed
+    ok, xp, q0, gx, gy = receiver_plane_affine(lv, view_of(lv, p), view_dir(lv, n))
+    if not ok:
+        return wp.vec2i(0, 0)
+    xmin = float(1.0e30)
+    xmax = float(-1.0e30)
+    ymin = float(1.0e30)
+    ymax = float(-1.0e30)
+    for k in range(4):
+        o, d, t0, t1 = camera_ray(cam, width, height, float(xy[0] + k % 2), float(xy[1] + k / 2))
+        den = wp.dot(d, n)
+        if wp.abs(den) < 1.0e-8:
+            return wp.vec2i(0, 0)
+        s = wp.dot(p - o, n) / den
+        if s <= 0.0:
+            return wp.vec2i(0, 0)
+        v = view_of(lv, o + d * s)
+        if lv.persp != 0 and v[2] <= lv.near:
+            return wp.vec2i(0, 0)
+        corner = texel_of(lv, v)
+        xmin = wp.min(xmin, corner[0])
+        xmax = wp.max(xmax, corner[0])
+        ymin = wp.min(ymin, corner[1])
+        ymax = wp.max(ymax, corner[1])
+    # a hair wider against rounding; outside the map nothing is known
+    xmin -= 0.01
+    ymin -= 0.01
+    xmax += 0.01
+    ymax += 0.01
+    fs = float(map_size)
+    if not (xmin >= 0.0 and ymin >= 0.0 and xmax < fs and ymax < fs):
+        return wp.vec2i(0, 0)
+    lev = int(0)
+    while lev < levels - 1 and (int(xmax) / (1 << lev) - int(xmin) / (1 << lev) >= max_texels
+                                or int(ymax) / (1 << lev) - int(ymin) / (1 << lev) >= max_texels):
+        lev += 1
+    size = map_size >> lev
+    side = float(1 << lev)
+    tx0 = int(xmin) >> lev
+    ty0 = int(ymin) >> lev
+    nx = (int(xmax) >> lev) - tx0 + 1
+    count = nx * ((int(ymax) >> lev) - ty0 + 1)
+    lit = int(1)
+    shadowed = int(1)
+    for k in range(count):
+        tx = tx0 + k % nx
+        ty = ty0 + k / nx
+        j = level_off[lev] + ty * size + tx
+        xa = float(tx) * side
+        ya = float(ty) * side
+        near_all = receiver_plane_nearest(lv, xp, q0, gx, gy, xa, ya, xa + side, ya + side)
+        near_fp = receiver_plane_nearest(lv, xp, q0, gx, gy, wp.max(xa, xmin), wp.max(ya, ymin), wp.min(xa + side, xmax), wp.min(ya + side, ymax))
+        m = bounds[j]
+        if near_all < 0.0 or m[0] < near_all - bias:
+            lit = 0
+        if near_fp < 0.0 or m[1] >= near_fp - bias:
+            shadowed = 0
+        if lit == 0 and shadowed == 0:
+            break
+    return wp.vec2i(lit, shadowed)
+
+
+@wp.kernel
+def bounds_stencil(
+    offset: int,
+    gb: GBufferGPU,
+    cam: CameraGPU,
+    lv: ViewGPU,
+    L: LightGPU,
+    bounds: wp.array[wp.vec2],
+    level_off: wp.array[wp.int32],
+    levels: int,
+    map_size: int,
+    bias: float,
+    max_texels: int,
+    pattern: wp.array[wp.vec2],
+    mesh: wp.uint64,
+    cut: Surfaces,
+    has_cutouts: int,
+    # outputs
+    edge: wp.array[wp.int32],
+    probed: wp.array[wp.int32],
+):
+    """Potential shadow-edge pixels (1) by exact depth bounds (:func:`footprint_certainty`): a pixel
+    is certain when its part on its own plane is certainly lit or certainly shadowed and, where a
+    neighbour's surface differs (a silhouette or a crease may cross the pixel), so is its part on
+    the plane of every surface its sub-pixel eye rays meet (``pattern``, the sub-samples the pixel
+    would get; ``probed`` = 1 where they were cast)."""
+    i = wp.tid() + offset
+    edge[i] = 0
+    probed[i] = 0
+    if not gb_covered(gb, i):
+        return
+    p = gb.pos[i]
+    n = gb.nrm[i]
+    xy = gb_pixel(gb, i)
+    r = footprint_certainty(lv, cam, gb.width, gb.height, xy, L, p, n, bounds, level_off, levels, map_size, bias, max_texels)
+    lit = r[0]
+    shadowed = r[1]
+    if lit == 0 and shadowed == 0:
+        edge[i] = 1
+        return
+    if other_surface_near(gb, cut, i) == 0:
+        return
+    probed[i] = 1
+    for s in range(pattern.shape[0]):
+        if lit == 0 and shadowed == 0:
+            break
+        off = pattern[s]
+        found, q, m, face, bu, bv, dist = cast_primary(mesh, cut, has_cutouts, cam, gb.width, gb.height,
+                                                       float(xy[0]) + off[0], float(xy[1]) + off[1])
+        if found != 0:
+            if not same_plane(p, n, q, m):
+                r = footprint_certainty(lv, cam, gb.width, gb.height, xy, L, q, m, bounds, level_off, levels, map_size, bias,
+                                        max_texels)
+                lit = lit * r[0]
+                shadowed = shadowed * r[1]
+    if lit == 0 and shadowed == 0:
+        edge[i] = 1
+
+
 # --------------------------------------------------------------------------- the technique
 
 
@@ -450,8 +683,38 @@ class IZB(Technique):
         counters["light"] = self.treatment(light)
         n_sub = p.samples if p.aa != "none" else 0
 
+        def edge_counters(edge, gb):
+            e = edge.numpy()
+            covered = int((gb.prim.numpy() >= 0).sum())
+            counters["edge_pixels"] = int(e.sum())
+            counters["edge_fraction"] = float(e.sum() / covered) if covered else 0.0
+            return edge
+
         stencil = None
-        if p.aa == "adaptive":
+        if p.aa == "adaptive" and p.stencil == "bounds":
+            outer = ctx.light_depth(light, size=p.shadow_map_size, conservative=True, opaque=True)
+            inner = ctx.light_depth(light, size=p.shadow_map_size, inner=True)
+            stencil = ctx.key("izb_stencil", light)
+
+            def run_bounds(res):
+                gb, dm, di = res[gbuf], res[outer], res[inner]
+                v = dm.view
+                pyr, offs = build_bounds_pyramid(dm.depth, di.depth, dev)
+                ds = res[sk]
+                edge = wp.empty(gb.count, dtype=wp.int32, device=dev)
+                probed = wp.empty(gb.count, dtype=wp.int32, device=dev)
+                pat = subpixel_pattern(n_sub, p.pattern_kind, p.seed)
+                launch_chunked(bounds_stencil, gb.count,
+                               inputs=[gb.gpu(), cam, v.gpu(), L, pyr, wp.array(offs, dtype=wp.int32, device=dev), len(offs) - 1,
+                                       p.shadow_map_size, p.bounds_bias * max(v.far - v.near, 1e-12), p.bounds_texels,
+                                       wp.array(pat, dtype=wp.vec2, device=dev), ds.mesh.id, ds.cutouts, int(ds.has_cutouts)],
+                               outputs=[edge, probed], device=dev)
+                counters["stencil_probed_pixels"] = int(probed.numpy().sum())
+                return {stencil: edge_counters(edge, gb)}
+
+            ctx.add_pass(ctx.pass_name("izb_stencil", light), inputs=(gbuf, sk, outer, inner), outputs=(stencil,), run=run_bounds,
+                         light=light)
+        elif p.aa == "adaptive":
             depth = ctx.light_depth(light, size=p.shadow_map_size, conservative=p.stencil_raster == "conservative")
             stencil = ctx.key("izb_stencil", light)
 
@@ -467,11 +730,7 @@ class IZB(Technique):
                                        p.shadow_map_size, scale, p.edge_threshold, p.min_variance, p.stencil_bias,
                                        int(p.stencil_rule == "listing")],
                                outputs=[edge, lev], device=dev)
-                e = edge.numpy()
-                covered = int((gb.prim.numpy() >= 0).sum())
-                counters["edge_pixels"] = int(e.sum())
-                counters["edge_fraction"] = float(e.sum() / covered) if covered else 0.0
-                return {stencil: edge}
+                return {stencil: edge_counters(edge, gb)}
 
             ctx.add_pass(ctx.pass_name("izb_stencil", light), inputs=(gbuf, depth), outputs=(stencil,), run=run_stencil, light=light)
 
@@ -503,12 +762,20 @@ class IZB(Technique):
             launch_chunked(centre_samples, n0, inputs=[L, gb.gpu(), eps, multi], outputs=outs, device=dev)
             if len(pixels):
                 pat = subpixel_pattern(n_sub, p.pattern_kind, p.seed)
+                mode = SUBSAMPLES.index(p.subsamples)
+                mixed = wp.zeros(1, dtype=wp.int32, device=dev)
+                if p.subsamples == "auto":
+                    mixed = wp.empty(n0, dtype=wp.int32, device=dev)
+                    launch_chunked(mixed_pixels, n0, inputs=[gb.gpu(), ds.cutouts], outputs=[mixed], device=dev)
+                recast = wp.empty(len(pixels) * n_sub, dtype=wp.int32, device=dev)
                 launch_chunked(sub_samples, len(pixels) * n_sub,
                                inputs=[n0, n_sub, pix, wp.array(pat, dtype=wp.vec2, device=dev), ds.mesh.id, ds.cutouts,
-                                       int(ds.has_cutouts), cam, gb.width, gb.height, L, eps],
-                               outputs=outs, device=dev)
+                                       int(ds.has_cutouts), cam, gb.gpu(), mixed, mode, L, eps],
+                               outputs=outs + [recast], device=dev)
+                counters["subsamples_recast"] = int(recast.numpy().sum())
                 launch_chunked(centre_fallback, len(pixels), inputs=[n0, n_sub, pix, arr["state"]], outputs=[arr["insert"], fallback], device=dev)
             st = arr["state"].numpy()
+            counters.setdefault("subsamples_recast", 0)
             counters["multisampled_pixels"] = int(len(pixels))
             counters["extra_samples"] = int(len(pixels) * n_sub)
             counters["centre_fallbacks"] = int(fallback.numpy()[: len(pixels)].sum())
@@ -531,7 +798,7 @@ class IZB(Technique):
                                   casters=scene.caster_points if light.kind == LIGHT_DISTANT else None)
             T = ds.indices.shape[0] // 3
             grid = build_grid(view, smp["origin"], smp["dir"], smp["tmax"], smp["insert"], ds.points, ds.indices,
-                              no_cull(ds.cutouts, T, dev), ds.has_cutouts, dev)
+                              without_culling(ds.cutouts, T, dev), ds.has_cutouts, dev)
             ll = grid.list_lengths
             counters.update(
                 samples_inserted=grid.inserted, samples_outside=grid.outside, cells=view.width * view.height,
