@@ -122,12 +122,30 @@ def scene_arg(arg: str) -> str:
     return str(found) if found is not None else arg
 
 
+def output_of(scene, out: str | None) -> str:
+    """The EXR to write: ``--out``, else the ``productName`` of the render settings' output product
+    (the one with a ``visibility`` RenderVar; a relative name is relative to the current folder)."""
+    from wsoft.errors import ParameterError
+
+    if out:
+        return out
+    rs = scene.render_settings
+    product = rs.output if rs is not None else None
+    if product is None or not product.product_name:
+        why = ("no render settings" if rs is None else f"render settings {rs.path} have no product with a visibility RenderVar"
+               if product is None else f"render product {product.path} has no productName")
+        raise ParameterError(f"--out is required ({why})", file=scene.path)
+    check_output(product.product_name, f"productName of {product.path}")
+    return product.product_name
+
+
 def cmd_render(args) -> int:
     import wsoft
 
     for path, what in ((args.out, "--out"), (args.stats, "--stats"), (args.png, "--png")):
         check_output(path, what)
-    scene = wsoft.load_scene(scene_arg(args.scene), time=args.time)
+    scene = wsoft.load_scene(scene_arg(args.scene), time=args.time, render_settings=args.render_settings)
+    out = output_of(scene, args.out)
     params = _parse_sets(args.set)
     with PassProgress(args.technique) as progress:
         frame = wsoft.render(
@@ -136,7 +154,7 @@ def cmd_render(args) -> int:
         )
     for w in frame.stats["warnings"]:  # the stage's, then the passes'
         print(f"warning: {w}", file=sys.stderr)
-    frame.write_exr(args.out)
+    frame.write_exr(out)
     if args.png:
         frame.write_png(args.png)
     if args.stats:
@@ -144,9 +162,9 @@ def cmd_render(args) -> int:
         with open(args.stats, "w") as f:
             json.dump(frame.stats, f, indent=2, default=str)
     st = frame.stats
-    print(f"{st['technique']} on {os.path.basename(scene.path)} ({args.width}x{args.height}, {st['device']}): "
+    print(f"{st['technique']} on {os.path.basename(scene.path)} ({st['width']}x{st['height']}, {st['device']}): "
           f"{st['timings_ms']['total']:.1f} ms{_compile_note(st['timings_ms']['compile'])}, passes: {', '.join(st['passes'])}")
-    print(f"wrote {args.out}" + (f", {args.png}" if args.png else "") + (f", {args.stats}" if args.stats else ""))
+    print(f"wrote {out}" + (f", {args.png}" if args.png else "") + (f", {args.stats}" if args.stats else ""))
     return 0
 
 
@@ -158,13 +176,22 @@ def _compile_note(ms: float) -> str:
 def cmd_plan(args) -> int:
     import wsoft
 
-    scene = wsoft.load_scene(scene_arg(args.scene), time=args.time)
+    scene = wsoft.load_scene(scene_arg(args.scene), time=args.time, render_settings=args.render_settings)
     techs = args.technique or None
-    p = wsoft.plan(scene, techs, light=args.light)
+    p = wsoft.plan(scene, techs, light=args.light, camera=args.camera)
     if args.json:
         print(json.dumps(p, indent=2))
         return 0
     print(f"scene {p['scene']}: {p['triangles']} triangles, up {p['up_axis']}, {p['meters_per_unit']:g} m/unit")
+    fr = p["framing"]
+    print(f"render settings: {fr['render_settings']} (from {fr['render_settings_source']})" if fr["render_settings"] else
+          "render settings: none (no --render-settings, no renderSettingsPrimPath metadata, none from GetStageRenderSettings)")
+    print(f"camera: {fr['camera']} (from {fr['camera_source']}); {fr['resolution'][0]}x{fr['resolution'][1]} "
+          f"(from {fr['resolution_source']}), pixel aspect {fr['pixel_aspect']:g}, {fr['conform_policy']}"
+          + (f", data window {fr['data_window']}" if fr["data_window"] else ""))
+    if fr["product"]:
+        print(f"render product: {fr['product']}: V as {fr['visibility_var']!r}" + (f", default output {fr['product_name']}" if fr["product_name"] else ""))
+    print(f"purposes loaded: {', '.join(p['purposes']) or '(none)'}")
     print("shadow-casting lights:" + ("" if p["lights"] else " (none)"))
     for l in p["lights"]:
         print(f"  {l['path']:<32} {l['kind']:<8} {l['size']}")
@@ -230,7 +257,7 @@ def cmd_compare(args) -> int:
     from wsoft.io import write_gray_png
 
     check_output(args.out_dir, "--out-dir", folder=True)
-    scene = wsoft.load_scene(scene_arg(args.scene), time=args.time)
+    scene = wsoft.load_scene(scene_arg(args.scene), time=args.time, render_settings=args.render_settings)
     names = list(dict.fromkeys(args.technique or ["hard"]))
     techs = _technique_sets(names, args.set)
     with PassProgress("compare") as progress:
@@ -271,7 +298,7 @@ def cmd_compare(args) -> int:
                             f"{e['facing']['mae']:.4f} | {e['not_facing']['mae']:.4f} | {e.get('frac_outside_3se', 0):.3f} | {e['nan_pixels']} |")
     cmd = "wsoft " + " ".join(sys.argv[1:]) if sys.argv[1:2] == ["compare"] else f"wsoft compare {args.scene}"
     ref = gstats["reference"]
-    lines = [f"# {', '.join(l for l in labels if l != ref)} vs {ref} on {stem} ({args.width}x{args.height}, {gstats['device']})", "",
+    lines = [f"# {', '.join(l for l in labels if l != ref)} vs {ref} on {stem} ({gstats['width']}x{gstats['height']}, {gstats['device']})", "",
              f"Command: `{cmd}`", "",
              "One frame graph: passes marked *shared* ran once for several techniques; a technique's frame time counts every pass it needs.", "",
              "## Time (ms)", "", *table, "",
@@ -295,6 +322,10 @@ def cmd_bench(args) -> int:
     return run_sweep(args.sweep, quick=args.quick, device=args.device, out_dir=args.out_dir, fresh=args.fresh, scenes=args.scenes)
 
 
+_RS_HELP = ("RenderSettings prim to use (default: the stage metadata renderSettingsPrimPath, else "
+            "UsdRender.Settings.GetStageRenderSettings, else none); --width/--height/--camera override its values")
+
+
 def main(argv: list[str] | None = None) -> int:
     from wsoft.bench.harness import SWEEPS
     from wsoft.techniques import NAMES  # the names only: the technique modules import Warp
@@ -308,14 +339,17 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("scene", help="a .usda/.usdc/.usdz file or a bundled stage's name (box_plane)")
     r.add_argument("--technique", "-t", required=True, metavar="TECHNIQUE", help="one of: " + ", ".join(techniques))
     r.add_argument("--set", action="append", metavar="KEY=VALUE", help="technique parameter (repeatable)")
-    r.add_argument("--width", type=int, default=640, help="image width in pixels")
-    r.add_argument("--height", type=int, default=480, help="image height in pixels")
-    r.add_argument("--camera", help="camera prim path (default: the stage's first camera, else automatic)")
+    r.add_argument("--width", type=int, help="image width in pixels (default: 640, or the render settings' resolution; "
+                   "--width alone keeps their aspect)")
+    r.add_argument("--height", type=int, help="image height in pixels (default: 480, or the render settings' resolution)")
+    r.add_argument("--camera", help="camera prim path (default: the render settings' camera, else the stage's first camera, else automatic)")
+    r.add_argument("--render-settings", metavar="PRIM", help=_RS_HELP)
     r.add_argument("--light", help="light path or name for V (default: every shadow-casting light; V = the first)")
     r.add_argument("--time", type=float, help="USD time code (default: the stage's start time)")
     r.add_argument("--device", help="cpu or cuda:N (default: cuda:0 when available, else cpu)")
     r.add_argument("--pixel-samples", type=int, default=1, help="G-buffer samples per pixel")
-    r.add_argument("--out", required=True, help="output EXR")
+    r.add_argument("--out", help="output EXR (default: the productName of the render settings' product with a "
+                   "visibility RenderVar; required without one)")
     r.add_argument("--stats", help="stats JSON")
     r.add_argument("--png", help="shaded PNG")
     r.set_defaults(fn=cmd_render)
@@ -328,9 +362,10 @@ def main(argv: list[str] | None = None) -> int:
                    help="a technique (repeatable; default: hard); one of: " + ", ".join(techniques))
     c.add_argument("--set", action="append", metavar="[TECHNIQUE.]KEY=VALUE", help="a parameter (TECHNIQUE.KEY with several techniques)")
     c.add_argument("--samples", type=int, default=256, help="reference light samples per pixel")
-    c.add_argument("--width", type=int, default=640, help="image width in pixels")
-    c.add_argument("--height", type=int, default=480, help="image height in pixels")
+    c.add_argument("--width", type=int, help="image width in pixels (default: 640, or the render settings' resolution)")
+    c.add_argument("--height", type=int, help="image height in pixels (default: 480, or the render settings' resolution)")
     c.add_argument("--camera")
+    c.add_argument("--render-settings", metavar="PRIM", help=_RS_HELP)
     c.add_argument("--light")
     c.add_argument("--time", type=float)
     c.add_argument("--device")
@@ -341,6 +376,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("scene", help="a .usda/.usdc/.usdz file or a bundled stage's name (box_plane)")
     p.add_argument("--technique", "-t", action="append", metavar="TECHNIQUE", help="one of: " + ", ".join(techniques))
     p.add_argument("--light")
+    p.add_argument("--camera")
+    p.add_argument("--render-settings", metavar="PRIM", help=_RS_HELP)
     p.add_argument("--time", type=float)
     p.add_argument("--json", action="store_true")
     p.set_defaults(fn=cmd_plan)

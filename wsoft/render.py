@@ -28,12 +28,13 @@ from wsoft.graph import FrameGraph, Key, Pass, Resources
 from wsoft.lightspace.light import disk_shaped, light_gpu
 from wsoft.lightspace.view import fit_light_view
 from wsoft.parallel import compile_time, cpu_threads, resolve_device
-from wsoft.raster.camera import camera_gpu, fit_aspect
+from wsoft.raster.camera import camera_gpu, conform_aperture
 from wsoft.raster.gbuffer import GBuffer, render_gbuffer
 from wsoft.raster.horizon import clip_to_front, front_counts, front_fraction
 from wsoft.raster.rasterizer import rasterize
 from wsoft.raster.shade import shade as shade_samples
 from wsoft.scene.device import upload_scene
+from wsoft.scene.render_settings import RenderSettings, data_window_pixels
 from wsoft.scene.types import LIGHT_DISTANT, Camera, Light, Scene
 from wsoft.scene.usd import auto_camera, load_scene
 
@@ -59,13 +60,15 @@ class Visibility:
 class RenderContext:
     """What techniques build their passes with; providers register the shared passes once."""
 
-    def __init__(self, scene: Scene, camera: Camera, width: int, height: int, device: str, pixel_samples: int = 1):
+    def __init__(self, scene: Scene, camera: Camera, width: int, height: int, device: str, pixel_samples: int = 1,
+                 framing: Framing | None = None):
         self.scene = scene
         self.camera = camera
         self.width = width
         self.height = height
         self.device = device
         self.pixel_samples = pixel_samples
+        self.framing = framing  # where the camera, size and data window came from (None: given directly)
         self.graph = FrameGraph()
         self.counters: dict[str, Any] = {"frame": {}, "passes": {}, "techniques": {}}
         self._labels = {l.path: scene.light_label(l) for l in scene.lights}
@@ -309,6 +312,9 @@ class Frame:
 
     channels: dict[str, np.ndarray]
     stats: dict[str, Any]
+    exr_names: dict[str, str] = dataclasses.field(default_factory=dict)
+    """Channels written to the EXR under another name: ``V`` (and ``V_stderr``) under the name of
+    the output product's visibility RenderVar (:mod:`wsoft.scene.render_settings`)."""
 
     def __getitem__(self, name: str) -> np.ndarray:
         return self.channels[name]
@@ -325,9 +331,11 @@ class Frame:
         return t.get(light, {})
 
     def write_exr(self, path: str) -> None:
+        """The channels as float32 EXR (``V`` under :attr:`exr_names`' name when the render
+        settings name a visibility RenderVar)."""
         from wsoft.io import write_exr
 
-        write_exr(path, self.channels)
+        write_exr(path, {self.exr_names.get(k, k): v for k, v in self.channels.items()})
 
     def write_png(self, path: str) -> None:
         from wsoft.io import write_png
@@ -356,16 +364,118 @@ class FrameSet(Mapping):
 # --------------------------------------------------------------------------- building the graph
 
 
-def _pick_camera(scene: Scene, camera, width: int, height: int) -> Camera:
-    if isinstance(camera, Camera):
-        cam = camera
-    elif camera:
-        cam = scene.find_camera(str(camera))
-    elif scene.cameras:
-        cam = scene.cameras[0]
+DEFAULT_SIZE = (640, 480)
+
+
+@dataclass
+class Framing:
+    """How a frame maps onto pixels: the camera (its window conformed to the image), the full
+    image's size, the data window that is kept, and where each came from. Built by
+    :func:`frame_setup`; the stats' ``framing`` is :meth:`describe`."""
+
+    camera: Camera
+    """The camera, its window conformed (:func:`~wsoft.raster.camera.conform_aperture`)."""
+    width: int
+    """Full image width in pixels (the settings' ``resolution``, a flag, or 640)."""
+    height: int
+    """Full image height in pixels."""
+    crop: tuple[int, int, int, int] | None
+    """The data window (x0, y0, x1, y1), half-open, rows from the top; None: the whole image."""
+    pixel_aspect: float
+    """A pixel's width over its height."""
+    conform_policy: str
+    """The ``aspectRatioConformPolicy`` applied (``adjustApertureHeight`` without settings)."""
+    camera_source: str
+    """``flag`` (asked for), ``render settings`` (their ``camera`` relationship), ``first camera``
+    (the stage's first) or ``automatic``."""
+    size_source: str
+    """``flag``, ``render settings`` (their ``resolution``) or ``default`` (640 x 480)."""
+    settings: RenderSettings | None = None
+    """The scene's :class:`~wsoft.scene.render_settings.RenderSettings`, or None."""
+    settings_source: str = "none"
+    """How they were chosen (``flag``, ``metadata``, ``GetStageRenderSettings``, ``none``)."""
+
+    @property
+    def out_size(self) -> tuple[int, int]:
+        """The written image's (width, height): the data window's."""
+        if self.crop is None:
+            return self.width, self.height
+        x0, y0, x1, y1 = self.crop
+        return x1 - x0, y1 - y0
+
+    def describe(self) -> dict:
+        rs = self.settings
+        out = rs.output if rs is not None else None
+        return {
+            "render_settings": rs.path if rs is not None else None,
+            "render_settings_source": self.settings_source,
+            "camera": self.camera.path,
+            "camera_source": self.camera_source,
+            "resolution": [self.width, self.height],
+            "resolution_source": self.size_source,
+            "pixel_aspect": self.pixel_aspect,
+            "conform_policy": self.conform_policy,
+            "data_window": list(self.crop) if self.crop is not None else None,
+            "product": out.path if out is not None else None,
+            "product_name": out.product_name if out is not None and out.product_name else None,
+            "visibility_var": out.visibility_var if out is not None else None,
+        }
+
+
+def frame_setup(scene: Scene, width: int | None = None, height: int | None = None, camera=None) -> Framing:
+    """The camera and image of a render of ``scene``: what is given wins, then the scene's render
+    settings (``Scene.render_settings``), then wsoft's defaults.
+
+    Size: ``width`` and ``height``; one of them alone keeps the settings' aspect (the other is
+    derived from their resolution); else the settings' ``resolution``; else 640 x 480 (either
+    alone, as before: ``width=100`` gives 100 x 480). Camera: ``camera`` (a path or a
+    :class:`Camera`), else the settings' ``camera``, else the stage's first camera, else an
+    automatic one framing the scene. The window is conformed to the image with the settings'
+    ``pixelAspectRatio`` and ``aspectRatioConformPolicy`` (without settings: square pixels and the
+    horizontal field of view kept), and the settings' ``dataWindowNDC`` picks the pixels kept."""
+    rs = scene.render_settings
+    if width is not None and height is not None:
+        size_source = "flag"
+    elif rs is not None:
+        rw, rh = rs.resolution
+        if width is None and height is None:
+            width, height, size_source = rw, rh, "render settings"
+        elif width is None:
+            width, size_source = max(1, int(round(height * rw / rh))), "flag"
+        else:
+            height, size_source = max(1, int(round(width * rh / rw))), "flag"
     else:
-        cam = auto_camera(scene, width / height)
-    return fit_aspect(cam, width, height)
+        size_source = "default" if width is None and height is None else "flag"
+        width = DEFAULT_SIZE[0] if width is None else width
+        height = DEFAULT_SIZE[1] if height is None else height
+    _check_sizes(width, height, 1)
+    par = rs.pixel_aspect if rs is not None else 1.0
+    policy = rs.conform_policy if rs is not None else "adjustApertureHeight"
+    if isinstance(camera, Camera):
+        cam, cam_source = camera, "flag"
+    elif camera:
+        cam, cam_source = scene.find_camera(str(camera)), "flag"
+    elif rs is not None and rs.camera:
+        cam, cam_source = scene.find_camera(rs.camera), "render settings"
+    elif scene.cameras:
+        cam, cam_source = scene.cameras[0], "first camera"
+    else:
+        cam, cam_source = auto_camera(scene, par * width / height), "automatic"
+    crop = None
+    if rs is not None and rs.has_data_window:
+        crop = data_window_pixels(rs.data_window, width, height)
+        if crop[0] == crop[2] or crop[1] == crop[3]:
+            ndc = ", ".join(f"{x:g}" for x in rs.data_window)
+            raise ParameterError(f"dataWindowNDC ({ndc}) selects no pixel of a {width}x{height} image", file=scene.path, prim=rs.path)
+        if crop == (0, 0, width, height):
+            crop = None
+    return Framing(conform_aperture(cam, width, height, par, policy), width, height, crop, par, policy, cam_source, size_source,
+                   rs, scene.render_settings_source)
+
+
+def _pick_camera(scene: Scene, camera, width: int, height: int) -> Camera:
+    """The conformed camera of a ``width x height`` render (:func:`frame_setup`)."""
+    return frame_setup(scene, width, height, camera).camera
 
 
 def technique_labels(techs: list) -> list[str]:
@@ -433,9 +543,12 @@ class Built:
         return [self.channels[l] for l in self.labels]
 
 
-def build_graph(scene: Scene, technique, *, width: int, height: int, camera=None, light=None, device: str = "cpu",
-                pixel_samples: int = 1, params: dict | None = None, strict: bool = True) -> Built:
+def build_graph(scene: Scene, technique, *, width: int | None = None, height: int | None = None, camera=None, light=None,
+                device: str = "cpu", pixel_samples: int = 1, params: dict | None = None, strict: bool = True) -> Built:
     """Register every pass for ``technique`` (one or several, see :func:`render`) on ``scene``.
+
+    ``width``, ``height``, ``camera``: as :func:`frame_setup` resolves them (None: the scene's
+    render settings, else the defaults).
 
     A technique that does not support a light skips it; with ``strict`` a technique left with no
     light is an error naming the reason (``wsoft plan`` builds with ``strict=False`` to list it)."""
@@ -449,8 +562,8 @@ def build_graph(scene: Scene, technique, *, width: int, height: int, camera=None
     techs = as_techniques(technique, params or {})
     labels = technique_labels(techs)
     lights = [scene.find_light(str(light))] if light else list(scene.lights)
-    cam = _pick_camera(scene, camera, width, height)
-    ctx = RenderContext(scene, cam, width, height, device, pixel_samples)
+    fr = frame_setup(scene, width, height, camera)
+    ctx = RenderContext(scene, fr.camera, fr.width, fr.height, device, pixel_samples, framing=fr)
     built = Built(ctx, labels, techs, {}, {}, {}, {})
     for tech, label in zip(techs, labels):
         tctx = ctx.technique(tech, label)
@@ -485,6 +598,7 @@ def _add_resolve(ctx: RenderContext, tech, label: str, lights: list[Light], vis_
     light_labels = [ctx.label(l) for l in lights]
     rgb_key = Key("rgb_samples", technique=label)
     out = Key("channels", technique=label)
+    crop = ctx.framing.crop if ctx.framing is not None else None
 
     def shade_pass(res):
         return {rgb_key: shade_samples(res[sk], res[gk], [(L, res[vk].vis) for L, vk in zip(light_structs, vis_keys)])}
@@ -511,6 +625,9 @@ def _add_resolve(ctx: RenderContext, tech, label: str, lights: list[Light], vis_
         ch.update(g["channels"])
         for i, c in enumerate("RGB"):
             ch[c] = np.ascontiguousarray(rgb[..., i], dtype=np.float32)
+        if crop is not None:  # the data window: the whole image was rendered, these pixels are kept
+            x0, y0, x1, y1 = crop
+            ch = {k: np.ascontiguousarray(v[y0:y1, x0:x1]) for k, v in ch.items()}
         return {out: ch}
 
     sname, rname = ("shade", "resolve") if single else (f"shade[{label}]", f"resolve[{label}]")
@@ -522,9 +639,12 @@ def _add_resolve(ctx: RenderContext, tech, label: str, lights: list[Light], vis_
 # --------------------------------------------------------------------------- render
 
 
-def _check_sizes(width: int, height: int, pixel_samples: int) -> None:
-    if width < 1 or height < 1 or width * height > 64 * 1024 * 1024:
+def _check_sizes(width: int | None, height: int | None, pixel_samples: int) -> None:
+    """Image size (None: not given, resolved later) and samples per pixel in range."""
+    if width is not None and height is not None and (width < 1 or height < 1 or width * height > 64 * 1024 * 1024):
         raise ParameterError(f"bad image size {width}x{height}")
+    if (width is not None and width < 1) or (height is not None and height < 1):
+        raise ParameterError(f"bad image size {'?' if width is None else width}x{'?' if height is None else height}")
     if not 1 <= pixel_samples <= 64:
         raise ParameterError(f"pixel_samples {pixel_samples} out of range [1, 64]")
 
@@ -578,12 +698,15 @@ def frames_of(built: Built, res: Resources, records: list[dict], total_ms: float
         "threads": cpu_threads() if ctx.device == "cpu" else None,
         "scene": {"path": scene.path, "triangles": scene.triangle_count, "time": scene.time, "up_axis": scene.up_axis,
                   "meters_per_unit": scene.meters_per_unit},
-        "width": ctx.width,
-        "height": ctx.height,
+        "width": ctx.framing.out_size[0] if ctx.framing is not None else ctx.width,  # the written image (the data window)
+        "height": ctx.framing.out_size[1] if ctx.framing is not None else ctx.height,
         "pixel_samples": ctx.pixel_samples,
         "camera": ctx.camera.path,
+        "framing": ctx.framing.describe() if ctx.framing is not None else None,
         "warnings": list(scene.warnings),
     }
+    out = scene.render_settings.output if scene.render_settings is not None else None
+    exr_names = {"V": out.visibility_var, "V_stderr": f"{out.visibility_var}_stderr"} if out is not None else {}
     frame_counters = {**ctx.counters["frame"], "triangles": scene.triangle_count, "pixels": ctx.width * ctx.height,
                       "gbuffer_samples": ctx.width * ctx.height * ctx.pixel_samples}
     frames = {}
@@ -629,7 +752,7 @@ def frames_of(built: Built, res: Resources, records: list[dict], total_ms: float
             msg = f"{label}: non-finite values (NaN/inf) in " + ", ".join(f"{k} ({n})" for k, n in bad.items())
             stats["warnings"].append(msg)
             warnings.warn(msg, NonFiniteWarning, stacklevel=2)
-        frames[label] = Frame(channels=channels, stats=stats)
+        frames[label] = Frame(channels=channels, stats=stats, exr_names=exr_names)
     stats = {
         **base,
         "techniques": list(frames),
@@ -651,13 +774,14 @@ def render(
     scene,
     technique,
     *,
-    width: int = 640,
-    height: int = 480,
+    width: int | None = None,
+    height: int | None = None,
     camera=None,
     light=None,
     device: str | None = None,
     pixel_samples: int = 1,
     time_code: float | None = None,
+    render_settings: str | None = None,
     progress=None,
     **params,
 ) -> Frame | FrameSet:
@@ -668,14 +792,21 @@ def render(
     filter_samples=64)``), or a list of names, ``(name, {params})`` pairs and
     :class:`~wsoft.techniques.Technique` instances, rendered in one graph that shares the passes
     they have in common (``render(scene, ["pcss", ("essm", {"H": 2}), "reference"])``).
-    ``camera``: a camera prim path (default: the stage's first camera, else an automatic one).
+    ``width``, ``height``, ``camera`` (a camera prim path): None takes them from the scene's
+    render settings, else 640 x 480 and the stage's first camera, else an automatic one (see
+    :func:`frame_setup`; the settings' pixel aspect, conform policy and data window apply whatever
+    was given). ``render_settings``: the ``RenderSettings`` prim to use (None: the stage's own, see
+    :mod:`wsoft.scene.render_settings`); a :class:`Scene` loaded with other settings is loaded
+    again from its file, since their ``includedPurposes`` may change its geometry.
     ``light``: a light path or name (default: every shadow-casting light; ``V`` = the first a
     technique supports). A light a technique does not support is skipped with a warning.
     ``progress``: called as ``progress(done, total, pass_name)`` before each pass of the graph and
     ``progress(total, total, None)`` after the last (the command line's progress bar).
+
+    With a ``dataWindowNDC`` the whole image is rendered and the frame's channels are the data
+    window's pixels (``stats["framing"]["data_window"]``), the same values as the whole render's.
     """
-    if not isinstance(scene, Scene):
-        scene = load_scene(scene, time=time_code)
+    scene = with_render_settings(scene, render_settings, time_code)
     _check_sizes(width, height, pixel_samples)
     several = is_several(technique)
     dev = resolve_device(device)
@@ -692,9 +823,30 @@ def render(
     return fs[built.labels[0]]
 
 
-def plan(scene: Scene, techniques: list[str] | None = None, *, width: int = 640, height: int = 480, light=None) -> dict:
-    """What would run: shadow-casting lights, skipped lights, cutout materials, and per technique
-    the passes (with their kinds) or why it is not applicable to a light."""
+def with_render_settings(scene, render_settings: str | None, time_code: float | None = None) -> Scene:
+    """``scene`` (a :class:`Scene` or what :func:`load_scene` opens) loaded with the render
+    settings ``render_settings`` (None: as it is, or the stage's own)."""
+    if not isinstance(scene, Scene):
+        return load_scene(scene, time=time_code, render_settings=render_settings)
+    if render_settings is None:
+        return scene
+    have = scene.render_settings.path if scene.render_settings is not None else None
+    if have == str(render_settings):
+        return scene
+    import os
+
+    if os.path.isfile(scene.path):  # the settings' includedPurposes may change the geometry
+        return load_scene(scene.path, time=scene.time, render_settings=str(render_settings))
+    raise ParameterError(f"this scene was loaded with render settings {have or '(none)'} and has no file to load again; "
+                         f"pass render_settings={str(render_settings)!r} to load_scene", file=scene.path)
+
+
+def plan(scene: Scene, techniques: list[str] | None = None, *, width: int | None = None, height: int | None = None, light=None,
+         camera=None) -> dict:
+    """What would run: shadow-casting lights, skipped lights, cutout materials, the purposes
+    loaded, the framing (``framing``: which render settings prim and camera, where each came from,
+    the resolution, conform policy and data window; see :meth:`Framing.describe`), and per
+    technique the passes (with their kinds) or why it is not applicable to a light."""
     from wsoft.techniques import TECHNIQUES
 
     out = {
@@ -709,6 +861,8 @@ def plan(scene: Scene, techniques: list[str] | None = None, *, width: int = 640,
         "dynamic_prims": scene.dynamic_prims(),
         "baked_light_triangles": 0 if scene.tri_baked is None else int(np.count_nonzero(~np.isnan(scene.tri_baked[:, 0, 0]))),
         "cameras": [c.path for c in scene.cameras],
+        "purposes": list(scene.purposes),
+        "framing": frame_setup(scene, width, height, camera).describe(),
         "warnings": list(scene.warnings),
         "techniques": {},
         "not_applicable": {},
@@ -716,7 +870,7 @@ def plan(scene: Scene, techniques: list[str] | None = None, *, width: int = 640,
     if not scene.lights:
         return out
     for name in techniques or sorted(TECHNIQUES):
-        built = build_graph(scene, name, width=width, height=height, light=light, device="cpu", strict=False)
+        built = build_graph(scene, name, width=width, height=height, camera=camera, light=light, device="cpu", strict=False)
         label = built.labels[0]
         if built.skipped[label]:
             out["not_applicable"][name] = [{"light": l.path, "reason": why} for l, why in built.skipped[label]]

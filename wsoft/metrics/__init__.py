@@ -100,7 +100,12 @@ def ground_truth_key(ctx, truth: GroundTruth, light: Light) -> Key:
     """Hand a :class:`GroundTruth` to the graph (a ``reference`` pass that does no work)."""
     label = ctx.label(light)
     key = Key("ground_truth", label, variant=f"@{truth.samples}")
-    return ctx.provide(key, truth.channels(label), name=f"ground_truth[{label}]@{truth.samples}", kind="reference")
+    channels = truth.channels(label)
+    crop = ctx.framing.crop if ctx.framing is not None else None
+    if crop is not None and channels["A"].shape == (ctx.height, ctx.width):  # a whole image: its data window
+        x0, y0, x1, y1 = crop
+        channels = {k: v[y0:y1, x0:x1] for k, v in channels.items()}
+    return ctx.provide(key, channels, name=f"ground_truth[{label}]@{truth.samples}", kind="reference")
 
 
 def add_error_pass(ctx, technique_label: str, channels: Key, reference: Key, light: Light) -> Key:
@@ -118,24 +123,25 @@ def add_error_pass(ctx, technique_label: str, channels: Key, reference: Key, lig
                         light=label))
 
 
-def compare(scene, techniques, *, samples: int = 256, ground_truth: GroundTruth | None = None, width: int = 640, height: int = 480,
-            camera=None, light=None, device: str | None = None, pixel_samples: int = 1, time_code: float | None = None, progress=None):
+def compare(scene, techniques, *, samples: int = 256, ground_truth: GroundTruth | None = None, width: int | None = None,
+            height: int | None = None, camera=None, light=None, device: str | None = None, pixel_samples: int = 1,
+            time_code: float | None = None, render_settings: str | None = None, progress=None):
     """Render ``techniques`` (as :func:`wsoft.render` takes a list) and the reference in one graph,
     and measure each technique's error against the reference on the same pixels.
 
     The reference is ``reference`` with ``samples`` light samples (added unless the list holds a
     reference already), or ``ground_truth`` computed earlier. Returns the
     :class:`~wsoft.render.FrameSet`; each technique's ``stats["errors"]`` maps light label ->
-    error, ``stats["error"]`` is the first light's. ``progress``: as :func:`wsoft.render` takes it."""
+    error, ``stats["error"]`` is the first light's. ``width``, ``height``, ``camera``,
+    ``render_settings``, ``progress``: as :func:`wsoft.render` takes them (errors are measured on
+    the data window's pixels when the settings have one)."""
     import time
 
     from wsoft.parallel import compile_time, resolve_device
-    from wsoft.render import Scene, _check_sizes, as_techniques, build_graph, execute, frames_of, is_several
-    from wsoft.scene.usd import load_scene
+    from wsoft.render import _check_sizes, as_techniques, build_graph, execute, frames_of, is_several, with_render_settings
     from wsoft.techniques import create
 
-    if not isinstance(scene, Scene):
-        scene = load_scene(scene, time=time_code)
+    scene = with_render_settings(scene, render_settings, time_code)
     _check_sizes(width, height, pixel_samples)
     techs = as_techniques(list(techniques) if is_several(techniques) else [techniques], {})
     ref_label = None

@@ -36,12 +36,46 @@ def camera_gpu(cam: Camera) -> CameraGPU:
     return c
 
 
-def fit_aspect(cam: Camera, width: int, height: int) -> Camera:
-    """Keep the horizontal field of view; derive the vertical one from the image aspect."""
+def conform_aperture(cam: Camera, width: int, height: int, pixel_aspect: float = 1.0, policy: str = "adjustApertureHeight") -> Camera:
+    """``cam`` with its window conformed to a ``width x height`` image of pixels ``pixel_aspect``
+    times as wide as tall, as UsdRender's ``aspectRatioConformPolicy`` resolves a mismatch
+    (``UsdRenderComputeSpec``): the image's aspect is ``pixel_aspect * width / height``, the
+    aperture's ``tan_half[0] / tan_half[1]`` (the apertures over the focal length, or the half
+    extents of an orthographic camera: the same ratio), and the window, centred where it was
+    (``offset`` unchanged), becomes
+
+    * ``adjustApertureHeight``: the height, to ``width / image aspect`` (wsoft's choice without
+      render settings: the horizontal field of view is kept);
+    * ``adjustApertureWidth``: the width, to ``height * image aspect``;
+    * ``expandAperture`` (UsdRender's fallback): whichever of the two grows the window, so all of
+      the aperture is seen and more;
+    * ``cropAperture``: whichever shrinks it, so the image is filled with part of the aperture;
+    * ``adjustPixelAspectRatio``: nothing; the pixels take the aspect that makes the image cover
+      the aperture exactly (``pixel_aspect`` is disregarded, as UsdRender says).
+
+    The image then spans the window: pixel column ``i`` sees ``ndc_x = (i + 0.5) / width * 2 - 1``
+    times ``tan_half[0]`` (plus the offset), row ``j`` ``1 - (j + 0.5) / height * 2`` times
+    ``tan_half[1]`` (:func:`wsoft.raster.gbuffer.camera_ray`)."""
     from dataclasses import replace
 
-    th = cam.tan_half[0]
-    return replace(cam, tan_half=(th, th * height / width))
+    tx, ty = cam.tan_half
+    if policy == "adjustPixelAspectRatio":
+        return cam
+    image = pixel_aspect * width / height
+    aperture = tx / ty
+    adjust = {
+        "adjustApertureHeight": "height",
+        "adjustApertureWidth": "width",
+        "expandAperture": "height" if aperture > image else "width",
+        "cropAperture": "width" if aperture > image else "height",
+    }.get(policy)
+    if adjust is None:
+        raise ValueError(f"unknown aspectRatioConformPolicy {policy!r}")
+    if adjust == "height":
+        ty = tx * height / (width * pixel_aspect)
+    else:
+        tx = ty * width * pixel_aspect / height
+    return replace(cam, tan_half=(tx, ty))
 
 
 # --------------------------------------------------------------------------- sub-pixel sample patterns

@@ -1,6 +1,8 @@
 """Scenes: USD stages turned into world-space triangles, materials, lights and cameras."""
 
+from wsoft.scene.render_settings import RenderProduct, RenderSettings
 from wsoft.scene.types import Camera, Light, Material, Scene, SkippedLight, Texture
 from wsoft.scene.usd import auto_camera, load_scene
 
-__all__ = ["Camera", "Light", "Material", "Scene", "SkippedLight", "Texture", "auto_camera", "load_scene"]
+__all__ = ["Camera", "Light", "Material", "RenderProduct", "RenderSettings", "Scene", "SkippedLight", "Texture", "auto_camera",
+           "load_scene"]

@@ -12,6 +12,8 @@ from functools import cached_property
 
 import numpy as np
 
+from wsoft.scene.render_settings import RenderSettings
+
 # light kinds (the integers are what kernels see)
 LIGHT_RECT = 0
 LIGHT_DISK = 1
@@ -158,6 +160,9 @@ class Scene:
     meters_per_unit: float = 0.01
     time: float | None = None
     warnings: list[str] = field(default_factory=list)
+    render_settings: RenderSettings | None = None  # the UsdRender settings it was loaded with (wsoft.scene.render_settings)
+    render_settings_source: str = "none"  # how they were chosen: flag, metadata, GetStageRenderSettings or none
+    purposes: tuple[str, ...] = ("default", "render")  # the UsdGeomImageable purposes that were loaded
 
     @property
     def triangle_count(self) -> int:

@@ -3,7 +3,8 @@
 Reads any file usd-core opens (.usda/.usdc/.usdz, sublayers, references, payloads,
 variant selections, instances through instance proxies) at one time code.
 Problems with the input raise :class:`SceneError` naming the file and the prim;
-features that are ignored become warnings on the scene.
+features that are ignored become warnings on the scene. The stage's UsdRender settings are read
+first (:mod:`wsoft.scene.render_settings`): their ``includedPurposes`` decide which prims load.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import os
 import numpy as np
 
 from wsoft.errors import SceneError
+from wsoft.scene.render_settings import DEFAULT_PURPOSES, read_render_settings
 from wsoft.scene.types import (
     LIGHT_DISK,
     LIGHT_DISTANT,
@@ -47,11 +49,16 @@ def _pxr():
     return Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade
 
 
-def load_scene(path_or_stage, time: float | None = None) -> Scene:
+def load_scene(path_or_stage, time: float | None = None, render_settings: str | None = None) -> Scene:
     """Load a USD stage (a file path or an open ``Usd.Stage``) at ``time``.
 
     ``time=None`` uses the stage's start time code when it has an authored time range,
-    else the default time. Returns a :class:`Scene` with world-space triangles. USD's own
+    else the default time. ``render_settings``: the path of the ``RenderSettings`` prim to use;
+    None picks the stage's own (metadata ``renderSettingsPrimPath``, else
+    ``UsdRender.Settings.GetStageRenderSettings``; see :mod:`wsoft.scene.render_settings`). The
+    settings' ``includedPurposes`` decide which purposes are loaded (without settings:
+    ``default`` and ``render``, never ``proxy`` or ``guide``); the rest of them are kept on
+    ``Scene.render_settings`` for the render. Returns a :class:`Scene` with world-space triangles. USD's own
     diagnostics while opening (a missing sublayer, reference or ``.mtlx``) become one
     ``warning`` line each on the scene, naming the layer; a file USD cannot parse is an error
     carrying the parser's own ``file:line:col`` message.
@@ -77,7 +84,7 @@ def load_scene(path_or_stage, time: float | None = None) -> Scene:
         if stage is None:
             raise SceneError("cannot open USD stage", file=file)
     _check_time(time, file)
-    scene = _StageReader(stage, file, time).read()
+    scene = _StageReader(stage, file, time, render_settings).read()
     scene.warnings[:0] = _diagnostic_lines(delegate.TakeUncoalescedDiagnostics(), file)
     return scene
 
@@ -114,7 +121,7 @@ def _diagnostic_lines(diagnostics, file: str) -> list[str]:
 
 
 class _StageReader:
-    def __init__(self, stage, file: str, time: float | None):
+    def __init__(self, stage, file: str, time: float | None, render_settings: str | None = None):
         Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = _pxr()
         self.stage = stage
         self.file = file
@@ -133,6 +140,8 @@ class _StageReader:
         self.textures: list[Texture] = []
         self.texture_index: dict[tuple, int] = {}
         self.dynamic_cache: dict[str, bool] = {}
+        self.render_settings, self.render_settings_source = read_render_settings(self, render_settings)
+        self.purposes = self.render_settings.included_purposes if self.render_settings else DEFAULT_PURPOSES
 
     # -- helpers -----------------------------------------------------------------
     def warn(self, prim, msg: str):
@@ -182,10 +191,10 @@ class _StageReader:
                 if img.ComputeVisibility(self.timecode) == UsdGeom.Tokens.invisible:
                     it.PruneChildren()
                     continue
-                purpose = img.ComputePurpose()
-                if purpose in (UsdGeom.Tokens.guide, UsdGeom.Tokens.proxy):
-                    it.PruneChildren()
-                    continue
+                if img.ComputePurpose() not in self.purposes:
+                    if prim.IsA(UsdGeom.PointInstancer):
+                        it.PruneChildren()  # its prototypes are drawn only where it places them
+                    continue  # otherwise not pruned: a descendant may author a purpose of its own that is included
             type_name = prim.GetTypeName()
 
             def add_mesh(mesh, name: str):
@@ -228,6 +237,10 @@ class _StageReader:
             elif prim.IsA(UsdGeom.Camera):
                 cameras.append(self.read_camera(prim))
 
+        rs = self.render_settings
+        if rs is not None and rs.camera and all(c.path != rs.camera for c in cameras):
+            cameras.append(self.read_camera(self.stage.GetPrimAtPath(rs.camera)))  # hidden or of an excluded purpose: still the view
+
         for lp in shadow_lights:
             self.check_shadow_controls(lp, prims)
         if pts:
@@ -258,6 +271,9 @@ class _StageReader:
             meters_per_unit=float(UsdGeom.GetStageMetersPerUnit(self.stage)),
             time=self.time,
             warnings=self.warnings,
+            render_settings=rs,
+            render_settings_source=self.render_settings_source,
+            purposes=tuple(self.purposes),
         )
         return scene
 
