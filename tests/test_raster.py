@@ -96,6 +96,47 @@ def test_inner_coverage_blocks_every_ray_of_its_texels(device, file, light):
         assert np.all(ray[hi] <= inner[hi] * (1 + 1e-4) + 1e-6), (fx, fy)
 
 
+@pytest.mark.parametrize("file,light", [("contact.usda", "Light"), ("multi_light.usda", "Sun")])
+def test_back_and_open_face_maps_hold_their_faces_only(device, file, light):
+    """``faces=back`` holds the faces of closed surfaces turned away from the light, ``open`` every
+    face of the other surfaces: each map's texel is no farther than any point of its own faces in
+    it (conservative), and the ground (open) leaves the back map empty around the objects."""
+    from wsoft.scene.device import face_surfaces
+
+    scene = wsoft.load_scene(scene_path(file))
+    ds = upload_scene(scene, device)
+    assert ds.culled_closed > 0  # the scene has a closed surface
+    view = _view(scene, light)
+    maps = {f: rasterize(ds, view, alpha_tested=False, conservative=True, faces=f).depth.numpy() for f in ("back", "open")}
+    hb, ho = maps["back"] < DEPTH_CLEAR, maps["open"] < DEPTH_CLEAR
+    assert hb.sum() > 50 and ho.sum() > 50 and (ho & ~hb).sum() > 0.3 * ho.sum()
+    tri = scene.points[scene.triangles].astype(np.float64)
+    nrm = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    toward = (np.einsum("td,td->t", nrm, tri[:, 0] - view.origin) < 0) if view.persp else (nrm @ np.asarray(view.axes)[:, 2] < 0)
+    rng = np.random.default_rng(1)
+    for f, depth in maps.items():
+        flags = face_surfaces(ds, view.origin if view.persp else None, f).cull.numpy()
+        kept = (flags != 2) & ((flags == 0) | (toward == (flags > 0)))
+        assert kept.any() and not kept.all()
+        if view.persp:  # a triangle seen edge-on covers no area: the rasterizer skips it (and so may we)
+            tx3, ty3 = view.texel_coords(tri.reshape(-1, 3))
+            t2 = np.stack([tx3, ty3], -1).reshape(-1, 3, 2)
+            e1, e2 = t2[:, 1] - t2[:, 0], t2[:, 2] - t2[:, 0]
+            area = np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+            kept &= area > 1e-3
+        u = rng.random((int(kept.sum()), 32, 2))
+        u[u.sum(-1) > 1] = 1 - u[u.sum(-1) > 1]
+        pts = (tri[kept, 0, None] * (1 - u.sum(-1, keepdims=True)) + tri[kept, 1, None] * u[..., :1] + tri[kept, 2, None] * u[..., 1:]).reshape(-1, 3)
+        if view.persp:
+            pts = pts[view.to_view(pts)[:, 2] > view.near]
+        fx, fy = view.texel_coords(pts)
+        tx, ty = np.floor(fx).astype(int), np.floor(fy).astype(int)
+        inside = (tx >= 0) & (ty >= 0) & (tx < view.width) & (ty < view.height)
+        assert inside.sum() >= 60
+        z = view.to_view(pts[inside])[:, 2]
+        assert np.all(depth[ty[inside], tx[inside]] <= z * (1 + 1e-4) + 1e-6), f
+
+
 def test_light_inside_the_scene_stays_finite(device):
     """A point light between objects: triangles behind it are clipped at the near plane."""
     from pxr import Gf, UsdGeom, UsdLux

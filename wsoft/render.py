@@ -168,20 +168,22 @@ class RenderContext:
         return self.add(Pass(name, (gk,), (key,), run, kind="light_map", light=self.label(light)))
 
     def light_depth(self, light: Light, size: int, conservative: bool = False, soft: bool = False, inner: bool = False,
-                    opaque: bool = False) -> Key:
+                    opaque: bool = False, faces: str = "all") -> Key:
         """Resource: a :class:`~wsoft.raster.rasterizer.DepthMap` (alpha-tested only if the scene has
         cutouts); ``inner``: the map of depths that certainly block a whole texel (inner coverage);
         ``opaque``: cutouts not alpha-tested (each covers every texel it touches: with
-        ``conservative``, a map no occluder escapes)."""
+        ``conservative``, a map no occluder escapes); ``faces``: ``all``, or only ``back`` faces of
+        closed surfaces or ``open`` surfaces (:func:`~wsoft.scene.device.face_surfaces`)."""
         sk = self.scene_arrays()
         vk = self.light_view(light, size, soft)
         alpha = self.scene.has_cutouts and not opaque
-        kind = "light_depth" + ("_alpha" if alpha else "") + ("_inner" if inner else "_conservative" if conservative else "")
+        kind = ("light_depth" + ("_alpha" if alpha else "") + ("_inner" if inner else "_conservative" if conservative else "")
+                + ("" if faces == "all" else f"_{faces}"))
         key = Key(kind, self.label(light), variant=f"@{size}" + ("+soft" if soft else ""))
         name = str(key)
 
         def run(res):
-            dm = rasterize(res[sk], res[vk], alpha_tested=alpha, conservative=conservative, inner=inner)
+            dm = rasterize(res[sk], res[vk], alpha_tested=alpha, conservative=conservative, inner=inner, faces=faces)
             if dm.private_maps:
                 c = self.pass_counters(name)
                 c["cpu_private_maps"] = dm.private_maps
@@ -255,8 +257,8 @@ class TechniqueContext:
         return self.ctx.light_view(light, size, soft)
 
     def light_depth(self, light: Light, size: int, conservative: bool = False, soft: bool = False, inner: bool = False,
-                    opaque: bool = False) -> Key:
-        return self.ctx.light_depth(light, size, conservative, soft, inner, opaque)
+                    opaque: bool = False, faces: str = "all") -> Key:
+        return self.ctx.light_depth(light, size, conservative, soft, inner, opaque, faces)
 
     def label(self, light: Light) -> str:
         return self.ctx.label(light)

@@ -73,18 +73,43 @@ def pyramid_level(
 
 
 @wp.kernel
-def pyramid_base_pair(
+def pyramid_base_bounds(
     offset: int,
-    nearest: wp.array2d[float],
-    farthest: wp.array2d[float],
+    near0: wp.array2d[float],
+    near1: wp.array2d[float],
+    near2: wp.array2d[float],
+    far: wp.array2d[float],
     # outputs
-    pyr: wp.array[wp.vec2],
+    pyr: wp.array[wp.vec4],
 ):
     i = wp.tid() + offset
-    n = nearest.shape[1]
+    n = near0.shape[1]
     y = i // n
     x = i - y * n
-    pyr[i] = wp.vec2(nearest[y, x], farthest[y, x])
+    pyr[i] = wp.vec4(near0[y, x], near1[y, x], near2[y, x], far[y, x])
+
+
+@wp.kernel
+def pyramid_level_bounds(
+    offset: int,
+    src_off: int,
+    dst_off: int,
+    n: int,
+    # outputs
+    pyr: wp.array[wp.vec4],
+):
+    """Level of ``n`` per side from the level below: min, min, min, max of the 2 x 2 texels."""
+    i = wp.tid() + offset
+    y = i // n
+    x = i - y * n
+    m = 2 * n
+    a = pyr[src_off + (2 * y) * m + 2 * x]
+    b = pyr[src_off + (2 * y) * m + 2 * x + 1]
+    c = pyr[src_off + (2 * y + 1) * m + 2 * x]
+    d = pyr[src_off + (2 * y + 1) * m + 2 * x + 1]
+    lo = wp.min(wp.min(a, b), wp.min(c, d))
+    hi = wp.max(wp.max(a, b), wp.max(c, d))
+    pyr[dst_off + i] = wp.vec4(lo[0], lo[1], lo[2], hi[3])
 
 
 def log2_exact(n: int) -> int:
@@ -117,18 +142,18 @@ def build_minmax_pyramid(depth: wp.array, device: str, *, skip_empty: bool) -> t
     return pyr, offs
 
 
-def build_bounds_pyramid(nearest: wp.array, farthest: wp.array, device: str) -> tuple[wp.array, np.ndarray]:
-    """One pyramid of two square power-of-two maps of the same view: per texel of every level, the
-    min of ``nearest`` and the max of ``farthest`` over the texels below (empty texels are
-    ``DEPTH_CLEAR`` surfaces, as ``skip_empty = False``)."""
-    n = nearest.shape[1]
-    if nearest.shape != farthest.shape or nearest.shape[0] != n:
-        raise ValueError("the maps must be square and of one size")
+def build_bounds_pyramid(near: list, far: wp.array, device: str) -> tuple[wp.array, np.ndarray]:
+    """One pyramid of four square power-of-two maps of one view: per texel of every level (vec4),
+    the min of each of the three ``near`` maps and the max of ``far`` over the texels below (empty
+    texels are ``DEPTH_CLEAR`` surfaces, as ``skip_empty = False``)."""
+    n = far.shape[1]
+    if far.shape[0] != n or any(m.shape != far.shape for m in near) or len(near) != 3:
+        raise ValueError("three near maps and a far map, square and of one size")
     log2_exact(n)
     offs = level_offsets(n)
-    pyr = wp.empty(int(offs[-1]), dtype=wp.vec2, device=device)
-    launch_chunked(pyramid_base_pair, n * n, inputs=[nearest, farthest], outputs=[pyr], device=device, min_chunk=1 << 14)
-    _build_levels(pyramid_level, pyr, offs, n, device)
+    pyr = wp.empty(int(offs[-1]), dtype=wp.vec4, device=device)
+    launch_chunked(pyramid_base_bounds, n * n, inputs=[*near, far], outputs=[pyr], device=device, min_chunk=1 << 14)
+    _build_levels(pyramid_level_bounds, pyr, offs, n, device)
     return pyr, offs
 
 

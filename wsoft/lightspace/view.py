@@ -569,16 +569,17 @@ def receiver_plane_affine(lv: ViewGPU, pv: wp.vec3, nv: wp.vec3):
 
 
 @wp.func
-def receiver_plane_nearest(lv: ViewGPU, xp: wp.vec2, qp: float, gx: float, gy: float, xa: float, ya: float, xb: float, yb: float) -> float:
-    """The nearest depth of a plane (:func:`receiver_plane_affine`) over the texel rectangle
-    [xa, xb] x [ya, yb]; -1 where it passes behind a perspective view's origin there (no bound)."""
+def receiver_plane_range(lv: ViewGPU, xp: wp.vec2, qp: float, gx: float, gy: float, xa: float, ya: float, xb: float, yb: float) -> wp.vec2:
+    """The nearest and farthest depths of a plane (:func:`receiver_plane_affine`) over the texel
+    rectangle [xa, xb] x [ya, yb]; (-1, 1e30) where it passes behind a perspective view's origin
+    there (no bound)."""
     qc = qp + gx * (0.5 * (xa + xb) - xp[0]) + gy * (0.5 * (ya + yb) - xp[1])
     h = 0.5 * ((xb - xa) * wp.abs(gx) + (yb - ya) * wp.abs(gy))
     if lv.persp != 0:
         if qc - h <= 0.0:
-            return -1.0
-        return 1.0 / (qc + h)
-    return qc - h
+            return wp.vec2(-1.0, 1.0e30)
+        return wp.vec2(1.0 / (qc + h), 1.0 / (qc - h))
+    return wp.vec2(qc - h, qc + h)
 
 
 @wp.func

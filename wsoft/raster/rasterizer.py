@@ -49,7 +49,7 @@ import warp as wp
 
 from wsoft.lightspace.view import DEPTH_CLEAR, LightView, ViewGPU, texel_of, view_of
 from wsoft.parallel import cpu_threads, ensure_loaded, launch_chunked, run_tasks
-from wsoft.scene.device import DeviceScene, Surfaces, surface_present, view_surfaces, without_culling
+from wsoft.scene.device import CULL_SKIP, DeviceScene, Surfaces, face_surfaces, surface_present, view_surfaces, without_culling
 
 GPU_BAND_ROWS = 64  # CUDA: rows per band (one thread per triangle and band)
 SMALL_BOX_TEXELS = wp.constant(8)  # triangles whose texel box is this small take the flat loop
@@ -483,6 +483,8 @@ def _make_kernel(persp: bool, spec: FragmentSpec, conservative: bool, alpha: boo
         pb = points[indices[3 * tri + 1]]
         pc = points[indices[3 * tri + 2]]
         cull = cut.cull[tri]
+        if cull == CULL_SKIP:
+            return
         if cull != 0:
             # closed surface: only faces turned toward the light can be nearest (+1 outward, -1 inward)
             n = wp.cross(pb - pa, pc - pa)
@@ -740,6 +742,7 @@ def rasterize(
     triangles: np.ndarray | None = None,
     behind: wp.array | None = None,
     inner: bool = False,
+    faces: str = "all",
 ) -> DepthMap:
     """Rasterize the scene (or only ``triangles``, an index array) into a depth map for ``view``.
 
@@ -747,7 +750,8 @@ def rasterize(
     inverted depth test, :func:`gated_depth_min`; texels where it is empty receive nothing).
     ``inner``: per texel the nearest of the farthest depths of the triangles that cover it whole
     (cutouts never do), far faces included (each adds coverage): a depth every ray through the
-    texel is certainly blocked at; ``DEPTH_CLEAR`` where no triangle covers the texel whole."""
+    texel is certainly blocked at; ``DEPTH_CLEAR`` where no triangle covers the texel whole.
+    ``faces``: ``all``, or only ``back`` / ``open`` faces (:func:`~wsoft.scene.device.face_surfaces`)."""
     dev = ds.device
     shape = (view.height, view.width)
     alpha = bool((alpha_tested or inner) and ds.has_cutouts)
@@ -761,7 +765,9 @@ def rasterize(
         frag = gated_depth_min
     target.depth = wp.empty(shape, dtype=float, device=dev)
     r = make_rasterizer(view, frag, conservative=conservative or inner, alpha=alpha, inner=inner)
-    if inner:
+    if faces != "all":
+        surfaces = face_surfaces(ds, view.origin if view.persp else None, faces)
+    elif inner:
         surfaces = without_culling(ds.cutouts, ds.indices.shape[0] // 3, dev)
     else:
         surfaces = view_surfaces(ds, view.origin if view.persp else None)  # no far-face skipping around a light inside a closed mesh

@@ -249,20 +249,47 @@ def _closed_bounds(scene: Scene, cull: np.ndarray) -> tuple[np.ndarray, np.ndarr
     return lo, hi
 
 
-def view_surfaces(ds: "DeviceScene", origin: np.ndarray | None) -> Surfaces:
-    """The scene's surfaces for a view from ``origin`` (None: an orthographic view, from infinitely
-    far): skipping the far faces of a closed surface is exact only when the view's origin lies
-    outside it, so prims whose culled triangles' bounds hold the origin keep every face."""
+CULL_SKIP = wp.constant(2)  # a cull flag: the light-view rasterizer skips the triangle whichever way it faces
+
+
+def view_cull(ds: "DeviceScene", origin: np.ndarray | None) -> np.ndarray | None:
+    """The cull flags (host, [T]) of a view from ``origin`` (None: orthographic, from infinitely
+    far), or None where they are the scene's own: skipping the far faces of a closed surface is exact
+    only when the view's origin lies outside it, so prims whose culled triangles' bounds hold the
+    origin keep every face (flag 0: open, for this view)."""
     if origin is None or ds.culled_closed == 0:
-        return ds.cutouts
+        return None
     o = np.asarray(origin, np.float64)
     pad = 1e-6 * max(ds.diagonal, 1e-12)
     inside = np.flatnonzero(np.all((ds.closed_lo - pad <= o) & (o <= ds.closed_hi + pad), axis=1))
     if inside.size == 0:
-        return ds.cutouts
+        return None
     cull = ds.cull_host.copy()
     cull[np.isin(ds.tri_prim, inside)] = 0
+    return cull
+
+
+def view_surfaces(ds: "DeviceScene", origin: np.ndarray | None) -> Surfaces:
+    """The scene's surfaces for a view from ``origin`` (:func:`view_cull`)."""
+    cull = view_cull(ds, origin)
+    if cull is None:
+        return ds.cutouts
     return surfaces_with_cull(ds.cutouts, wp.array(cull, dtype=wp.int32, device=ds.device))
+
+
+def face_surfaces(ds: "DeviceScene", origin: np.ndarray | None, faces: str) -> Surfaces:
+    """The scene's surfaces for a view from ``origin`` reduced to ``faces``: ``back`` — the faces of
+    closed surfaces turned away from the view (every ray that crosses a closed surface leaves it
+    through one), ``open`` — every face of the surfaces that are not closed for this view."""
+    cull = view_cull(ds, origin)
+    cull = ds.cull_host if cull is None else cull
+    if faces == "back":
+        flags = np.where(cull != 0, -cull, int(CULL_SKIP))
+    elif faces == "open":
+        flags = np.where(cull != 0, int(CULL_SKIP), 0)
+    else:
+        raise ValueError(f"faces {faces!r} is not back or open")
+    return surfaces_with_cull(ds.cutouts, wp.array(flags.astype(np.int32), dtype=wp.int32, device=ds.device))
 
 
 def without_culling(cut: Surfaces, triangles: int, device: str) -> Surfaces:

@@ -55,14 +55,14 @@ from wsoft.accel.izb_grid import build_grid, izb_test
 from wsoft.accel.pyramid import build_bounds_pyramid, build_moments_pyramid
 from wsoft.errors import ParameterError
 from wsoft.lightspace.light import LightGPU, in_front, light_center_dir
-from wsoft.lightspace.view import ViewGPU, fit_light_view, receiver_plane_affine, receiver_plane_nearest, texel_of, view_dir, view_of
+from wsoft.lightspace.view import ViewGPU, fit_light_view, receiver_plane_affine, receiver_plane_range, texel_of, view_dir, view_of
 from wsoft.params import check_ranges
 from wsoft.parallel import launch_chunked
 from wsoft.raster.camera import CameraGPU, camera_gpu, subpixel_pattern
 from wsoft.raster.gbuffer import GBufferGPU, camera_ray, cast_primary, gb_covered, gb_pixel
 from wsoft.raster.rasterizer import make_rasterizer
 from wsoft.reference import ray_epsilon, ray_offset, ray_origin
-from wsoft.scene.device import Surfaces, without_culling
+from wsoft.scene.device import CULL_SKIP, Surfaces, face_surfaces, without_culling
 from wsoft.scene.types import LIGHT_DISTANT, LIGHT_KIND_NAMES, LIGHT_POINT
 from wsoft.techniques.base import Quality, Technique, Tolerance, check, param
 
@@ -98,7 +98,7 @@ class IZBParams:
                                    "inner-coverage map, per pixel plane: certain only where the maps prove it) or vsm (the paper: "
                                    "one-tailed Chebyshev bounds of a mip-mapped variance shadow map, probabilistic)")
     shadow_map_size: int = param(512, "texels per side of the stencil's light maps (a power of two)", range=(256, 4096))
-    bounds_bias: float = param(1e-4, "stencil=bounds: depth tolerance (fraction of the map's depth range) between a map and the "
+    bounds_bias: float = param(1e-5, "stencil=bounds: depth tolerance (fraction of the map's depth range) between a map and the "
                                      "receiver's plane, for rounding", range=(0.0, 0.05))
     bounds_texels: int = param(8, "stencil=bounds: texels per side compared per footprint (the finest pyramid level that covers "
                                   "the pixel's footprint in as many)", range=(1, 64))
@@ -507,24 +507,35 @@ def footprint_certainty(
     L: LightGPU,
     p: wp.vec3,
     n: wp.vec3,
-    bounds: wp.array[wp.vec2],
+    closed: bool,
+    eps: float,
+    bounds: wp.array[wp.vec4],
     level_off: wp.array[wp.int32],
     levels: int,
     map_size: int,
     bias: float,
     max_texels: int,
 ) -> wp.vec2i:
-    """Is the part of pixel ``xy`` on the plane (``p``, ``n``) certainly lit, certainly shadowed
-    (1 / 0 each)? Exact bounds, no probability: every texel of the finest pyramid level that
-    covers the footprint in at most ``max_texels`` per side is compared with the plane's own depth
-    over it. Certainly lit: the nearest depth of anything touching the texel (conservative map)
-    is no nearer than the plane anywhere in the texel. Certainly shadowed: the texel is covered
-    whole by a blocker (inner map) nearer than the plane anywhere in the footprint part of the
-    texel."""
+    """Is the part of pixel ``xy`` on the plane (``p``, ``n``; ``closed``: of a closed surface)
+    certainly lit, certainly shadowed (1 / 0 each)? Exact bounds, no probability: every texel of the
+    finest pyramid level that covers the footprint in at most ``max_texels`` per side is compared
+    with the plane's own depths over it (``bounds``: per texel the nearest depth of every surface,
+    of the back faces of closed surfaces, of open surfaces, all rasterized conservatively, and the
+    farthest depth of the inner-coverage map). Certainly lit: nothing touching the texel is nearer
+    than the plane's nearest point in the texel (the receiver itself is in that map, at that
+    point), no back face of a closed surface is nearer than the plane's farthest point of the
+    footprint in the texel (every ray that crosses a closed blocker leaves it through a back face;
+    this catches a blocker a steep plane's own depth hides in the first map) and, on a closed
+    receiver, no open surface is either. Certainly shadowed: the texel is covered whole by a
+    blocker nearer than the plane anywhere in the footprint's part of the texel.
+
+    The plane is the one the samples' shadow rays start from: moved off the surface along ``n`` as
+    :func:`shadow_ray` moves them (``eps``); at a grazing light that shift alone moves a point
+    across texels."""
     c = light_center_dir(L, p)
     if not in_front(n, wp.vec3(c[0], c[1], c[2])):
         return wp.vec2i(0, 1)  # the light's centre is behind the plane: every sample on it is shadowed
-    ok, xp, q0, gx, gy = receiver_plane_affine(lv, view_of(lv, p), view_dir(lv, n))
+    ok, xp, q0, gx, gy = receiver_plane_affine(lv, view_of(lv, ray_origin(p, n, ray_offset(p, eps))), view_dir(lv, n))
     if not ok:
         return wp.vec2i(0, 0)
     xmin = float(1.0e30)
@@ -539,7 +550,8 @@ def footprint_certainty(
         s = wp.dot(p - o, n) / den
         if s <= 0.0:
             return wp.vec2i(0, 0)
-        v = view_of(lv, o + d * s)
+        q = o + d * s
+        v = view_of(lv, ray_origin(q, n, ray_offset(q, eps)))
         if lv.persp != 0 and v[2] <= lv.near:
             return wp.vec2i(0, 0)
         corner = texel_of(lv, v)
@@ -573,12 +585,14 @@ def footprint_certainty(
         j = level_off[lev] + ty * size + tx
         xa = float(tx) * side
         ya = float(ty) * side
-        near_all = receiver_plane_nearest(lv, xp, q0, gx, gy, xa, ya, xa + side, ya + side)
-        near_fp = receiver_plane_nearest(lv, xp, q0, gx, gy, wp.max(xa, xmin), wp.max(ya, ymin), wp.min(xa + side, xmax), wp.min(ya + side, ymax))
+        whole = receiver_plane_range(lv, xp, q0, gx, gy, xa, ya, xa + side, ya + side)
+        part = receiver_plane_range(lv, xp, q0, gx, gy, wp.max(xa, xmin), wp.max(ya, ymin), wp.min(xa + side, xmax), wp.min(ya + side, ymax))
         m = bounds[j]
-        if near_all < 0.0 or m[0] < near_all - bias:
+        if whole[0] < 0.0 or m[0] < whole[0] - bias or m[1] < part[1] - bias:
             lit = 0
-        if near_fp < 0.0 or m[1] >= near_fp - bias:
+        elif m[2] < wp.where(closed, part[1], whole[0]) - bias:
+            lit = 0
+        if part[0] < 0.0 or m[3] >= part[0] - bias:
             shadowed = 0
         if lit == 0 and shadowed == 0:
             break
@@ -592,12 +606,14 @@ def bounds_stencil(
     cam: CameraGPU,
     lv: ViewGPU,
     L: LightGPU,
-    bounds: wp.array[wp.vec2],
+    bounds: wp.array[wp.vec4],
+    closed_faces: wp.array[wp.int32],
     level_off: wp.array[wp.int32],
     levels: int,
     map_size: int,
     bias: float,
     max_texels: int,
+    eps: float,
     pattern: wp.array[wp.vec2],
     mesh: wp.uint64,
     cut: Surfaces,
@@ -619,7 +635,8 @@ def bounds_stencil(
     p = gb.pos[i]
     n = gb.nrm[i]
     xy = gb_pixel(gb, i)
-    r = footprint_certainty(lv, cam, gb.width, gb.height, xy, L, p, n, bounds, level_off, levels, map_size, bias, max_texels)
+    r = footprint_certainty(lv, cam, gb.width, gb.height, xy, L, p, n, closed_faces[gb.prim[i]] != CULL_SKIP, eps, bounds, level_off,
+                            levels, map_size, bias, max_texels)
     lit = r[0]
     shadowed = r[1]
     if lit == 0 and shadowed == 0:
@@ -636,8 +653,8 @@ def bounds_stencil(
                                                        float(xy[0]) + off[0], float(xy[1]) + off[1])
         if found != 0:
             if not same_plane(p, n, q, m):
-                r = footprint_certainty(lv, cam, gb.width, gb.height, xy, L, q, m, bounds, level_off, levels, map_size, bias,
-                                        max_texels)
+                r = footprint_certainty(lv, cam, gb.width, gb.height, xy, L, q, m, closed_faces[face] != CULL_SKIP, eps, bounds, level_off,
+                                        levels, map_size, bias, max_texels)
                 lit = lit * r[0]
                 shadowed = shadowed * r[1]
     if lit == 0 and shadowed == 0:
@@ -693,26 +710,29 @@ class IZB(Technique):
         stencil = None
         if p.aa == "adaptive" and p.stencil == "bounds":
             outer = ctx.light_depth(light, size=p.shadow_map_size, conservative=True, opaque=True)
+            back = ctx.light_depth(light, size=p.shadow_map_size, conservative=True, opaque=True, faces="back")
+            opened = ctx.light_depth(light, size=p.shadow_map_size, conservative=True, opaque=True, faces="open")
             inner = ctx.light_depth(light, size=p.shadow_map_size, inner=True)
             stencil = ctx.key("izb_stencil", light)
 
             def run_bounds(res):
                 gb, dm, di = res[gbuf], res[outer], res[inner]
                 v = dm.view
-                pyr, offs = build_bounds_pyramid(dm.depth, di.depth, dev)
+                pyr, offs = build_bounds_pyramid([dm.depth, res[back].depth, res[opened].depth], di.depth, dev)
+                closed_faces = face_surfaces(res[sk], v.origin if v.persp else None, "back").cull
                 ds = res[sk]
                 edge = wp.empty(gb.count, dtype=wp.int32, device=dev)
                 probed = wp.empty(gb.count, dtype=wp.int32, device=dev)
                 pat = subpixel_pattern(n_sub, p.pattern_kind, p.seed)
                 launch_chunked(bounds_stencil, gb.count,
-                               inputs=[gb.gpu(), cam, v.gpu(), L, pyr, wp.array(offs, dtype=wp.int32, device=dev), len(offs) - 1,
+                               inputs=[gb.gpu(), cam, v.gpu(), L, pyr, closed_faces, wp.array(offs, dtype=wp.int32, device=dev), len(offs) - 1,
                                        p.shadow_map_size, p.bounds_bias * max(v.far - v.near, 1e-12), p.bounds_texels,
-                                       wp.array(pat, dtype=wp.vec2, device=dev), ds.mesh.id, ds.cutouts, int(ds.has_cutouts)],
+                                       ray_epsilon(gb, light), wp.array(pat, dtype=wp.vec2, device=dev), ds.mesh.id, ds.cutouts, int(ds.has_cutouts)],
                                outputs=[edge, probed], device=dev)
                 counters["stencil_probed_pixels"] = int(probed.numpy().sum())
                 return {stencil: edge_counters(edge, gb)}
 
-            ctx.add_pass(ctx.pass_name("izb_stencil", light), inputs=(gbuf, sk, outer, inner), outputs=(stencil,), run=run_bounds,
+            ctx.add_pass(ctx.pass_name("izb_stencil", light), inputs=(gbuf, sk, outer, back, opened, inner), outputs=(stencil,), run=run_bounds,
                          light=light)
         elif p.aa == "adaptive":
             depth = ctx.light_depth(light, size=p.shadow_map_size, conservative=p.stencil_raster == "conservative")
