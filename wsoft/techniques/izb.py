@@ -7,26 +7,40 @@ by a depth map, so there is no light-view aliasing at any grid size.
 
 Steps of one light (the paper's eight, as passes):
 
-1. ``izb_stencil`` (``aa=adaptive``) — the *conservative shadow-edge stencil*: a variance shadow
-   map from a light depth map rendered with conservative rasterization (``stencil_raster=
-   ordinary`` renders it with ordinary rasterization, the paper's Fig. 1.6.7), mip-mapped
-   (:func:`~wsoft.accel.pyramid.build_moments_pyramid`). Per pixel: the pixel's footprint on
-   its tangent plane (the camera rays through its four corners) projected into the map, widened
-   by one texel, picks the mip level whose texels are at least as large; the moments of the
-   (at most 2 x 2) texels it overlaps; the nearest light depth t of the footprint less a slack
-   (the receiver's own depth change over two texels, plus ``stencil_bias``); the one-tailed
-   Chebyshev bounds of the occluder mass below t (``certainly lit`` when below
-   ``edge_threshold``) and of the mass at or beyond t (``certainly shadowed``). A potential edge
-   is a pixel that is neither (``stencil_rule=cull``: the paper's text, "bounds ... to cull
-   eye-view pixels"); Listing 1.6.1 returns *true* when either bound is below the threshold,
-   which read literally flags the certain pixels instead (``stencil_rule=listing``, kept to
-   measure it).
+1. ``izb_stencil`` (``aa=adaptive``) — the *shadow-edge stencil*, the pixels that get sub-samples.
+   ``stencil=bounds`` (default) proves, per pixel, that its samples agree or flags it: the plane
+   its samples' shadow rays start from (moved off the surface as :func:`shadow_ray` moves them),
+   the pixel's footprint on it projected into the light's maps, and per texel of the finest
+   pyramid level holding the footprint in ``bounds_texels`` texels per side
+   (:func:`footprint_certainty`): *certainly lit* when nothing touching the texel (a conservative
+   map, cutouts opaque) is nearer than the plane's nearest point there, no back face of a closed
+   surface (every ray through a closed blocker leaves it by one) and, on a closed receiver, no
+   open surface is nearer than the plane's farthest footprint point there; *certainly shadowed*
+   when a blocker covers the texel whole (an inner-coverage map) nearer than the plane anywhere in
+   the footprint. Pixels whose neighbours see another surface (or whose centre is a cutout) cast
+   their sub-pixel eye rays and test each surface met likewise. ``stencil=vsm`` is the paper's:
+   a variance shadow map from a light depth map rendered with conservative rasterization
+   (``stencil_raster=ordinary`` renders it with ordinary rasterization, the paper's Fig. 1.6.7),
+   mip-mapped (:func:`~wsoft.accel.pyramid.build_moments_pyramid`). Per pixel: the pixel's
+   footprint on its tangent plane projected into the map, widened by one texel, picks the mip
+   level whose texels are at least as large; the moments of the (at most 2 x 2) texels it
+   overlaps; the nearest light depth t of the footprint less a slack (the receiver's own depth
+   change over two texels, plus ``stencil_bias``); the one-tailed Chebyshev bounds of the
+   occluder mass below t (``certainly lit`` when below ``edge_threshold``) and of the mass at or
+   beyond t (``certainly shadowed``). A potential edge is a pixel that is neither
+   (``stencil_rule=cull``: the paper's text, "bounds ... to cull eye-view pixels"); Listing 1.6.1
+   returns *true* when either bound is below the threshold, which read literally flags the
+   certain pixels instead (``stencil_rule=listing``, kept to measure it). The VSM's bounds are
+   probabilistic and its receivers are in its own map: it misses aliased pixels
+   (``reports/izb.md``).
 2. ``izb_samples`` — the shadow samples: one per pixel (the G-buffer's, at the pixel centre),
    and for potential-edge pixels (``adaptive``) or every pixel (``supersample``) ``samples``
-   sub-pixel samples (rotated grid 4x, or jittered 8x / 16x) whose eye rays are *re-cast* through
-   the scene at their sub-pixel offsets (:func:`~wsoft.raster.gbuffer.cast_primary`): exact
-   surface points even where a pixel straddles a silhouette, which a reconstruction from the
-   depth buffer (a plane through the centre sample) gets wrong. A multi-sampled pixel's
+   sub-pixel samples (rotated grid 4x, or jittered 8x / 16x) at their sub-pixel offsets
+   (``subsamples``): on the centre's plane where the pixel sees that plane alone (its 8
+   neighbours on it, its centre no cutout: the camera ray meets the plane, no scene query), their
+   eye rays *re-cast* through the scene elsewhere (:func:`~wsoft.raster.gbuffer.cast_primary`):
+   exact surface points where a pixel straddles a silhouette or a crease, which a reconstruction
+   from the depth buffer (``subsamples=plane``) gets wrong; ``recast`` re-casts all. A multi-sampled pixel's
    visibility is the mean over its sub-samples that hit a surface (its centre sample is not
    inserted unless none did).
 3. ``izb_grid`` — the irregular z-buffer: a light view fitted to the inserted samples
