@@ -16,6 +16,9 @@ Python API::
     result = wsoft.compare(scene, ["pcss", "essm"], samples=256)
     result["pcss"].stats["error"]["mae_penumbra"]
 
+    # visibility baked into USD: a layer of overs with primvars:wsoft:visibility:<light> per mesh
+    layer = wsoft.bake("usd_scenes/lightmapped_bridge.usda", "pcss", frames="1:48", out="vis.usda")
+
 The names below Warp or USD (everything but the exceptions) are imported at first use, so that
 ``import wsoft.cli`` and ``wsoft --help`` do not load Warp and USD. Any other wsoft module imports
 :mod:`wsoft.parallel` first (Warp quiet, no adjoint code), as ``import wsoft`` used to.
@@ -31,7 +34,8 @@ import types
 from wsoft.errors import ParameterError, SceneError, WsoftError
 
 __version__ = "0.1.0"
-__all__ = ["Frame", "FrameSet", "ParameterError", "Scene", "SceneError", "TECHNIQUES", "WsoftError", "compare", "load_scene", "plan", "render"]
+__all__ = ["Frame", "FrameSet", "ParameterError", "Scene", "SceneError", "TECHNIQUES", "WsoftError", "bake", "compare", "load_scene", "plan",
+           "render"]
 
 # name -> the module that defines it, imported at first use
 _LAZY = {
@@ -43,6 +47,7 @@ _LAZY = {
     "load_scene": "wsoft.scene",
     "TECHNIQUES": "wsoft.techniques",
     "compare": "wsoft.metrics",
+    "bake": "wsoft.bake",
 }
 
 # modules that import neither Warp nor USD: what the command line needs to parse its arguments
@@ -87,10 +92,11 @@ def __dir__():
 
 class _Package(types.ModuleType):
     """``wsoft.render`` is the function, as it was when this package imported it eagerly: importing
-    the submodule ``wsoft.render`` (``sys.modules["wsoft.render"]``) does not rebind it."""
+    the submodule ``wsoft.render`` (``sys.modules["wsoft.render"]``) does not rebind it; nor does
+    importing ``wsoft.bake`` rebind the function ``wsoft.bake``."""
 
     def __setattr__(self, name, value):
-        if name == "render" and isinstance(value, types.ModuleType):
+        if name in ("render", "bake") and isinstance(value, types.ModuleType):
             return
         super().__setattr__(name, value)
 

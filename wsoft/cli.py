@@ -1,4 +1,4 @@
-"""``wsoft`` command line: render, plan, techniques, bench.
+"""``wsoft`` command line: render, compare, plan, techniques, bake, bench.
 
 Bad input prints one line naming the file and prim and exits with code 2. Warp and USD are
 imported by the commands that need them, never to parse the arguments (``wsoft --help`` and
@@ -315,6 +315,55 @@ def cmd_compare(args) -> int:
     return 0
 
 
+def cmd_bake(args) -> int:
+    """Bake a technique's visibility into a layer of overs (primvars, optional textures)."""
+    from wsoft.errors import ParameterError
+    from wsoft.params import parse_frames
+
+    check_output(args.out, "--out")
+    if not args.out.endswith((".usda", ".usdc", ".usd")):
+        raise ParameterError(f"--out {args.out}: the layer must be a .usda, .usdc or .usd file")
+    frames = None
+    if args.frames is not None:
+        try:
+            frames = parse_frames(args.frames)
+        except ValueError as exc:
+            raise ParameterError(f"--frames {exc}") from None
+    if args.texture_size is not None and not 1 <= args.texture_size <= 8192:
+        raise ParameterError(f"--texture-size {args.texture_size} out of range [1, 8192]")
+    if args.texture_dir:
+        check_output(args.texture_dir, "--texture-dir", folder=True)
+    if not 0.0 <= args.crease_angle <= 180.0:
+        raise ParameterError(f"--crease-angle {args.crease_angle:g} out of range [0, 180]")
+    import wsoft
+
+    params = _parse_sets(args.set)
+    stats: dict = {}
+    t0 = time.perf_counter()
+
+    def progress(done, total, t):
+        if total > 1:
+            f = stats["frames"][-1]
+            print(f"frame {t:g} ({done}/{total}): {f['total_ms'] / 1e3:.2f} s", file=sys.stderr)
+
+    wsoft.bake(scene_arg(args.scene), args.technique, light=args.light, frames=frames, out=args.out, texture_size=args.texture_size,
+               texture_dir=args.texture_dir, device=args.device, crease_angle=args.crease_angle, stats=stats, progress=progress, **params)
+    wall = time.perf_counter() - t0
+    for w in stats["warnings"]:
+        print(f"warning: {w}", file=sys.stderr)
+    fr = stats["frames"]
+    per = sum(f["total_ms"] for f in fr) / len(fr) / 1e3
+    comp = sum(f["compile_ms"] for f in fr)
+    kinds = {}
+    for m in stats["meshes"].values():
+        kinds[m["interpolation"]] = kinds.get(m["interpolation"], 0) + 1
+    print(f"{args.technique} on {os.path.basename(scene_arg(args.scene))}: {len(stats['meshes'])} meshes "
+          f"({', '.join(f'{n} {k}' for k, n in sorted(kinds.items()))}), {fr[0]['points']} points, lights "
+          f"{', '.join(stats['lights'].values())}, {len(fr)} frame(s): {per:.2f} s per frame{_compile_note(comp)}; {wall:.1f} s in all")
+    print(f"wrote {args.out}" + (f" and {len(stats['textures'])} texture(s)" if stats["textures"] else ""))
+    return 0
+
+
 def cmd_bench(args) -> int:
     from wsoft.bench.harness import run_sweep
 
@@ -386,6 +435,26 @@ def main(argv: list[str] | None = None) -> int:
     t.add_argument("--json", action="store_true")
     t.add_argument("--markdown", action="store_true", help="the README's technique table")
     t.set_defaults(fn=cmd_techniques)
+
+    k = sub.add_parser("bake", help="bake a technique's visibility into a USD layer of overs (primvars, optional textures)",
+                       formatter_class=fmt, description="Writes OUT, a layer to add as a sublayer of the stage: on every mesh a float "
+                       "primvar primvars:wsoft:visibility:<light> (vertex, or faceVarying on meshes with creases), time-sampled over "
+                       "--frames, computed at the vertices themselves (seen by a camera or not); with --texture-size, an EXR per mesh "
+                       "and light over its st and a UsdUVTexture hookup under <mesh>/wsoftVisibility.")
+    k.add_argument("scene", help="a .usda/.usdc/.usdz file or a bundled stage's name (lightmapped_bridge)")
+    k.add_argument("--technique", "-t", required=True, metavar="TECHNIQUE", help="one of: " + ", ".join(techniques)
+                   + " (izb with --set aa=none; ssm without a budget_map)")
+    k.add_argument("--set", action="append", metavar="KEY=VALUE", help="technique parameter (repeatable)")
+    k.add_argument("--light", help="light path or name (default: every shadow-casting light the technique supports)")
+    k.add_argument("--frames", metavar="A:B[:STEP]", help="time codes A to B inclusive (step 1, or STEP), or one time code A, within the "
+                   "stage's range: time samples (default: the stage's start time, written as default values)")
+    k.add_argument("--out", required=True, help="the layer to write (.usda, .usdc or .usd)")
+    k.add_argument("--texture-size", type=int, metavar="N", help="also bake an N x N texture per mesh with st and light")
+    k.add_argument("--texture-dir", help="where the textures go (default: the layer's folder)")
+    k.add_argument("--crease-angle", type=float, default=30.0, help="degrees: faces around a vertex closer than this share its "
+                   "normal; farther ones make the mesh faceVarying")
+    k.add_argument("--device", help="cpu or cuda:N (default: cuda:0 when available, else cpu)")
+    k.set_defaults(fn=cmd_bake)
 
     b = sub.add_parser("bench", help="run a benchmark sweep; rows go to <out-dir>/<sweep>.jsonl", formatter_class=fmt)
     b.add_argument("sweep", help="one of: " + ", ".join(sorted(SWEEPS)))

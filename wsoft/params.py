@@ -51,3 +51,30 @@ def range_text(f) -> str:
         return ""
     lo, hi = r
     return f"{lo:g}..{hi:g}"
+
+
+def parse_frames(text: str) -> list[float]:
+    """``a:b`` (every time code from a to b, both included, step 1), ``a:b:s`` (step s > 0) or
+    ``a`` (one time code) as a list of time codes; a ``ValueError`` naming what is wrong otherwise.
+    ``a``, ``b`` and ``s`` are finite numbers, ``a <= b``, at most 100000 time codes."""
+    parts = str(text).strip().split(":")
+    if not 1 <= len(parts) <= 3 or any(p.strip() == "" for p in parts):
+        raise ValueError(f"{text!r} is not a:b, a:b:step or a single time code")
+    try:
+        nums = [float(p) for p in parts]
+    except ValueError:
+        raise ValueError(f"{text!r} is not a:b, a:b:step or a single time code (numbers)") from None
+    if not all(math.isfinite(x) for x in nums):
+        raise ValueError(f"{text!r}: time codes and step must be finite")
+    if len(nums) == 1:
+        return nums
+    a, b = nums[0], nums[1]
+    step = nums[2] if len(nums) == 3 else 1.0
+    if step <= 0:
+        raise ValueError(f"{text!r}: the step must be > 0")
+    if b < a:
+        raise ValueError(f"{text!r}: the last time code {b:g} is before the first {a:g}")
+    n = int(math.floor((b - a) / step + 1e-9)) + 1
+    if n > 100000:
+        raise ValueError(f"{text!r}: {n} time codes (at most 100000)")
+    return [a + i * step for i in range(n)]

@@ -569,13 +569,7 @@ def build_graph(scene: Scene, technique, *, width: int | None = None, height: in
     built = Built(ctx, labels, techs, {}, {}, {}, {})
     for tech, label in zip(techs, labels):
         tctx = ctx.technique(tech, label)
-        mine, skipped = [], []
-        for l in lights:
-            why = tech.supports(scene, l)
-            if why is None:
-                mine.append(l)
-            else:
-                skipped.append((l, why))
+        mine, skipped = supported_lights(tech, scene, lights)
         built.skipped[label] = skipped
         if not mine:
             if strict:
@@ -583,12 +577,30 @@ def build_graph(scene: Scene, technique, *, width: int | None = None, height: in
             built.lights[label] = []
             continue
         built.lights[label] = mine
-        # the receiver's horizon (a point sees only the light in front of its tangent plane): the
-        # reference applies it per light sample, every other technique is capped by its front fraction
-        built.visibility[label] = [tech.add_passes(tctx, l) if tech.horizon == "exact" else ctx.clip_to_front(tctx, l, tech.add_passes(tctx, l))
-                                   for l in mine]
+        built.visibility[label] = [visibility_of(ctx, tctx, l) for l in mine]
         built.channels[label] = _add_resolve(ctx, tech, label, mine, built.visibility[label], single=len(techs) == 1)
     return built
+
+
+def supported_lights(tech, scene: Scene, lights: list[Light]) -> tuple[list[Light], list[tuple[Light, str]]]:
+    """``lights`` split into those ``tech`` supports and (light, reason) for the others."""
+    mine, skipped = [], []
+    for l in lights:
+        why = tech.supports(scene, l)
+        if why is None:
+            mine.append(l)
+        else:
+            skipped.append((l, why))
+    return mine, skipped
+
+
+def visibility_of(ctx: RenderContext, tctx: TechniqueContext, light: Light) -> Key:
+    """Register a technique's passes for ``light``; the key of its per-sample visibility, capped by
+    the receiver's horizon (a point sees only the light in front of its tangent plane): the
+    reference applies it per light sample, every other technique is capped by its front fraction."""
+    tech = tctx.tech
+    vk = tech.add_passes(tctx, light)
+    return vk if tech.horizon == "exact" else ctx.clip_to_front(tctx, light, vk)
 
 
 def _add_resolve(ctx: RenderContext, tech, label: str, lights: list[Light], vis_keys: list[Key], single: bool) -> Key:

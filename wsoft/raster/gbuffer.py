@@ -9,6 +9,11 @@ Samples are stored sample-major: ``k * H * W`` entries, layer ``s`` (the ``s``-t
 every pixel) after layer ``s - 1``. Kernels take the G-buffer as one :class:`GBufferGPU` struct
 and find their way with :func:`gb_pixel`, :func:`gb_layer`, :func:`gb_index` and
 :func:`gb_neighbour` (never by decoding flat indices by hand).
+
+A *bake* G-buffer (:func:`bake_gbuffer`) holds given points on surfaces instead of camera-ray
+hits (mesh vertices, texel centres), packed into a near-square ``W x H`` image of one layer with
+no pixel grid (``grid = 0``): its samples are independent points, so :func:`gb_neighbour` finds
+none (a point has no pixel footprint).
 """
 
 from __future__ import annotations
@@ -155,6 +160,7 @@ class GBufferGPU:
     width: int
     height: int
     spp: int
+    grid: int
     pos: wp.array[wp.vec3]
     nrm: wp.array[wp.vec3]
     dist: wp.array[float]
@@ -191,7 +197,10 @@ def gb_index(gb: GBufferGPU, x: int, y: int, layer: int) -> int:
 
 @wp.func
 def gb_neighbour(gb: GBufferGPU, i: int, dx: int, dy: int) -> int:
-    """The sample in ``i``'s layer at the pixel (dx, dy) away, or -1 outside the image."""
+    """The sample in ``i``'s layer at the pixel (dx, dy) away, or -1 outside the image (always -1
+    in a bake G-buffer, whose samples are independent points)."""
+    if gb.grid == 0:
+        return -1
     p = gb_pixel(gb, i)
     x = p[0] + dx
     y = p[1] + dy
@@ -219,6 +228,8 @@ class GBuffer:
     ``pos``/``nrm`` vec3 world position and viewer-facing unit normal; ``dist`` float32 camera
     distance; ``prim`` int32 triangle index (-1 = background); ``uv`` vec2 texture coordinates;
     ``bary`` vec2 weights (u, v) of the triangle's first two corners (the third is 1 - u - v).
+    ``grid``: True for an image (neighbouring samples are neighbouring pixels), False for a bake
+    G-buffer of independent points (:func:`bake_gbuffer`).
     """
 
     width: int
@@ -230,6 +241,7 @@ class GBuffer:
     prim: wp.array
     uv: wp.array
     bary: wp.array
+    grid: bool = True
     _bounds: tuple | None = field(default=None, repr=False, compare=False)
 
     @property
@@ -257,7 +269,7 @@ class GBuffer:
 
     def gpu(self) -> GBufferGPU:
         g = GBufferGPU()
-        g.width, g.height, g.spp = self.width, self.height, self.spp
+        g.width, g.height, g.spp, g.grid = self.width, self.height, self.spp, int(self.grid)
         g.pos, g.nrm, g.dist, g.prim, g.uv, g.bary = self.pos, self.nrm, self.dist, self.prim, self.uv, self.bary
         return g
 
@@ -318,3 +330,36 @@ def render_gbuffer(ds: DeviceScene, cam: CameraGPU, width: int, height: int, spp
         device=dev,
     )
     return g
+
+
+def bake_gbuffer(pos: np.ndarray, nrm: np.ndarray, prim: np.ndarray, uv: np.ndarray | None, device: str) -> GBuffer:
+    """A G-buffer whose samples are given points (a bake, :mod:`wsoft.bake`) instead of camera-ray
+    hits: ``pos`` [N, 3] world points, ``nrm`` [N, 3] unit normals (the side whose visibility is
+    wanted), ``prim`` [N] the triangle each lies on (>= 0), ``uv`` [N, 2] or None (zeros).
+
+    The N points are packed row by row into a near-square ``W x H`` image of one layer (W = ceil
+    sqrt N), the last row padded with background samples (``prim = -1``, visibility 1), so that
+    the per-pixel light-sample patterns (``interleave``, ``rotate``) still vary over two axes;
+    ``grid = False``: no sample is another's neighbour. ``dist`` (camera distance) and ``bary``
+    are 0: a bake has no camera, and no technique that bakes reads them."""
+    n = int(len(pos))
+    w = max(1, int(np.ceil(np.sqrt(max(n, 1)))))
+    h = max(1, (n + w - 1) // w)
+    total = w * h
+
+    def padded(a, width, fill):
+        out = np.full((total, width) if width else total, fill, dtype=np.float32 if width else np.int32)
+        if n:
+            out[:n] = a
+        return out
+
+    return GBuffer(
+        w, h, 1,
+        pos=wp.array(padded(np.asarray(pos, np.float32), 3, 0.0), dtype=wp.vec3, device=device),
+        nrm=wp.array(padded(np.asarray(nrm, np.float32), 3, 0.0), dtype=wp.vec3, device=device),
+        dist=wp.zeros(total, dtype=float, device=device),
+        prim=wp.array(padded(np.asarray(prim, np.int32), 0, -1), dtype=wp.int32, device=device),
+        uv=wp.array(padded(np.zeros((n, 2), np.float32) if uv is None else np.asarray(uv, np.float32), 2, 0.0), dtype=wp.vec2, device=device),
+        bary=wp.zeros(total, dtype=wp.vec2, device=device),
+        grid=False,
+    )

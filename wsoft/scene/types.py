@@ -147,6 +147,8 @@ class Scene:
     tri_uv: np.ndarray  # [T, 3, 2] float32 texture coordinates (0 where the mesh has none)
     tri_double_sided: np.ndarray  # [T] bool
     prims: list[str] = field(default_factory=list)
+    tri_face: np.ndarray | None = None  # [T] int32: the face of its prim (faceVertexCounts order) a triangle comes from
+    prim_points: np.ndarray | None = None  # [P, 2] int64: a prim's points are points[first : first + count], in its own order
     tri_closed: np.ndarray | None = None  # [T] int8: +1/-1 closed surface facing out/in, 0 open (see closed_orientation)
     tri_dynamic: np.ndarray | None = None  # [T] bool: dynamic caster (time-sampled, animated or wsoft:dynamic)
     tri_baked: np.ndarray | None = None  # [T, 3, 3] float32 baked light per corner (primvars:wsoft:bakedLight), NaN where absent
@@ -211,7 +213,7 @@ class Scene:
         pick = lambda a: None if a is None else a[m]  # noqa: E731
         sub = replace(
             self, triangles=self.triangles[m], tri_prim=self.tri_prim[m], tri_material=self.tri_material[m], tri_uv=self.tri_uv[m],
-            tri_double_sided=self.tri_double_sided[m], tri_closed=pick(self.tri_closed), tri_dynamic=pick(self.tri_dynamic), tri_baked=pick(self.tri_baked),
+            tri_double_sided=self.tri_double_sided[m], tri_closed=pick(self.tri_closed), tri_face=pick(self.tri_face), tri_dynamic=pick(self.tri_dynamic), tri_baked=pick(self.tri_baked),
         )
         sub.changed()
         return sub

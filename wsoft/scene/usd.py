@@ -69,24 +69,38 @@ def load_scene(path_or_stage, time: float | None = None, render_settings: str | 
     delegate = UsdUtils.CoalescingDiagnosticDelegate()  # USD's warnings are collected, not printed
     if isinstance(path_or_stage, Usd.Stage):
         stage = path_or_stage
-        file = stage.GetRootLayer().realPath or stage.GetRootLayer().identifier
+        file = stage_file(stage)
     else:
         file = os.fspath(path_or_stage)
-        if not os.path.exists(file):
-            raise SceneError("file not found", file=file)
-        if os.path.isdir(file):
-            raise SceneError("is a folder, not a USD file", file=file)
         _check_time(time, file)
-        try:
-            stage = Usd.Stage.Open(file)
-        except Exception as exc:  # Tf.ErrorException: the parser's own message is the useful one
-            raise SceneError(f"cannot open USD stage: {_usd_error_detail(str(exc))}", file=file) from None
-        if stage is None:
-            raise SceneError("cannot open USD stage", file=file)
+        stage = open_stage(file)
     _check_time(time, file)
     scene = _StageReader(stage, file, time, render_settings).read()
-    scene.warnings[:0] = _diagnostic_lines(delegate.TakeUncoalescedDiagnostics(), file)
+    scene.warnings[:0] = diagnostic_lines(delegate.TakeUncoalescedDiagnostics(), file)
     return scene
+
+
+def open_stage(file: str):
+    """``Usd.Stage.Open(file)``, its problems as a :class:`SceneError` naming the file (not found, a
+    folder, the parser's own ``file:line:col`` message)."""
+    Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = _pxr()
+    file = os.fspath(file)
+    if not os.path.exists(file):
+        raise SceneError("file not found", file=file)
+    if os.path.isdir(file):
+        raise SceneError("is a folder, not a USD file", file=file)
+    try:
+        stage = Usd.Stage.Open(file)
+    except Exception as exc:  # Tf.ErrorException: the parser's own message is the useful one
+        raise SceneError(f"cannot open USD stage: {_usd_error_detail(str(exc))}", file=file) from None
+    if stage is None:
+        raise SceneError("cannot open USD stage", file=file)
+    return stage
+
+
+def stage_file(stage) -> str:
+    """How errors and scenes name a stage: its root layer's file, else its identifier (in memory)."""
+    return stage.GetRootLayer().realPath or stage.GetRootLayer().identifier
 
 
 def _check_time(time: float | None, file: str) -> None:
@@ -107,7 +121,7 @@ def _usd_error_detail(text: str) -> str:
     return re.sub(r"pxrInternal_\w+?::(\w+::)*", "", " ".join(msgs[0].split()))
 
 
-def _diagnostic_lines(diagnostics, file: str) -> list[str]:
+def diagnostic_lines(diagnostics, file: str) -> list[str]:
     """USD's diagnostics as one line each: the commentary without USD's ``(instantiating stage ...)`` tail."""
     import re
 
@@ -182,6 +196,7 @@ class _StageReader:
     def read(self) -> Scene:
         Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = _pxr()
         pts, tris, tri_prim, tri_mat, tri_uv, tri_ds, tri_cl, tri_dyn, tri_bk, prims = [], [], [], [], [], [], [], [], [], []
+        tri_face, prim_points = [], []
         lights, unshadowed, skipped, cameras, shadow_lights = [], [], [], [], []
         nverts = 0
         it = iter(Usd.PrimRange.Stage(self.stage, Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)))
@@ -199,8 +214,9 @@ class _StageReader:
 
             def add_mesh(mesh, name: str):
                 nonlocal nverts
-                p, t, m, uv, ds, closed, dynamic, baked = mesh
+                p, t, m, uv, ds, closed, dynamic, baked, faces = mesh
                 prims.append(name)
+                prim_points.append((nverts, len(p)))
                 pts.append(p)
                 tris.append(t + nverts)
                 nverts += len(p)
@@ -211,6 +227,7 @@ class _StageReader:
                 tri_cl.append(np.full(len(t), closed, np.int8))
                 tri_dyn.append(np.full(len(t), dynamic, bool))
                 tri_bk.append((baked, len(t)))
+                tri_face.append(faces.astype(np.int32))
 
             if prim.IsA(UsdGeom.PointInstancer):
                 it.PruneChildren()  # its prototypes are drawn only where it places them
@@ -260,7 +277,9 @@ class _StageReader:
             tri_closed=np.concatenate(tri_cl) if tri_cl else np.zeros(0, np.int8),
             tri_dynamic=np.concatenate(tri_dyn) if tri_dyn else np.zeros(0, bool),
             tri_baked=_baked(tri_bk),
+            tri_face=np.concatenate(tri_face) if tri_face else np.zeros(0, np.int32),
             prims=prims,
+            prim_points=np.asarray(prim_points, np.int64).reshape(-1, 2),
             materials=self.materials,
             textures=self.textures,
             lights=lights,
@@ -355,7 +374,7 @@ class _StageReader:
                     mesh = self.read_mesh(q)
                     if mesh is not None:
                         if moving:
-                            mesh = (*mesh[:6], True, mesh[7])
+                            mesh = (*mesh[:6], True, *mesh[7:])
                         yield mesh, f"{q.GetPath()}@{prim.GetPath()}[{int(i)}]"
             finally:
                 self.world_override = None
@@ -426,7 +445,7 @@ class _StageReader:
         mat = self.bind_materials(prim, mesh, len(counts), face_of_tri)
         ds = bool(self.get(mesh.GetDoubleSidedAttr(), False))
         baked = self.read_primvar(prim, corners, face_of_tri, tris, "wsoft:bakedLight", 3)
-        return pw, tris.astype(np.int32), mat, uv, ds, closed_orientation(pw, tris), self.is_dynamic(prim, mesh), baked
+        return pw, tris.astype(np.int32), mat, uv, ds, closed_orientation(pw, tris), self.is_dynamic(prim, mesh), baked, face_of_tri
 
     def is_dynamic(self, prim, mesh) -> bool:
         """A *dynamic caster* (Salzman's sense): time-sampled points, a time-varying transform on the

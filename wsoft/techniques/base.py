@@ -8,7 +8,9 @@ answer), and implement :meth:`Technique.add_passes`, which registers passes thro
 :class:`~wsoft.render.TechniqueContext` it is given (scene arrays, G-buffer, light depth maps)
 and returns the key of the visibility it writes. Override :meth:`Technique.supports` when some
 lights or scenes are out of the technique's reach: ``wsoft plan`` lists the reason, ``render``
-skips the light (or stops with the reason when nothing is left).
+skips the light (or stops with the reason when nothing is left). Override
+:meth:`Technique.bake_support` when the technique needs a camera image (``wsoft bake`` refuses it
+with the reason).
 """
 
 from __future__ import annotations
@@ -122,6 +124,13 @@ class Technique:
     # -- what it supports ------------------------------------------------------------------------
     def supports(self, scene, light) -> str | None:
         """``None`` when the technique can render ``light`` of ``scene``, else the reason it cannot."""
+        return None
+
+    def bake_support(self) -> str | None:
+        """``None`` when the technique answers for any points given their positions and normals,
+        so that it can bake visibility into a stage (:mod:`wsoft.bake`: its G-buffer holds mesh
+        vertices and texel centres, with no camera and no pixel grid), else the reason it cannot
+        (it casts eye rays, or reads a per-pixel input)."""
         return None
 
     # -- quality ---------------------------------------------------------------------------------

@@ -699,6 +699,12 @@ class IZB(Technique):
         kind = LIGHT_KIND_NAMES.get(light.kind, str(light.kind))
         return "exact (point light)" if light.kind == LIGHT_POINT else f"from the light's centre ({kind} light: the hard shadow of its centre)"
 
+    def bake_support(self) -> str | None:
+        if self.params.aa != "none":
+            return (f"aa={self.params.aa} anti-aliases over the eye view's pixels (sub-pixel eye rays, a screen-space shadow-edge "
+                    f"stencil) and a bake has no camera; bake with aa=none (the exact hard shadow of the light's centre at each point)")
+        return None
+
     def add_passes(self, ctx, light):
         p = self.params
         if p.aa != "none" and ctx.pixel_samples != 1:
@@ -707,7 +713,7 @@ class IZB(Technique):
         gbuf = ctx.gbuffer()
         sk = ctx.scene_arrays()
         L = ctx.light_gpu(light)
-        cam = camera_gpu(ctx.camera)
+        cam = camera_gpu(ctx.camera) if p.aa != "none" else None  # only anti-aliasing casts eye rays (a bake has no camera)
         dev = ctx.device
         scene = ctx.scene
         counters = ctx.counters(light)

@@ -340,6 +340,12 @@ class SSM(Technique):
             return "the light has no area (a point light or a sun of angle 0): no soft shadow to backproject"
         return None
 
+    def bake_support(self) -> str | None:
+        # without a pixel grid the LOQ smoothing (§4.2) finds no neighbours: each point keeps its own level
+        if self.params.budget_map:
+            return f"budget_map={self.params.budget_map!r} gives b_mo per pixel of the image and a bake has no image; bake without it"
+        return None
+
     def add_passes(self, ctx, light):
         p = self.params
         gbuf = ctx.gbuffer()
