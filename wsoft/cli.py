@@ -195,6 +195,14 @@ def cmd_plan(args) -> int:
     print("shadow-casting lights:" + ("" if p["lights"] else " (none)"))
     for l in p["lights"]:
         print(f"  {l['path']:<32} {l['kind']:<8} {l['size']}")
+        sh = l["shadow"]
+        lk = sh["link"]
+        print(f"      collection:shadowLink: {lk['excluded_prims']} of {lk['prims']} prims excluded"
+              + (f" ({', '.join(lk['excluded'])}{', ...' if lk['excluded_prims'] > len(lk['excluded']) else ''}): {lk['applied']}" if lk["excluded_prims"] else ""))
+        dist = "unlimited" if sh["distance"] is None else f"{sh['distance']:g} scene units: {sh['distance_applied']}"
+        print(f"      shadow:distance: {dist}")
+        print(f"      shadow:color: ({', '.join(f'{c:g}' for c in sh['color'])}): {sh['color_applied']}")
+        print(f"      shadow:falloff: {sh['falloff']:g}, falloffGamma {sh['falloff_gamma']:g}: {sh['falloff_applied']}")
     print("lights skipped:" + ("" if p["skipped_lights"] else " (none)"))
     for l in p["skipped_lights"]:
         print(f"  {l['path']:<32} {l['kind']:<12} {l['reason']}")

@@ -173,8 +173,12 @@ class RenderContext:
         cutouts); ``inner``: the map of depths that certainly block a whole texel (inner coverage);
         ``opaque``: cutouts not alpha-tested (each covers every texel it touches: with
         ``conservative``, a map no occluder escapes); ``faces``: ``all``, or only ``back`` faces of
-        closed surfaces or ``open`` surfaces (:func:`~wsoft.scene.device.face_surfaces`)."""
+        closed surfaces or ``open`` surfaces (:func:`~wsoft.scene.device.face_surfaces`). Only the
+        triangles that cast ``light``'s shadow are drawn (its ``collection:shadowLink``,
+        :meth:`Scene.casting_triangles`); the key is the light's own, so lights with different links
+        never share a map."""
         sk = self.scene_arrays()
+        casting = self.scene.casting_triangles(light)  # None: every triangle (no list, no extra work)
         vk = self.light_view(light, size, soft)
         alpha = self.scene.has_cutouts and not opaque
         kind = ("light_depth" + ("_alpha" if alpha else "") + ("_inner" if inner else "_conservative" if conservative else "")
@@ -183,7 +187,10 @@ class RenderContext:
         name = str(key)
 
         def run(res):
-            dm = rasterize(res[sk], res[vk], alpha_tested=alpha, conservative=conservative, inner=inner, faces=faces)
+            dm = rasterize(res[sk], res[vk], alpha_tested=alpha, conservative=conservative, inner=inner, faces=faces,
+                           triangles=casting)
+            if casting is not None:
+                self.pass_counters(name)["casting_triangles"] = int(len(casting))
             if dm.private_maps:
                 c = self.pass_counters(name)
                 c["cpu_private_maps"] = dm.private_maps
@@ -286,6 +293,13 @@ class TechniqueContext:
         """``base[light]suffix``, or ``base[label:light]suffix`` for a labelled instance."""
         inner = self.label(light) if self.label_ == self.tech.name else f"{self.label_}:{self.label(light)}"
         return f"{base}[{inner}]{suffix}"
+
+    def warn_distance(self, pass_name: str, light: Light) -> None:
+        """The warning of a depth-map technique that applies ``inputs:shadow:distance`` to the caster
+        its map keeps per texel (the one nearest the light)."""
+        self.ctx.warn(pass_name, f"light {light.path}: inputs:shadow:distance = {light.shadow_distance:g} is tested against the "
+                                 f"caster nearest the light in each texel of the depth map: a caster behind it within the distance "
+                                 f"is missed (reference and izb test every caster)")
 
     def visibility(self, vis: wp.array, stderr: wp.array | None = None) -> Visibility:
         return Visibility(vis, stderr)
@@ -615,7 +629,8 @@ def _add_resolve(ctx: RenderContext, tech, label: str, lights: list[Light], vis_
     crop = ctx.framing.crop if ctx.framing is not None else None
 
     def shade_pass(res):
-        return {rgb_key: shade_samples(res[sk], res[gk], [(L, res[vk].vis) for L, vk in zip(light_structs, vis_keys)])}
+        return {rgb_key: shade_samples(res[sk], res[gk], [(L, res[vk].vis, l.shadow_color)
+                                                          for L, l, vk in zip(light_structs, lights, vis_keys)])}
 
     def resolve(res):
         """Per-sample results -> per-pixel channels (means over the pixel's covered samples)."""
@@ -855,12 +870,42 @@ def with_render_settings(scene, render_settings: str | None, time_code: float | 
                          f"pass render_settings={str(render_settings)!r} to load_scene", file=scene.path)
 
 
+COLOR_APPLIED = "applied to R G B, not to V"
+FALLOFF_APPLIED = "not applied (UsdLux gives no formula for the fade; the shadow ends sharply at shadow:distance)"
+
+
+def shadow_controls(scene: Scene, light: Light) -> dict:
+    """A light's UsdLux shadow controls as ``wsoft plan`` lists them: the ``collection:shadowLink``
+    membership (prims it leaves out of the shadow, of the prims loaded), ``inputs:shadow:distance``
+    (None: unlimited) and which techniques honour it, the shadow colour (applied to ``R G B``, not
+    to ``V``) and falloff (not applied)."""
+    from wsoft.techniques import TECHNIQUES
+
+    out = [scene.prims[i] for i in light.shadow_excluded]
+    casting = scene.casting_mask(light)
+    refused = sorted(n for n, c in TECHNIQUES.items() if c.distance_refusal)
+    return {
+        "link": {"excluded_prims": len(out), "prims": len(scene.prims), "excluded": out[:5],
+                 "casting_triangles": scene.triangle_count if casting is None else int(casting.sum()),
+                 "applied": "excluded prims cast no shadow of this light (still seen, still receive it)" if out else "every prim casts"},
+        "distance": light.shadow_distance if light.distance_limited else None,
+        "distance_applied": ("unlimited" if not light.distance_limited else
+                             f"honoured by {', '.join(n for n in sorted(TECHNIQUES) if n not in refused)}; refused by {', '.join(refused)}"),
+        "color": list(light.shadow_color),
+        "color_applied": COLOR_APPLIED,
+        "falloff": light.shadow_falloff,
+        "falloff_gamma": light.shadow_falloff_gamma,
+        "falloff_applied": FALLOFF_APPLIED if light.shadow_falloff > 0 else "none authored (falloff <= 0)",
+    }
+
+
 def plan(scene: Scene, techniques: list[str] | None = None, *, width: int | None = None, height: int | None = None, light=None,
          camera=None) -> dict:
-    """What would run: shadow-casting lights, skipped lights, cutout materials, the purposes
-    loaded, the framing (``framing``: which render settings prim and camera, where each came from,
-    the resolution, conform policy and data window; see :meth:`Framing.describe`), and per
-    technique the passes (with their kinds) or why it is not applicable to a light."""
+    """What would run: shadow-casting lights (with their UsdLux shadow controls,
+    :func:`shadow_controls`), skipped lights, cutout materials, the purposes loaded, the framing
+    (``framing``: which render settings prim and camera, where each came from, the resolution,
+    conform policy and data window; see :meth:`Framing.describe`), and per technique the passes
+    (with their kinds) or why it is not applicable to a light."""
     from wsoft.techniques import TECHNIQUES
 
     out = {
@@ -868,7 +913,8 @@ def plan(scene: Scene, techniques: list[str] | None = None, *, width: int | None
         "triangles": scene.triangle_count,
         "up_axis": scene.up_axis,
         "meters_per_unit": scene.meters_per_unit,
-        "lights": [{"path": l.path, "kind": l.kind_name, "size": l.size_description()} for l in scene.lights],
+        "lights": [{"path": l.path, "kind": l.kind_name, "size": l.size_description(), "shadow": shadow_controls(scene, l)}
+                   for l in scene.lights],
         "skipped_lights": [{"path": l.path, "kind": l.kind_name, "reason": "shadow:enable = false"} for l in scene.unshadowed_lights]
         + [{"path": s.path, "kind": s.kind, "reason": s.reason} for s in scene.skipped_lights],
         "cutout_materials": [{"path": p, "triangles": n} for p, n in scene.cutout_triangle_counts().items()],

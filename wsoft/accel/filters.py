@@ -13,7 +13,7 @@ import numpy as np
 import warp as wp
 
 from wsoft.lightspace.samples import SamplePattern, to_light_coords
-from wsoft.lightspace.view import ViewGPU, depth_at, receiver_plane_depth_or, texel_center
+from wsoft.lightspace.view import ViewGPU, depth_at, receiver_plane_depth_or, texel_center, within_distance
 
 TAP_SEED = 7  # the Poisson taps' seed (deterministic patterns)
 
@@ -51,10 +51,13 @@ def pcf_visibility(
     ntaps: int,
     bias: float,
     use_plane: int,
+    dmax: float,
 ) -> float:
     """Fraction of ``taps`` (offsets ``half`` x pattern around ``m0``, window units) where the
     receiver (view-space point ``pv``, normal ``nv``) is lit. With ``use_plane`` the receiver's
-    depth at a tap is its tangent plane's at the tap's texel centre."""
+    depth at a tap is its tangent plane's at the tap's texel centre. ``dmax >= 0``
+    (``inputs:shadow:distance``): a tap's caster counts only within ``dmax`` of the receiver (the
+    caster's point on the tap texel's ray, :func:`~wsoft.lightspace.view.caster_distance`)."""
     lit = float(0.0)
     for i in range(ntaps):
         o = to_light_coords(taps[i], disk)
@@ -63,6 +66,10 @@ def pcf_visibility(
         zr = pv[2]
         if use_plane != 0 and c[2] > 0.0:
             zr = receiver_plane_depth_or(lv, pv, nv, wp.vec2(c[0], c[1]), pv[2])
-        if zr - bias <= depth_at(lv, depth, m):
+        d = depth_at(lv, depth, m)
+        if zr - bias <= d:
             lit += 1.0
+        elif dmax >= 0.0:
+            if not within_distance(lv, pv, wp.vec2(c[0], c[1]), d, dmax):
+                lit += 1.0
     return lit / float(ntaps)

@@ -512,6 +512,29 @@ def depth_at(lv: ViewGPU, depth: wp.array2d[float], m: wp.vec2) -> float:
 
 
 @wp.func
+def caster_distance(lv: ViewGPU, pv: wp.vec3, m: wp.vec2, d: float) -> float:
+    """Distance from the receiver (view-space point ``pv``) to the caster a depth map records at
+    window coordinates ``m`` with linear depth ``d``: the point at depth ``d`` on the view's ray
+    through ``m`` (through the light's centre for a perspective view, along the view axis for an
+    orthographic one). With ``m`` the receiver's own map coordinates this is the distance along the
+    receiver's ray toward the light's centre, (z - d) |pv| / z, exactly; it is what
+    ``inputs:shadow:distance`` limits."""
+    c = wp.vec3(m[0], m[1], d)
+    if lv.persp != 0:
+        c = wp.vec3(m[0] * d, m[1] * d, d)
+    return wp.length(c - pv)
+
+
+@wp.func
+def within_distance(lv: ViewGPU, pv: wp.vec3, m: wp.vec2, d: float, dmax: float) -> bool:
+    """Does the caster at (``m``, ``d``) count for the receiver ``pv``: always when ``dmax < 0`` (no
+    ``inputs:shadow:distance``), else when it lies within ``dmax`` of it (:func:`caster_distance`)."""
+    if dmax < 0.0:
+        return True
+    return caster_distance(lv, pv, m, d) <= dmax
+
+
+@wp.func
 def receiver_texel(lv: ViewGPU, p: wp.vec3) -> wp.vec4:
     """(tx, ty, view depth, 1) of a world point seen by the light inside its map, else w = 0
     (behind a perspective light's near plane or outside the map: nothing mapped can shadow it)."""

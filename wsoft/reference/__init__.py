@@ -32,7 +32,7 @@ from wsoft.lightspace.samples import LightSamples, SamplePattern, sample_coords,
 from wsoft.parallel import launch_chunked
 from wsoft.raster.gbuffer import GBufferGPU, gb_covered, gb_pixel
 from wsoft.lightspace.bitmask import popcount
-from wsoft.scene.device import DeviceScene, Surfaces, occluded
+from wsoft.scene.device import DeviceScene, Surfaces, occluded, shadow_surfaces
 from wsoft.scene.packets import PACKET, PackedBVH, packed_bvh, packet_f, trace_receiver_packet
 
 TRAVERSALS = ("auto", "packet", "ray")
@@ -69,6 +69,17 @@ def receiver_begin(gb: GBufferGPU, ls: LightSamples, eps: float, i: int):
 
 
 @wp.func
+def shadow_ray_length(to_light: float, dmax: float, off: float) -> float:
+    """How far a shadow ray from a receiver (its origin ``off`` off the surface) looks for a caster:
+    to the light point (``to_light`` from the surface), or only ``dmax`` (``inputs:shadow:distance``,
+    measured from the surface point) when ``dmax >= 0``."""
+    t = to_light
+    if dmax >= 0.0:
+        t = wp.min(t, dmax)
+    return wp.max(t - off, 0.0)
+
+
+@wp.func
 def visible_fraction(visible: int, samples: int):
     """(V, its standard error) from ``visible`` of ``samples`` rays (pseudo-count estimate)."""
     pe = (float(visible) + 0.5) / (float(samples) + 1.0)
@@ -85,6 +96,7 @@ def trace_visibility(
     ls: LightSamples,
     gb: GBufferGPU,
     eps: float,
+    dmax: float,
     # outputs
     vis: wp.array[float],
     stderr: wp.array[float],
@@ -104,7 +116,7 @@ def trace_visibility(
         r = light_point(light, p, c)
         d = wp.vec3(r[0], r[1], r[2])
         if in_front(n, d):
-            if not occluded(mesh, cut, has_cutouts, o, d, r[3] - off):
+            if not occluded(mesh, cut, has_cutouts, o, d, shadow_ray_length(r[3], dmax, off)):
                 visible += 1
     v, e = visible_fraction(visible, samples)
     vis[i] = v
@@ -122,6 +134,7 @@ def trace_visibility_packets(
     ls: LightSamples,
     gb: GBufferGPU,
     eps: float,
+    dmax: float,
     # outputs
     vis: wp.array[float],
     stderr: wp.array[float],
@@ -158,7 +171,7 @@ def trace_visibility_packets(
                 dx[k] = d[0]
                 dy[k] = d[1]
                 dz[k] = d[2]
-                tm[k] = r[3] - off
+                tm[k] = shadow_ray_length(r[3], dmax, off)
                 mask = mask | (wp.uint32(1) << wp.uint32(k))
         live, each = trace_receiver_packet(mesh, pb, cut, has_cutouts, o, dx, dy, dz, tm, mask, each)
         visible += popcount(live)
@@ -187,14 +200,20 @@ def reference_pattern(samples: int, seed: int, jitter: bool) -> SamplePattern:
 
 
 def trace_reference(ds: DeviceScene, light: LightGPU, gb, pattern: SamplePattern, disk: bool, eps: float, traversal: str = "auto",
-                    counters: dict | None = None) -> tuple[wp.array, wp.array]:
+                    counters: dict | None = None, excluded: tuple[int, ...] = (), max_distance: float = -1.0) -> tuple[wp.array, wp.array]:
     """Visibility and its standard error per G-buffer sample (flat float32 arrays), with the
     light samples of ``pattern`` (mapped onto a disk when ``disk``); ``eps``: the rays' offset
     (:func:`ray_epsilon`); ``traversal``: ``packet``, ``ray`` or ``auto`` (:func:`resolve_traversal`).
+    ``excluded``: prims (indices into the scene's prims) that cast no shadow of this light (its
+    ``collection:shadowLink``): rays continue past them (:func:`~wsoft.scene.device.shadow_surfaces`).
+    ``max_distance``: ``inputs:shadow:distance`` (>= 0: a ray looks for casters only that far from
+    the receiver; -1: up to the light).
     ``counters`` (a dict) receives ``traversal`` (the one used), ``packet_fallback`` (why not
     packets, when the BVH is too deep for them) and ``receivers_ray_by_ray`` (receivers whose
     packets gave up: their rays fan out over fine geometry)."""
     n = gb.count
+    cut, has_cutouts = shadow_surfaces(ds, excluded)
+    dmax = float(max_distance) if max_distance >= 0.0 else -1.0
     vis = wp.empty(n, dtype=float, device=ds.device)
     err = wp.empty(n, dtype=float, device=ds.device)
     mode = resolve_traversal(traversal, ds.device, pattern.count)
@@ -210,7 +229,7 @@ def trace_reference(ds: DeviceScene, light: LightGPU, gb, pattern: SamplePattern
         launch_chunked(
             trace_visibility_packets,
             n,
-            inputs=[ds.mesh.id, pb, ds.cutouts, ds.has_cutouts, light, pattern.on(ds.device, disk), gb.gpu(), eps],
+            inputs=[ds.mesh.id, pb, cut, has_cutouts, light, pattern.on(ds.device, disk), gb.gpu(), eps, dmax],
             outputs=[vis, err, given_up],
             device=ds.device,
             min_chunk=256,
@@ -222,7 +241,7 @@ def trace_reference(ds: DeviceScene, light: LightGPU, gb, pattern: SamplePattern
     launch_chunked(
         trace_visibility,
         n,
-        inputs=[ds.mesh.id, ds.cutouts, ds.has_cutouts, light, pattern.on(ds.device, disk), gb.gpu(), eps],
+        inputs=[ds.mesh.id, cut, has_cutouts, light, pattern.on(ds.device, disk), gb.gpu(), eps, dmax],
         outputs=[vis, err],
         device=ds.device,
         min_chunk=256,

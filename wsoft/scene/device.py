@@ -6,7 +6,7 @@ point on a triangle; scenes without cutouts pass ``has_cutouts = 0`` and never s
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import warp as wp
@@ -142,6 +142,7 @@ class DeviceScene:
     lo: np.ndarray
     hi: np.ndarray
     packed: tuple | None = None  # (PackedBVH or None, its stats), built by wsoft.scene.packets.packed_bvh on first use
+    linked: dict = field(default_factory=dict)  # excluded prims -> (Surfaces, has_cutouts), built by shadow_surfaces
 
     def arrays(self) -> dict[str, wp.array]:
         c = self.cutouts
@@ -305,3 +306,31 @@ def surfaces_with_cull(cut: Surfaces, cull: wp.array) -> Surfaces:
         setattr(s, name, getattr(cut, name))
     s.cull = cull
     return s
+
+
+def shadow_surfaces(ds: DeviceScene, excluded_prims: tuple[int, ...]) -> tuple[Surfaces, int]:
+    """The surfaces shadow rays of one light meet, and their ``has_cutouts`` flag: ``ds``'s own when
+    ``excluded_prims`` is empty (every prim casts), else a copy in which the triangles of the
+    excluded prims (a light's ``collection:shadowLink``) are a cutout with nothing present, so
+    any-hit queries (:func:`occluded`, the packet traversal) continue past them as they do through
+    a cutout's holes. Eye rays keep ``ds.cutouts``: excluded prims are still seen. Built once per
+    set of prims on each device."""
+    if not excluded_prims:
+        return ds.cutouts, ds.has_cutouts
+    key = tuple(excluded_prims)
+    if key not in ds.linked:
+        c = ds.cutouts
+        n_cut = int(c.threshold.shape[0]) if int(np.count_nonzero(c.tri_cut.numpy() >= 0)) else 0  # real cutout entries
+        tri_cut = c.tri_cut.numpy().copy()
+        out = np.isin(ds.tri_prim, np.asarray(key, np.int32))
+        tri_cut[out] = n_cut  # a new entry: opacity 0 below threshold 1 (never present)
+        s = Surfaces()
+        for name in Surfaces.vars:
+            setattr(s, name, getattr(c, name))
+        dev = ds.device
+        s.tri_cut = wp.array(tri_cut.astype(np.int32), dtype=wp.int32, device=dev)
+        s.threshold = wp.array(np.r_[c.threshold.numpy()[:n_cut], 1.0].astype(np.float32), dtype=wp.float32, device=dev)
+        s.opacity = wp.array(np.r_[c.opacity.numpy()[:n_cut], 0.0].astype(np.float32), dtype=wp.float32, device=dev)
+        s.tex = wp.array(np.r_[c.tex.numpy()[:n_cut], -1].astype(np.int32), dtype=wp.int32, device=dev)
+        ds.linked[key] = (s, int(bool(out.any()) or bool(ds.has_cutouts)))
+    return ds.linked[key]

@@ -73,6 +73,25 @@ class Light:
     angle_deg: float = 0.0  # distant light full cone angle
     intensity: float = 1.0
     color: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    # UsdLux shadow controls (ShadowAPI and the shadowLink collection of LightAPI)
+    shadow_excluded: tuple[int, ...] = ()
+    """Indices into ``Scene.prims`` of the prims ``collection:shadowLink`` leaves out: they cast no
+    shadow of this light (they are still seen and still receive its shadows). Empty: every prim casts."""
+    shadow_distance: float = -1.0
+    """``inputs:shadow:distance`` in scene units: casters farther than this from the receiver along
+    the shadow ray cast no shadow. Negative (USD's -1): no limit."""
+    shadow_color: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """``inputs:shadow:color``: the shadowed part of this light's contribution to ``R G B`` takes
+    this colour (black: a plain shadow). Never applied to ``V``."""
+    shadow_falloff: float = -1.0
+    """``inputs:shadow:falloff`` (scene units; <= 0: none). Read, listed by ``wsoft plan``, not applied."""
+    shadow_falloff_gamma: float = 1.0
+    """``inputs:shadow:falloffGamma``. Read, listed by ``wsoft plan``, not applied."""
+
+    @property
+    def distance_limited(self) -> bool:
+        """Does ``inputs:shadow:distance`` limit which casters shadow (a value >= 0)?"""
+        return self.shadow_distance >= 0.0
 
     @property
     def name(self) -> str:
@@ -218,6 +237,23 @@ class Scene:
         sub.changed()
         return sub
 
+    def casting_mask(self, light: Light) -> np.ndarray | None:
+        """Which triangles cast ``light``'s shadow (bool ``[T]``): those of prims its
+        ``collection:shadowLink`` includes. None when every triangle does (no exclusion: the common
+        case, which adds no pass and no test). Computed once per light (see :meth:`changed`)."""
+        if not light.shadow_excluded:
+            return None
+        cache = self.__dict__.setdefault("_casting", {})
+        key = (light.path, light.shadow_excluded)
+        if key not in cache:
+            cache[key] = ~np.isin(self.tri_prim, np.asarray(light.shadow_excluded, np.int32))
+        return cache[key]
+
+    def casting_triangles(self, light: Light) -> np.ndarray | None:
+        """The indices (int32) of the triangles that cast ``light``'s shadow; None: every triangle."""
+        m = self.casting_mask(light)
+        return None if m is None else np.flatnonzero(m).astype(np.int32)
+
     def dynamic_subset(self) -> "Scene":
         """The dynamic casters as a scene of their own (built once; see :meth:`changed`)."""
         if "_dynamic_subset" not in self.__dict__:
@@ -238,7 +274,7 @@ class Scene:
 
     def changed(self) -> None:
         """Forget device copies and derived values after the arrays were edited in place."""
-        for k in ("_device_cache", "bounds", "caster_points", "_dynamic_subset"):
+        for k in ("_device_cache", "bounds", "caster_points", "_dynamic_subset", "_casting"):
             self.__dict__.pop(k, None)
 
     def light_label(self, light: Light) -> str:

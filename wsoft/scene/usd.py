@@ -247,7 +247,7 @@ class _StageReader:
                 enabled = UsdLux.ShadowAPI(prim).GetShadowEnableAttr().Get(self.timecode)
                 (unshadowed if enabled is False else lights).append(light)
                 if enabled is not False:
-                    shadow_lights.append(prim)
+                    shadow_lights.append((prim, light))
             elif prim.HasAPI(UsdLux.LightAPI) or type_name.endswith("Light"):
                 reason = _UNHANDLED_REASONS.get(type_name, f"{type_name or 'this light'} is not handled")
                 skipped.append(SkippedLight(str(prim.GetPath()), type_name or "light", reason))
@@ -258,8 +258,8 @@ class _StageReader:
         if rs is not None and rs.camera and all(c.path != rs.camera for c in cameras):
             cameras.append(self.read_camera(self.stage.GetPrimAtPath(rs.camera)))  # hidden or of an excluded purpose: still the view
 
-        for lp in shadow_lights:
-            self.check_shadow_controls(lp, prims)
+        for lp, light in shadow_lights:
+            self.read_shadow_controls(lp, light, prims)
         if pts:
             points = np.concatenate(pts).astype(np.float32)
             triangles = np.concatenate(tris).astype(np.int32)
@@ -297,24 +297,43 @@ class _StageReader:
         return scene
 
     # -- lights' shadow controls ------------------------------------------------------
-    def check_shadow_controls(self, prim, casters: list[str]) -> None:
-        """UsdLux controls that change who casts a light's shadow and that wsoft does not apply
-        yet: a warning each, so that no shadow is silently wrong. ``collection:shadowLink`` (as
-        ``Usd.CollectionAPI`` computes its membership) excluding loaded casters, and
-        ``inputs:shadow:distance`` other than -1 (unlimited)."""
+    def read_shadow_controls(self, prim, light: Light, casters: list[str]) -> Light:
+        """The UsdLux controls that change who casts ``light``'s shadow and how it is shaded, onto
+        the light: ``collection:shadowLink`` (membership as ``Usd.CollectionAPI`` computes it;
+        unauthored, USD's ``includeRoot = true`` includes everything) as the prims it leaves out,
+        ``inputs:shadow:distance``, ``inputs:shadow:color``, ``inputs:shadow:falloff`` and
+        ``falloffGamma``. A mesh placed by a PointInstancer casts when both the instancer and the
+        prototype mesh are members. Falloff is read but not applied: a warning when authored."""
         Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = _pxr()
         link = UsdLux.LightAPI(prim).GetShadowLinkCollectionAPI()
+        excluded = []
         if link:
             query = link.ComputeMembershipQuery()
-            out = [c for c in casters if not query.IsPathIncluded(Sdf.Path(c.split("@")[-1].split("[")[0]))]
-            if out:
-                self.warn(prim, f"collection:shadowLink excludes {len(out)} of {len(casters)} shadow-casting prims (e.g. {out[0]}) "
-                                "from this light's shadow; not applied: they cast it")
-        dist = UsdLux.ShadowAPI(prim).GetShadowDistanceAttr()
-        if dist and dist.HasAuthoredValue():
-            v = dist.Get(self.timecode)
-            if v is not None and float(v) != -1.0:
-                self.warn(prim, f"inputs:shadow:distance = {float(v):g} is not applied: occluders at any distance cast this light's shadow")
+            for i, c in enumerate(casters):
+                paths = {c.split("@")[0], c.split("@")[-1].split("[")[0]}  # the mesh, and its instancer if any
+                if not all(query.IsPathIncluded(Sdf.Path(q)) for q in paths):
+                    excluded.append(i)
+        shadow = UsdLux.ShadowAPI(prim)
+        dist = self.get(shadow.GetShadowDistanceAttr(), -1.0)
+        dist = float(dist)
+        if math.isnan(dist):
+            raise self.err(prim, "inputs:shadow:distance = nan is not a number")
+        if dist < 0.0 or math.isinf(dist):
+            dist = -1.0  # USD: -1 (any negative value, or an infinite one) is no limit
+        color = tuple(float(c) for c in self.get(shadow.GetShadowColorAttr(), (0.0, 0.0, 0.0)))
+        if not all(math.isfinite(c) for c in color):
+            raise self.err(prim, f"inputs:shadow:color = {color} is not finite")
+        falloff = self.finite(prim, "inputs:shadow:falloff", self.get(shadow.GetShadowFalloffAttr(), -1.0))
+        gamma = self.finite(prim, "inputs:shadow:falloffGamma", self.get(shadow.GetShadowFalloffGammaAttr(), 1.0))
+        if falloff > 0.0:
+            self.warn(prim, f"inputs:shadow:falloff = {falloff:g} (falloffGamma {gamma:g}) is not applied: the shadow ends "
+                            "sharply at inputs:shadow:distance (UsdLux gives no formula for the fade)")
+        light.shadow_excluded = tuple(excluded)
+        light.shadow_distance = dist
+        light.shadow_color = color
+        light.shadow_falloff = falloff
+        light.shadow_falloff_gamma = gamma
+        return light
 
     # -- point instancers ----------------------------------------------------------
     def read_instancer(self, prim):
@@ -443,7 +462,11 @@ class _StageReader:
             tris, corners, face_of_tri = tris[keep], corners[keep], face_of_tri[keep]
         uv = self.read_st(prim, mesh, corners, face_of_tri, tris)
         mat = self.bind_materials(prim, mesh, len(counts), face_of_tri)
-        ds = bool(self.get(mesh.GetDoubleSidedAttr(), False))
+        ds = bool(self.get(mesh.GetDoubleSidedAttr(), False))  # UsdGeom's uniform doubleSided (the eye view's back-face culling)
+        stray = prim.GetAttribute("primvars:doubleSided")
+        if stray and stray.HasAuthoredValue():
+            self.warn(prim, "primvars:doubleSided is not a UsdGeom property; ignored (the mesh's doubleSided attribute "
+                            f"is read: {str(ds).lower()})")
         baked = self.read_primvar(prim, corners, face_of_tri, tris, "wsoft:bakedLight", 3)
         return pw, tris.astype(np.int32), mat, uv, ds, closed_orientation(pw, tris), self.is_dynamic(prim, mesh), baked, face_of_tri
 

@@ -11,6 +11,12 @@ lights or scenes are out of the technique's reach: ``wsoft plan`` lists the reas
 skips the light (or stops with the reason when nothing is left). Override
 :meth:`Technique.bake_support` when the technique needs a camera image (``wsoft bake`` refuses it
 with the reason).
+
+UsdLux shadow controls: every technique honours a light's ``collection:shadowLink`` (maps from
+``ctx.light_depth`` hold only the light's casters, :meth:`Scene.casting_triangles` lists them for
+maps drawn otherwise, and ray queries get ``light.shadow_excluded``); one that cannot honour a
+finite ``inputs:shadow:distance`` (``light.shadow_distance``) sets ``distance_refusal`` to the
+one-line reason, and :meth:`Technique.supports` declines such lights with it.
 """
 
 from __future__ import annotations
@@ -89,6 +95,10 @@ class Technique:
     # front of the tangent plane, "centre" zeroes V where the light's centre is behind it (a
     # technique that answers for the centre alone), "exact": the technique applies it itself
     horizon: ClassVar[str] = "fraction"
+    # UsdLux inputs:shadow:distance: "" when the technique honours it, else why it cannot (one
+    # line); supports() then refuses a light with a finite distance, naming the attribute. Every
+    # technique honours collection:shadowLink (its maps and rays see only a light's casters).
+    distance_refusal: ClassVar[str] = ""
 
     def __init__(self, params):
         self.params = params
@@ -123,7 +133,15 @@ class Technique:
 
     # -- what it supports ------------------------------------------------------------------------
     def supports(self, scene, light) -> str | None:
-        """``None`` when the technique can render ``light`` of ``scene``, else the reason it cannot."""
+        """``None`` when the technique can render ``light`` of ``scene``, else the reason it cannot.
+        Subclasses that override it start with ``super().supports(scene, light)``."""
+        return self.shadow_controls_refusal(light)
+
+    def shadow_controls_refusal(self, light) -> str | None:
+        """Why the technique cannot honour ``light``'s UsdLux shadow controls (a finite
+        ``inputs:shadow:distance`` and a :attr:`distance_refusal`), else None."""
+        if light.distance_limited and self.distance_refusal:
+            return f"inputs:shadow:distance = {light.shadow_distance:g} cannot be honoured: {self.distance_refusal}"
         return None
 
     def bake_support(self) -> str | None:

@@ -106,6 +106,7 @@ class ESM(Technique):
 
     quality = (Quality("c", (40.0, 80.0, 160.0), "a larger exponent: less light leaking near contacts, harder edges; same time"),)
     tolerance = Tolerance(mae=0.008, mae_penumbra=0.33)
+    distance_refusal = "its prefiltered exp(c d) map mixes every caster's depth, so it cannot tell which lie within the distance"
 
     def add_passes(self, ctx, light):
         p = self.params

@@ -548,6 +548,7 @@ class ESSM(Technique):
         Quality("level", (0, 1, 2), "LevelX rasterization: the ellipse's sides cut finer, more look-ups"),
     )
     tolerance = Tolerance(mae=0.001, mae_penumbra=0.025)
+    distance_refusal = "its summed-area tables of exp(-c z) sum every caster of a kernel together, so they cannot tell which lie within the distance"
 
     def add_passes(self, ctx, light):
         p = self.params

@@ -5,6 +5,13 @@ cutouts); each G-buffer sample is lit when its light-space depth, less a bias, i
 behind the stored depth of its texel. The result is binary and matches the reference
 with one sample at the light's centre.
 
+UsdLux shadow controls: the map holds only the light's casters (``collection:shadowLink``); with
+a finite ``inputs:shadow:distance`` the texel's caster shadows only when it lies within the
+distance of the receiver along the receiver's ray to the light's centre (exact:
+(z - d) |p| / z in light space). Known limit: the map keeps the caster *nearest the light*, so a
+caster beyond the distance hides one behind it within the distance (and a closed caster is
+measured from its surface facing the light); the render warns when a distance is in force.
+
 Example::
 
     frame = wsoft.render(scene, "hard", width=640, height=480, shadow_map_size=2048)
@@ -17,7 +24,7 @@ from dataclasses import dataclass
 import warp as wp
 
 from wsoft.lightspace.light import LightGPU, receiver_bias
-from wsoft.lightspace.view import ViewGPU, inside_map, texel_of
+from wsoft.lightspace.view import ViewGPU, inside_map, map_coords, texel_of, within_distance
 from wsoft.parallel import launch_chunked
 from wsoft.raster.gbuffer import GBufferGPU, gb_receiver
 from wsoft.params import check_ranges
@@ -45,6 +52,7 @@ def shade_hard(
     gb: GBufferGPU,
     bias: float,
     slope_texels: float,
+    dmax: float,
     # outputs
     vis: wp.array[float],
 ):
@@ -62,10 +70,11 @@ def shade_hard(
     x = int(wp.floor(t[0]))
     y = int(wp.floor(t[1]))
     b = receiver_bias(lv, L, p, gb.nrm[i], v[2], bias, slope_texels)
-    if v[2] - b > depth[y, x]:
-        vis[i] = 0.0
-    else:
-        vis[i] = 1.0
+    d = depth[y, x]
+    blocked = v[2] - b > d
+    if blocked and dmax >= 0.0:  # inputs:shadow:distance: a caster farther from the receiver does not count
+        blocked = within_distance(lv, v, map_coords(lv, v), d, dmax)
+    vis[i] = wp.where(blocked, 0.0, 1.0)
 
 
 class Hard(Technique):
@@ -92,7 +101,11 @@ class Hard(Technique):
             gb, dm = res[gbuf], res[depth]
             bias = p.bias * dm.view.extent
             vis = wp.empty(gb.count, dtype=float, device=ctx.device)
-            launch_chunked(shade_hard, gb.count, inputs=[dm.view.gpu(), L, dm.depth, gb.gpu(), bias, p.slope_bias], outputs=[vis], device=ctx.device)
+            launch_chunked(shade_hard, gb.count, inputs=[dm.view.gpu(), L, dm.depth, gb.gpu(), bias, p.slope_bias, light.shadow_distance],
+                           outputs=[vis], device=ctx.device)
+            if light.distance_limited:
+                ctx.warn_distance(name, light)
             return {out: ctx.visibility(vis)}
 
-        return ctx.add_pass(ctx.pass_name("hard", light), inputs=(gbuf, depth), outputs=(out,), run=run, light=light)
+        name = ctx.pass_name("hard", light)
+        return ctx.add_pass(name, inputs=(gbuf, depth), outputs=(out,), run=run, light=light)

@@ -53,6 +53,12 @@ Every sample's shadow ray starts at its surface point moved off the surface alon
 the reference's) and goes to the light's centre; where the light's centre lies behind the tangent
 plane the sample is shadowed without a test (the receiver's own horizon, applied per sample).
 
+UsdLux shadow controls are exact: the light pass draws only the triangles the light's
+``collection:shadowLink`` lets cast (and its stencil's maps hold only them), and a finite
+``inputs:shadow:distance`` ends every sample's ray that far from its surface point. The stencil's
+maps cannot tell a caster's distance, so with a distance no pixel is "certainly shadowed" by a
+blocker: such pixels get sub-samples too (correct, a little slower).
+
 Example::
 
     frame = wsoft.render(scene, "izb", width=640, height=480, aa="adaptive", samples=4)
@@ -156,16 +162,21 @@ class IZBParams:
 
 
 @wp.func
-def shadow_ray(L: LightGPU, p: wp.vec3, n: wp.vec3, eps: float):
+def shadow_ray(L: LightGPU, p: wp.vec3, n: wp.vec3, eps: float, dmax: float):
     """A sample's ray toward the light's centre: (origin off the surface, unit direction, length,
-    state TEST, or HORIZON where the centre lies behind the tangent plane)."""
-    o = ray_origin(p, n, ray_offset(p, eps))
+    state TEST, or HORIZON where the centre lies behind the tangent plane). ``dmax >= 0``
+    (``inputs:shadow:distance``): the ray ends that far from the surface point."""
+    off = ray_offset(p, eps)
+    o = ray_origin(p, n, off)
     c = light_center_dir(L, o)
     d = wp.vec3(c[0], c[1], c[2])
     state = int(1)
     if not in_front(n, d):
         state = 2
-    return o, d, c[3], state
+    t = c[3]
+    if dmax >= 0.0:
+        t = wp.max(wp.min(t, dmax - off), 0.0)
+    return o, d, t, state
 
 
 @wp.func
@@ -176,6 +187,7 @@ def store_sample(
     p: wp.vec3,
     n: wp.vec3,
     eps: float,
+    dmax: float,
     may_insert: bool,
     origin: wp.array[wp.vec3],
     dir: wp.array[wp.vec3],
@@ -192,7 +204,7 @@ def store_sample(
         dir[i] = wp.vec3(0.0)
         tmax[i] = 0.0
         return
-    o, d, t, st = shadow_ray(L, p, n, eps)
+    o, d, t, st = shadow_ray(L, p, n, eps, dmax)
     origin[i] = o
     dir[i] = d
     tmax[i] = t
@@ -206,6 +218,7 @@ def centre_samples(
     L: LightGPU,
     gb: GBufferGPU,
     eps: float,
+    dmax: float,
     multi: wp.array[wp.int32],
     # outputs
     origin: wp.array[wp.vec3],
@@ -216,7 +229,7 @@ def centre_samples(
 ):
     """The G-buffer's samples (pixel centres); inserted unless their pixel is multi-sampled."""
     i = wp.tid() + offset
-    store_sample(i, gb_covered(gb, i), L, gb.pos[i], gb.nrm[i], eps, multi[i] < 0, origin, dir, tmax, state, insert)
+    store_sample(i, gb_covered(gb, i), L, gb.pos[i], gb.nrm[i], eps, dmax, multi[i] < 0, origin, dir, tmax, state, insert)
 
 
 @wp.kernel
@@ -235,6 +248,7 @@ def sub_samples(
     mode: int,
     L: LightGPU,
     eps: float,
+    dmax: float,
     # outputs
     origin: wp.array[wp.vec3],
     dir: wp.array[wp.vec3],
@@ -266,10 +280,10 @@ def sub_samples(
             t = wp.dot(pc - o, nc) / den
             if t >= t0 and t <= t1:
                 recast[k] = 0
-                store_sample(base + k, True, L, o + d * t, nc, eps, True, origin, dir, tmax, state, insert)
+                store_sample(base + k, True, L, o + d * t, nc, eps, dmax, True, origin, dir, tmax, state, insert)
     if recast[k] != 0:
         found, p, n, face, bu, bv, dist = cast_primary(mesh, cut, has_cutouts, cam, gb.width, gb.height, fx, fy)
-        store_sample(base + k, found != 0, L, p, n, eps, True, origin, dir, tmax, state, insert)
+        store_sample(base + k, found != 0, L, p, n, eps, dmax, True, origin, dir, tmax, state, insert)
 
 
 @wp.kernel
@@ -376,6 +390,7 @@ def edge_stencil(
     min_var: float,
     bias: float,
     listing: int,
+    may_shadow: int,
     # outputs
     edge: wp.array[wp.int32],
     level_used: wp.array[wp.int32],
@@ -460,7 +475,7 @@ def edge_stencil(
             cnt += 1.0
     m = m / cnt
     lit = chebyshev(m, tn, min_var, 1) < threshold  # occluder mass in front of the footprint: almost none
-    shadowed = chebyshev(m, tn, min_var, 0) < threshold  # mass at or beyond it: almost none
+    shadowed = chebyshev(m, tn, min_var, 0) < threshold and may_shadow != 0  # mass at or beyond it: almost none
     if listing != 0:
         if lit or shadowed:
             edge[i] = 1
@@ -529,6 +544,7 @@ def footprint_certainty(
     map_size: int,
     bias: float,
     max_texels: int,
+    may_shadow: int,
 ) -> wp.vec2i:
     """Is the part of pixel ``xy`` on the plane (``p``, ``n``; ``closed``: of a closed surface)
     certainly lit, certainly shadowed (1 / 0 each)? Exact bounds, no probability: every texel of the
@@ -545,7 +561,8 @@ def footprint_certainty(
 
     The plane is the one the samples' shadow rays start from: moved off the surface along ``n`` as
     :func:`shadow_ray` moves them (``eps``); at a grazing light that shift alone moves a point
-    across texels."""
+    across texels. ``may_shadow = 0`` (a finite ``inputs:shadow:distance``, which the maps cannot
+    check): never certainly shadowed by a blocker, only by the light's centre being behind the plane."""
     c = light_center_dir(L, p)
     if not in_front(n, wp.vec3(c[0], c[1], c[2])):
         return wp.vec2i(0, 1)  # the light's centre is behind the plane: every sample on it is shadowed
@@ -592,7 +609,7 @@ def footprint_certainty(
     nx = (int(xmax) >> lev) - tx0 + 1
     count = nx * ((int(ymax) >> lev) - ty0 + 1)
     lit = int(1)
-    shadowed = int(1)
+    shadowed = may_shadow
     for k in range(count):
         tx = tx0 + k % nx
         ty = ty0 + k / nx
@@ -628,6 +645,7 @@ def bounds_stencil(
     bias: float,
     max_texels: int,
     eps: float,
+    may_shadow: int,
     pattern: wp.array[wp.vec2],
     mesh: wp.uint64,
     cut: Surfaces,
@@ -650,7 +668,7 @@ def bounds_stencil(
     n = gb.nrm[i]
     xy = gb_pixel(gb, i)
     r = footprint_certainty(lv, cam, gb.width, gb.height, xy, L, p, n, closed_faces[gb.prim[i]] != CULL_SKIP, eps, bounds, level_off,
-                            levels, map_size, bias, max_texels)
+                            levels, map_size, bias, max_texels, may_shadow)
     lit = r[0]
     shadowed = r[1]
     if lit == 0 and shadowed == 0:
@@ -668,7 +686,7 @@ def bounds_stencil(
         if found != 0:
             if not same_plane(p, n, q, m):
                 r = footprint_certainty(lv, cam, gb.width, gb.height, xy, L, q, m, closed_faces[face] != CULL_SKIP, eps, bounds, level_off,
-                                        levels, map_size, bias, max_texels)
+                                        levels, map_size, bias, max_texels, may_shadow)
                 lit = lit * r[0]
                 shadowed = shadowed * r[1]
     if lit == 0 and shadowed == 0:
@@ -719,6 +737,9 @@ class IZB(Technique):
         counters = ctx.counters(light)
         counters["light"] = self.treatment(light)
         n_sub = p.samples if p.aa != "none" else 0
+        dmax = float(light.shadow_distance)  # inputs:shadow:distance (-1: none): each sample's ray ends there
+        may_shadow = int(not light.distance_limited)  # the stencil's maps cannot tell a caster's distance
+        casting = scene.casting_triangles(light)  # collection:shadowLink: the light pass draws only these (None: all)
 
         def edge_counters(edge, gb):
             e = edge.numpy()
@@ -747,7 +768,8 @@ class IZB(Technique):
                 launch_chunked(bounds_stencil, gb.count,
                                inputs=[gb.gpu(), cam, v.gpu(), L, pyr, closed_faces, wp.array(offs, dtype=wp.int32, device=dev), len(offs) - 1,
                                        p.shadow_map_size, p.bounds_bias * max(v.far - v.near, 1e-12), p.bounds_texels,
-                                       ray_epsilon(gb, light), wp.array(pat, dtype=wp.vec2, device=dev), ds.mesh.id, ds.cutouts, int(ds.has_cutouts)],
+                                       ray_epsilon(gb, light), may_shadow, wp.array(pat, dtype=wp.vec2, device=dev), ds.mesh.id, ds.cutouts,
+                                       int(ds.has_cutouts)],
                                outputs=[edge, probed], device=dev)
                 counters["stencil_probed_pixels"] = int(probed.numpy().sum())
                 return {stencil: edge_counters(edge, gb)}
@@ -768,7 +790,7 @@ class IZB(Technique):
                 launch_chunked(edge_stencil, gb.count,
                                inputs=[gb.gpu(), cam, v.gpu(), pyr, wp.array(offs, dtype=wp.int32, device=dev), len(offs) - 1,
                                        p.shadow_map_size, scale, p.edge_threshold, p.min_variance, p.stencil_bias,
-                                       int(p.stencil_rule == "listing")],
+                                       int(p.stencil_rule == "listing"), may_shadow],
                                outputs=[edge, lev], device=dev)
                 return {stencil: edge_counters(edge, gb)}
 
@@ -799,7 +821,7 @@ class IZB(Technique):
             multi = wp.array(multi_h, dtype=wp.int32, device=dev)
             pix = wp.array(pixels if len(pixels) else np.zeros(1, np.int32), dtype=wp.int32, device=dev)
             fallback = wp.zeros(max(len(pixels), 1), dtype=wp.int32, device=dev)
-            launch_chunked(centre_samples, n0, inputs=[L, gb.gpu(), eps, multi], outputs=outs, device=dev)
+            launch_chunked(centre_samples, n0, inputs=[L, gb.gpu(), eps, dmax, multi], outputs=outs, device=dev)
             if len(pixels):
                 pat = subpixel_pattern(n_sub, p.pattern_kind, p.seed)
                 mode = SUBSAMPLES.index(p.subsamples)
@@ -810,7 +832,7 @@ class IZB(Technique):
                 recast = wp.empty(len(pixels) * n_sub, dtype=wp.int32, device=dev)
                 launch_chunked(sub_samples, len(pixels) * n_sub,
                                inputs=[n0, n_sub, pix, wp.array(pat, dtype=wp.vec2, device=dev), ds.mesh.id, ds.cutouts,
-                                       int(ds.has_cutouts), cam, gb.gpu(), mixed, mode, L, eps],
+                                       int(ds.has_cutouts), cam, gb.gpu(), mixed, mode, L, eps, dmax],
                                outputs=outs + [recast], device=dev)
                 counters["subsamples_recast"] = int(recast.numpy().sum())
                 launch_chunked(centre_fallback, len(pixels), inputs=[n0, n_sub, pix, arr["state"]], outputs=[arr["insert"], fallback], device=dev)
@@ -860,7 +882,8 @@ class IZB(Technique):
             ds, grid = res[sk], res[grid_key]
             if grid.inserted:
                 r = make_rasterizer(grid.view, izb_test, conservative=True)
-                st = r.run(ds.points, ds.indices, grid.target.cut, grid.view, grid.target, dev, initialized=False)
+                tris = None if casting is None else wp.array(casting, dtype=wp.int32, device=dev)
+                st = r.run(ds.points, ds.indices, grid.target.cut, grid.view, grid.target, dev, triangles=tris, initialized=False)
                 counters["cpu_private_targets"] = st.private_targets
                 t = grid.target
                 counters["triangle_cell_pairs"] = int(t.pairs.numpy().sum(dtype=np.int64))

@@ -6,6 +6,12 @@ fraction of taps where the sample is not behind the stored depth. With ``receive
 sample's depth at each tap is that of its tangent plane at the tap's texel centre (the
 receiver-plane depth bias), so wide kernels do not shadow sloped receivers; otherwise a
 slope-scaled bias as in ``hard`` is used.
+
+UsdLux shadow controls: the map holds only the light's casters (``collection:shadowLink``); with
+a finite ``inputs:shadow:distance`` a tap's caster counts only when its point (the tap texel's
+ray at the stored depth) lies within the distance of the receiver. Known limit, as ``hard``'s: a
+map keeps the caster nearest the light, so one beyond the distance hides one behind it within
+it; the render warns when a distance is in force.
 """
 
 from __future__ import annotations
@@ -55,6 +61,7 @@ def shade_pcf(
     bias: float,
     use_plane: int,
     slope_texels: float,
+    dmax: float,
     # outputs
     vis: wp.array[float],
 ):
@@ -69,7 +76,7 @@ def shade_pcf(
     if use_plane == 0:
         b = receiver_bias(lv, L, p, gb.nrm[i], pv[2], bias, slope_texels)
     half = texel_size(lv) * radius
-    vis[i] = pcf_visibility(lv, depth, pv, view_dir(lv, gb.nrm[i]), map_coords(lv, pv), half, disk, taps, ntaps, b, use_plane)
+    vis[i] = pcf_visibility(lv, depth, pv, view_dir(lv, gb.nrm[i]), map_coords(lv, pv), half, disk, taps, ntaps, b, use_plane, dmax)
 
 
 class PCF(Technique):
@@ -99,9 +106,12 @@ class PCF(Technique):
             launch_chunked(
                 shade_pcf, gb.count,
                 inputs=[dm.view.gpu(), L, dm.depth, gb.gpu(), taps.array, taps.count, int(p.pattern == "poisson"),
-                        p.radius, bias, int(p.receiver_plane), p.slope_bias],
+                        p.radius, bias, int(p.receiver_plane), p.slope_bias, light.shadow_distance],
                 outputs=[vis], device=ctx.device, min_chunk=256,
             )
+            if light.distance_limited:
+                ctx.warn_distance(name, light)
             return {out: ctx.visibility(vis)}
 
-        return ctx.add_pass(ctx.pass_name("pcf", light), inputs=(gbuf, depth), outputs=(out,), run=run, light=light)
+        name = ctx.pass_name("pcf", light)
+        return ctx.add_pass(name, inputs=(gbuf, depth), outputs=(out,), run=run, light=light)

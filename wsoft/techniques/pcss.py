@@ -13,6 +13,13 @@
 Exact for a planar occluder parallel to a planar receiver and light (the test scene
 ``box_plane``); it underestimates the umbra when blockers at different depths overlap (the
 average depth is too near), which a test pins.
+
+UsdLux shadow controls: the map holds only the light's casters (``collection:shadowLink``); with
+a finite ``inputs:shadow:distance`` a tap (blocker search and filter alike) counts its caster only
+when the caster's point (the tap texel's ray at the stored depth) lies within the distance of the
+receiver, so the average blocker depth and the penumbra are those of the casters in reach. Known
+limit, as ``hard``'s: the map keeps the caster nearest the light; the render warns when a
+distance is in force.
 """
 
 from __future__ import annotations
@@ -35,6 +42,7 @@ from wsoft.lightspace.view import (
     texel_center,
     texel_size,
     view_dir,
+    within_distance,
 )
 from wsoft.parallel import launch_chunked
 from wsoft.raster.gbuffer import GBufferGPU, gb_receiver
@@ -83,6 +91,7 @@ def shade_pcss(
     bias: float,
     min_radius: float,
     max_radius: float,
+    dmax: float,
     # outputs
     vis: wp.array[float],
     blockers: wp.array[float],
@@ -109,8 +118,9 @@ def shade_pcss(
         if c[2] > 0.0:
             zr = receiver_plane_depth_or(lv, pv, nv, wp.vec2(c[0], c[1]), pv[2])
         if d < zr - bias:
-            total += d
-            count += 1.0
+            if dmax < 0.0 or within_distance(lv, pv, wp.vec2(c[0], c[1]), d, dmax):
+                total += d
+                count += 1.0
     if count == 0.0:
         vis[i] = 1.0
         return
@@ -118,7 +128,7 @@ def shade_pcss(
     blockers[i] = z_avg
     # 2. penumbra from the average blocker depth; 3. PCF over it, shaped like the light
     pen = clamp_half(lv, spread(lv, k, z_avg, pv[2]), min_radius, max_radius)
-    vis[i] = pcf_visibility(lv, depth, pv, nv, m0, pen, k.disk, ftaps, nf, bias, 1)
+    vis[i] = pcf_visibility(lv, depth, pv, nv, m0, pen, k.disk, ftaps, nf, bias, 1, dmax)
 
 
 class PCSS(Technique):
@@ -154,10 +164,13 @@ class PCSS(Technique):
             launch_chunked(
                 shade_pcss, gb.count,
                 inputs=[dm.view.gpu(), k, dm.depth, gb.gpu(), bt.array, bt.count, ft.array, ft.count,
-                        z_min, bias, p.min_radius, p.max_radius],
+                        z_min, bias, p.min_radius, p.max_radius, light.shadow_distance],
                 outputs=[vis, blk], device=ctx.device, min_chunk=256,
             )
             ctx.counters(light)["samples_with_blockers"] = int(np.count_nonzero(blk.numpy()))
+            if light.distance_limited:
+                ctx.warn_distance(name, light)
             return {out: ctx.visibility(vis)}
 
-        return ctx.add_pass(ctx.pass_name("pcss", light), inputs=(gbuf, depth), outputs=(out,), run=run, light=light)
+        name = ctx.pass_name("pcss", light)
+        return ctx.add_pass(name, inputs=(gbuf, depth), outputs=(out,), run=run, light=light)

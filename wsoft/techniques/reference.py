@@ -1,6 +1,8 @@
 """``reference``: ray-traced ground truth (see :mod:`wsoft.reference`).
 
-Writes ``visibility`` and ``V_stderr``, the per-pixel standard error. ``samples`` is its
+Writes ``visibility`` and ``V_stderr``, the per-pixel standard error. UsdLux's shadow controls are
+exact here: prims a light's ``collection:shadowLink`` leaves out are passed through by its rays
+(as a cutout's holes are), and ``inputs:shadow:distance`` ends each ray that far from the receiver. ``samples`` is its
 quality knob: error falls as 1/sqrt(samples) (faster where the stratification helps), time
 grows linearly.
 
@@ -49,6 +51,9 @@ class Reference(Technique):
     horizon = "exact"  # per light sample, in the tracing kernel
 
     def supports(self, scene, light) -> str | None:
+        why = super().supports(scene, light)
+        if why is not None:
+            return why
         if self.params.casters == "dynamic" and (scene.tri_dynamic is None or not scene.tri_dynamic.any()):
             return "casters=dynamic but the scene has no dynamic prims"
         return None
@@ -72,7 +77,8 @@ class Reference(Technique):
             if dynamic:  # occluders: the dynamic casters only (their own BVH, built once per device)
                 ds, _ = scene.dynamic_subset().device_copy(ctx.device, upload_scene)
             counters = ctx.counters(light)
-            vis, err = trace_reference(ds, L, res[gbuf], pattern, disk, ray_epsilon(res[gbuf], light), p.traversal, counters)
+            vis, err = trace_reference(ds, L, res[gbuf], pattern, disk, ray_epsilon(res[gbuf], light), p.traversal, counters,
+                                       excluded=light.shadow_excluded, max_distance=light.shadow_distance)
             if "packet_fallback" in counters:
                 ctx.ctx.warn(pass_name, f"traced ray by ray, not in packets: {counters['packet_fallback']}")
             return {out: ctx.visibility(vis, err)}

@@ -19,6 +19,10 @@ in 8 bits per component, as the paper suggests is feasible.
 
 Known failure (pinned by a test): a receiver between two casters along a light ray gets a
 reconstructed depth averaged behind it and escapes the shadow.
+
+UsdLux: only the casters a light's ``collection:shadowLink`` includes go into its map (prims it
+leaves out still receive its shadow); a finite ``inputs:shadow:distance`` is declined (the
+blurred map keeps no caster's own distance).
 """
 
 from __future__ import annotations
@@ -162,18 +166,27 @@ class Salzman(Technique):
     quality = (Quality("radius", (2, 4, 8), "a wider blur: wider (uniform) penumbrae, more time"),)
     # one blur width for every penumbra: the parallel-rectangle penumbra is matched only roughly
     tolerance = Tolerance(mae=0.007, mae_penumbra=0.28)
+    distance_refusal = "its blurred depth and mask reconstruct one averaged caster depth per texel, not each caster's distance"
 
     def supports(self, scene, light) -> str | None:
+        why = super().supports(scene, light)
+        if why is not None:
+            return why
         if self.params.casters == "dynamic" and (scene.tri_dynamic is None or not scene.tri_dynamic.any()):
             return "casters=dynamic but the scene has no dynamic prims (nothing would cast a shadow)"
         return None
 
-    def caster_triangles(self, scene) -> tuple[np.ndarray, str]:
+    def caster_triangles(self, scene, light=None) -> tuple[np.ndarray, str]:
+        """The triangles drawn into the map (the dynamic casters, or all) and the mode used; with
+        ``light``, only those its ``collection:shadowLink`` lets cast."""
         dyn = scene.tri_dynamic if scene.tri_dynamic is not None else np.zeros(scene.triangle_count, bool)
         mode = self.params.casters
         if mode == "auto":
             mode = "dynamic" if dyn.any() else "all"
         sel = dyn if mode == "dynamic" else np.ones(scene.triangle_count, bool)
+        link = scene.casting_mask(light) if light is not None else None
+        if link is not None:
+            sel = sel & link
         return np.flatnonzero(sel).astype(np.int32), mode
 
     def add_passes(self, ctx, light):
@@ -185,8 +198,9 @@ class Salzman(Technique):
         map_key = ctx.key("salzman_map", light, variant=f"@{p.shadow_map_size}")
         counters = ctx.counters(light)
         out = ctx.visibility_key(light)
-        casters, mode = self.caster_triangles(scene)
-        receivers = np.setdiff1d(np.arange(scene.triangle_count, dtype=np.int32), casters) if mode == "dynamic" else np.arange(scene.triangle_count, dtype=np.int32)
+        casters, mode = self.caster_triangles(scene, light)
+        receivers = np.setdiff1d(np.arange(scene.triangle_count, dtype=np.int32), self.caster_triangles(scene)[0]) if mode == "dynamic" \
+            else np.arange(scene.triangle_count, dtype=np.int32)  # excluded casters still receive
         mats = scene.materials
         tri_opacity = np.array([1.0 if m.is_cutout else min(max(m.opacity, 0.0), 1.0) for m in mats], np.float32)[scene.tri_material]
 

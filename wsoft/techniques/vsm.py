@@ -98,6 +98,7 @@ class VSM(Technique):
 
     quality = (Quality("radius", (1, 2, 4), "a wider prefilter: softer edges (not wider penumbrae), a little more time"),)
     tolerance = Tolerance(mae=0.0085, mae_penumbra=0.34)
+    distance_refusal = "its blurred moments (mean and variance of the depths) cannot tell which casters lie within the distance"
 
     def add_passes(self, ctx, light):
         p = self.params

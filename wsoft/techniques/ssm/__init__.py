@@ -334,8 +334,12 @@ class SSM(Technique):
     writes = ("visibility",)
     quality = (Quality("budget", (4.0, 8.0, 16.0, math.inf), "b_mo, micro-occluders per axis: more is closer to level 0 and slower"),)
     tolerance = Tolerance(mae=0.0005, mae_penumbra=0.012)
+    distance_refusal = "its pruning pyramids and merged micro-occluders classify receivers by depth ranges of all casters, not by each caster's distance"
 
     def supports(self, scene, light) -> str | None:
+        why = super().supports(scene, light)
+        if why is not None:
+            return why
         if light.kind == LIGHT_POINT or (light.kind == LIGHT_DISTANT and light.angle_deg <= 0.0) or light.extent() <= 0.0:
             return "the light has no area (a point light or a sun of angle 0): no soft shadow to backproject"
         return None
