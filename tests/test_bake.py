@@ -277,6 +277,7 @@ def test_a_time_sampled_bake_of_the_moving_character():
     stats = {}
     layer = wsoft.bake(path, "reference", samples=16, frames="1:25:12", device="cpu", stats=stats)
     assert [f["time"] for f in stats["frames"]] == [1.0, 13.0, 25.0]
+    assert all(f["cpu_ms"] > 0 and f["technique_cpu_ms"] > 0 for f in stats["frames"])  # CPU time per frame, beside the wall time
     assert layer.timeCodesPerSecond == 24 and layer.startTimeCode == 1 and layer.endTimeCode == 48
     composed = Usd.Stage.Open(path)
     composed.GetRootLayer().subLayerPaths.append(layer.identifier)
