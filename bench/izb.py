@@ -190,20 +190,22 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
              "strictly between 0 and 1. Times: the median of 3 renders after a warm-up. `IZB cpu`: CPU ms of the irregular z-buffer's "
              "passes (samples, grid, light, resolve); `stencil cpu`: of the stencil's view fit, maps and pass; `× none`: IZB cpu over "
              "`aa=none`'s on the same frame; `paper`: 1 + edge fraction × N, the chapter's estimate. `missed`: pixels whose N "
-             "sub-samples disagree (`supersample`, same placement) that the stencil did not flag.")
+             "sub-samples disagree (`supersample`, same placement) that the stencil did not flag. `re-cast`: sub-samples whose eye "
+             "ray the samples pass cast through the scene; `from stencil`: those whose ray the bounds stencil had already cast "
+             "(probing a pixel next to another surface) and whose hit it kept.")
     L.append("")
     L += _targets(rows)
     L += ["", "## Rows", ""]
     L.append("| scene | res | technique | params | frame ms | IZB ms | IZB cpu | stencil cpu | × none | paper 1+ef×N | edge fraction | "
-             "samples | re-cast | list max / mean / p99 | pairs | tests | grid + lists MiB | MAE | MAE edge | aliased | missed |")
-    L.append("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+             "samples | re-cast | from stencil | list max / mean / p99 | pairs | tests | grid + lists MiB | MAE | MAE edge | aliased | missed |")
+    L.append("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     none = {(r["scene"], r["width"]): _sum(r["cpu_ms"], IZB_PASSES) for r in rows if r["technique"] == "izb" and r["params"] == {"aa": "none"}}
     order = {"none": 0, "adaptive": 1, "supersample": 2}
     for r in sorted(rows, key=lambda r: (r["scene"], r["width"], r["technique"], order.get(r["params"].get("aa"), 3),
                                          r["params"].get("samples", 0), str(r["params"]))):
         p = r["params"]
         if r["technique"] == "hard":
-            L.append(f"| {r['scene']} | {r['width']}x{r['height']} | hard | {_ptxt(p)} | {r['timings_ms']['total']:.1f} | | | | | | | | | | | | | "
+            L.append(f"| {r['scene']} | {r['width']}x{r['height']} | hard | {_ptxt(p)} | {r['timings_ms']['total']:.1f} | | | | | | | | | | | | | | "
                      f"{r['mae']:.4f} | {r['mae_edge']:.4f} | | |")
             continue
         cpu = _sum(r["cpu_ms"], IZB_PASSES)
@@ -216,9 +218,9 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
         L.append(f"| {r['scene']} | {r['width']}x{r['height']} | izb | {_ptxt(p)} | {r['timings_ms']['total']:.1f} | "
                  f"{_sum(r['timings_ms'], IZB_PASSES):.1f} | {cpu:.1f} | {_sum(r['cpu_ms'], STENCIL_PASSES):.1f} | "
                  f"{cpu / base:.2f} | {paper} | {'' if ef is None else f'{ef:.3f}'} | {_counter(r, 'samples_inserted')} | "
-                 f"{_counter(r, 'subsamples_recast')} | {_counter(r, 'list_max')} / {_counter(r, 'list_mean'):.2f} / {_counter(r, 'list_p99'):.0f} | "
+                 f"{_counter(r, 'subsamples_recast')} | {_counter(r, 'subsamples_from_stencil')} | {_counter(r, 'list_max')} / {_counter(r, 'list_mean'):.2f} / {_counter(r, 'list_p99'):.0f} | "
                  f"{_counter(r, 'triangle_cell_pairs')} | {_counter(r, 'sample_tests')} | {mib:.1f} | {r['mae']:.4f} | {r['mae_edge']:.4f} | "
-                 f"{r.get('aliased', '')} | {missed} |" if base else f"| {r['scene']} | | izb | {_ptxt(p)} |" + " |" * 17)
+                 f"{r.get('aliased', '')} | {missed} |" if base else f"| {r['scene']} | | izb | {_ptxt(p)} |" + " |" * 18)
     names = IZB_PASSES + STENCIL_PASSES
     L += ["", "## Passes (CPU ms)", "", "| scene | params | " + " | ".join(names) + " |", "|---|---|" + "---|" * len(names)]
     for r in sorted((r for r in rows if r["technique"] == "izb"), key=lambda r: (r["scene"], str(r["params"]))):

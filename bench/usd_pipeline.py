@@ -404,7 +404,8 @@ def _matplotlib_picture(P, sizes, values, view, path: Path, size, title) -> None
     cax = fig.add_axes((0.84, 0.2, 0.025, 0.6))
     fig.colorbar(plt.cm.ScalarMappable(cmap=cmap, norm=matplotlib.colors.Normalize(0, 1)), cax=cax, label="V")
     fig.text(0.01, 0.96, title, fontsize=7)
-    fig.savefig(path, dpi=100)
+    with np.errstate(over="ignore"):  # mplot3d's margin arithmetic overflows harmlessly on its unset data limits
+        fig.savefig(path, dpi=100)
     plt.close(fig)
 
 

@@ -40,7 +40,9 @@ Steps of one light (the paper's eight, as passes):
    neighbours on it, its centre no cutout: the camera ray meets the plane, no scene query), their
    eye rays *re-cast* through the scene elsewhere (:func:`~wsoft.raster.gbuffer.cast_primary`):
    exact surface points where a pixel straddles a silhouette or a crease, which a reconstruction
-   from the depth buffer (``subsamples=plane``) gets wrong; ``recast`` re-casts all. A multi-sampled pixel's
+   from the depth buffer (``subsamples=plane``) gets wrong; ``recast`` re-casts all. Where the
+   ``bounds`` stencil already cast a pixel's eye rays (probing it), their hits are taken, not cast
+   again. A multi-sampled pixel's
    visibility is the mean over its sub-samples that hit a surface (its centre sample is not
    inserted unless none did).
 3. ``izb_grid`` — the irregular z-buffer: a light view fitted to the inserted samples
@@ -246,6 +248,11 @@ def sub_samples(
     gb: GBufferGPU,
     mixed: wp.array[wp.int32],
     mode: int,
+    probed: wp.array[wp.int32],
+    slot: wp.array[wp.int32],
+    hit_pos: wp.array[wp.vec3],
+    hit_nrm: wp.array[wp.vec3],
+    hit_found: wp.array[wp.int32],
     L: LightGPU,
     eps: float,
     dmax: float,
@@ -261,7 +268,9 @@ def sub_samples(
     centre (where the camera ray meets it: no scene query) or by re-casting its eye ray through the
     scene. ``mode`` (:data:`SUBSAMPLES`): 0 auto — on the plane where the pixel sees that plane
     alone (``mixed`` 0, :func:`other_surface_near`), else re-cast; 1 recast — always; 2 plane —
-    always on the plane (re-cast only where the ray misses it). ``recast`` = 1 where re-cast."""
+    always on the plane (re-cast only where the ray misses it). A pixel the stencil ``probed``
+    (:func:`bounds_stencil`) takes the hits its eye rays found there (the same rays, the same
+    answer). ``recast`` = 1 where re-cast here, 2 where the stencil's hit was taken."""
     k = wp.tid() + offset
     j = k / n_sub
     s = k - j * n_sub
@@ -271,7 +280,11 @@ def sub_samples(
     fx = float(xy[0]) + off[0]
     fy = float(xy[1]) + off[1]
     recast[k] = 1
-    if mode == 2 or (mode == 0 and mixed[pix] == 0):
+    if mode == 0 and mixed[pix] != 0 and probed[pix] != 0:
+        h = slot[pix] * n_sub + s
+        recast[k] = 2
+        store_sample(base + k, hit_found[h] != 0, L, hit_pos[h], hit_nrm[h], eps, dmax, True, origin, dir, tmax, state, insert)
+    elif mode == 2 or (mode == 0 and mixed[pix] == 0):
         o, d, t0, t1 = camera_ray(cam, gb.width, gb.height, fx, fy)
         pc = gb.pos[pix]
         nc = gb.nrm[pix]
@@ -281,7 +294,7 @@ def sub_samples(
             if t >= t0 and t <= t1:
                 recast[k] = 0
                 store_sample(base + k, True, L, o + d * t, nc, eps, dmax, True, origin, dir, tmax, state, insert)
-    if recast[k] != 0:
+    if recast[k] == 1:
         found, p, n, face, bu, bv, dist = cast_primary(mesh, cut, has_cutouts, cam, gb.width, gb.height, fx, fy)
         store_sample(base + k, found != 0, L, p, n, eps, dmax, True, origin, dir, tmax, state, insert)
 
@@ -650,15 +663,21 @@ def bounds_stencil(
     mesh: wp.uint64,
     cut: Surfaces,
     has_cutouts: int,
+    mixed: wp.array[wp.int32],
+    slot: wp.array[wp.int32],
     # outputs
     edge: wp.array[wp.int32],
     probed: wp.array[wp.int32],
+    hit_pos: wp.array[wp.vec3],
+    hit_nrm: wp.array[wp.vec3],
+    hit_found: wp.array[wp.int32],
 ):
     """Potential shadow-edge pixels (1) by exact depth bounds (:func:`footprint_certainty`): a pixel
     is certain when its part on its own plane is certainly lit or certainly shadowed and, where a
-    neighbour's surface differs (a silhouette or a crease may cross the pixel), so is its part on
-    the plane of every surface its sub-pixel eye rays meet (``pattern``, the sub-samples the pixel
-    would get; ``probed`` = 1 where they were cast)."""
+    neighbour's surface differs (``mixed``: a silhouette or a crease may cross the pixel), so is its
+    part on the plane of every surface its sub-pixel eye rays meet (``pattern``, the sub-samples the
+    pixel would get). Those rays are all cast (``probed`` = 1) and their hits kept at the pixel's
+    ``slot`` for :func:`sub_samples`, which then casts none of them again."""
     i = wp.tid() + offset
     edge[i] = 0
     probed[i] = 0
@@ -674,16 +693,19 @@ def bounds_stencil(
     if lit == 0 and shadowed == 0:
         edge[i] = 1
         return
-    if other_surface_near(gb, cut, i) == 0:
+    if mixed[i] == 0:
         return
     probed[i] = 1
-    for s in range(pattern.shape[0]):
-        if lit == 0 and shadowed == 0:
-            break
+    ns = pattern.shape[0]
+    for s in range(ns):
         off = pattern[s]
         found, q, m, face, bu, bv, dist = cast_primary(mesh, cut, has_cutouts, cam, gb.width, gb.height,
                                                        float(xy[0]) + off[0], float(xy[1]) + off[1])
-        if found != 0:
+        h = slot[i] * ns + s
+        hit_found[h] = found
+        hit_pos[h] = q
+        hit_nrm[h] = m
+        if found != 0 and (lit != 0 or shadowed != 0):
             if not same_plane(p, n, q, m):
                 r = footprint_certainty(lv, cam, gb.width, gb.height, xy, L, q, m, closed_faces[face] != CULL_SKIP, eps, bounds, level_off,
                                         levels, map_size, bias, max_texels, may_shadow)
@@ -748,13 +770,14 @@ class IZB(Technique):
             counters["edge_fraction"] = float(e.sum() / covered) if covered else 0.0
             return edge
 
-        stencil = None
+        stencil = probes = None
         if p.aa == "adaptive" and p.stencil == "bounds":
             outer = ctx.light_depth(light, size=p.shadow_map_size, conservative=True, opaque=True)
             back = ctx.light_depth(light, size=p.shadow_map_size, conservative=True, opaque=True, faces="back")
             opened = ctx.light_depth(light, size=p.shadow_map_size, conservative=True, opaque=True, faces="open")
             inner = ctx.light_depth(light, size=p.shadow_map_size, inner=True)
             stencil = ctx.key("izb_stencil", light)
+            probes = ctx.key("izb_probes", light)
 
             def run_bounds(res):
                 gb, dm, di = res[gbuf], res[outer], res[inner]
@@ -764,18 +787,27 @@ class IZB(Technique):
                 ds = res[sk]
                 edge = wp.empty(gb.count, dtype=wp.int32, device=dev)
                 probed = wp.empty(gb.count, dtype=wp.int32, device=dev)
+                mixed = wp.empty(gb.count, dtype=wp.int32, device=dev)
+                launch_chunked(mixed_pixels, gb.count, inputs=[gb.gpu(), ds.cutouts], outputs=[mixed], device=dev)
+                # a slot of n_sub hits per pixel that may probe (one next to another surface); host scan: no atomics
+                m = mixed.numpy()
+                slot_h = np.where(m != 0, np.cumsum(m) - 1, -1).astype(np.int32)
+                nhits = max(int(m.sum()) * n_sub, 1)
+                hits = {"pos": wp.empty(nhits, dtype=wp.vec3, device=dev), "nrm": wp.empty(nhits, dtype=wp.vec3, device=dev),
+                        "found": wp.empty(nhits, dtype=wp.int32, device=dev), "slot": wp.array(slot_h, dtype=wp.int32, device=dev),
+                        "probed": probed, "mixed": mixed}
                 pat = subpixel_pattern(n_sub, p.pattern_kind, p.seed)
                 launch_chunked(bounds_stencil, gb.count,
                                inputs=[gb.gpu(), cam, v.gpu(), L, pyr, closed_faces, wp.array(offs, dtype=wp.int32, device=dev), len(offs) - 1,
                                        p.shadow_map_size, p.bounds_bias * max(v.far - v.near, 1e-12), p.bounds_texels,
                                        ray_epsilon(gb, light), may_shadow, wp.array(pat, dtype=wp.vec2, device=dev), ds.mesh.id, ds.cutouts,
-                                       int(ds.has_cutouts)],
-                               outputs=[edge, probed], device=dev)
+                                       int(ds.has_cutouts), mixed, hits["slot"]],
+                               outputs=[edge, probed, hits["pos"], hits["nrm"], hits["found"]], device=dev)
                 counters["stencil_probed_pixels"] = int(probed.numpy().sum())
-                return {stencil: edge_counters(edge, gb)}
+                return {stencil: edge_counters(edge, gb), probes: hits}
 
-            ctx.add_pass(ctx.pass_name("izb_stencil", light), inputs=(gbuf, sk, outer, back, opened, inner), outputs=(stencil,), run=run_bounds,
-                         light=light)
+            ctx.add_pass(ctx.pass_name("izb_stencil", light), inputs=(gbuf, sk, outer, back, opened, inner), outputs=(stencil, probes),
+                         run=run_bounds, light=light)
         elif p.aa == "adaptive":
             depth = ctx.light_depth(light, size=p.shadow_map_size, conservative=p.stencil_raster == "conservative")
             stencil = ctx.key("izb_stencil", light)
@@ -825,19 +857,28 @@ class IZB(Technique):
             if len(pixels):
                 pat = subpixel_pattern(n_sub, p.pattern_kind, p.seed)
                 mode = SUBSAMPLES.index(p.subsamples)
-                mixed = wp.zeros(1, dtype=wp.int32, device=dev)
-                if p.subsamples == "auto":
-                    mixed = wp.empty(n0, dtype=wp.int32, device=dev)
-                    launch_chunked(mixed_pixels, n0, inputs=[gb.gpu(), ds.cutouts], outputs=[mixed], device=dev)
+                none1 = wp.zeros(1, dtype=wp.int32, device=dev)
+                hits = {"pos": wp.zeros(1, dtype=wp.vec3, device=dev), "nrm": wp.zeros(1, dtype=wp.vec3, device=dev), "found": none1,
+                        "slot": none1, "probed": wp.zeros(n0, dtype=wp.int32, device=dev), "mixed": none1}
+                if probes is not None:  # the stencil's mixed pixels and the hits of the eye rays it cast
+                    hits = res[probes]
+                elif p.subsamples == "auto":
+                    hits["mixed"] = wp.empty(n0, dtype=wp.int32, device=dev)
+                    launch_chunked(mixed_pixels, n0, inputs=[gb.gpu(), ds.cutouts], outputs=[hits["mixed"]], device=dev)
+                mixed = hits["mixed"]
                 recast = wp.empty(len(pixels) * n_sub, dtype=wp.int32, device=dev)
                 launch_chunked(sub_samples, len(pixels) * n_sub,
                                inputs=[n0, n_sub, pix, wp.array(pat, dtype=wp.vec2, device=dev), ds.mesh.id, ds.cutouts,
-                                       int(ds.has_cutouts), cam, gb.gpu(), mixed, mode, L, eps, dmax],
+                                       int(ds.has_cutouts), cam, gb.gpu(), mixed, mode, hits["probed"], hits["slot"], hits["pos"],
+                                       hits["nrm"], hits["found"], L, eps, dmax],
                                outputs=outs + [recast], device=dev)
-                counters["subsamples_recast"] = int(recast.numpy().sum())
+                rc = recast.numpy()
+                counters["subsamples_recast"] = int((rc == 1).sum())
+                counters["subsamples_from_stencil"] = int((rc == 2).sum())
                 launch_chunked(centre_fallback, len(pixels), inputs=[n0, n_sub, pix, arr["state"]], outputs=[arr["insert"], fallback], device=dev)
             st = arr["state"].numpy()
             counters.setdefault("subsamples_recast", 0)
+            counters.setdefault("subsamples_from_stencil", 0)
             counters["multisampled_pixels"] = int(len(pixels))
             counters["extra_samples"] = int(len(pixels) * n_sub)
             counters["centre_fallbacks"] = int(fallback.numpy()[: len(pixels)].sum())
@@ -845,7 +886,7 @@ class IZB(Technique):
             arr.update(multi=multi, fallback=fallback, base=n0, pixels=len(pixels))
             return {samples_key: arr}
 
-        ins = (gbuf, sk) + ((stencil,) if stencil is not None else ())
+        ins = (gbuf, sk) + ((stencil,) if stencil is not None else ()) + ((probes,) if probes is not None else ())
         ctx.add_pass(ctx.pass_name("izb_samples", light), inputs=ins, outputs=(samples_key,), run=run_samples, light=light)
 
         grid_key = ctx.key("izb_grid", light)
