@@ -176,11 +176,14 @@ def cell_ranges(
     width: int,
     cells: int,
     keys: wp.array[wp.int32],
+    depth: wp.array[float],
     # outputs
     start: wp.array2d[wp.int32],
     end: wp.array2d[wp.int32],
+    zmax: wp.array2d[float],
 ):
-    """Each run of equal keys writes its cell's range: its first sample the start, its last the end."""
+    """Each run of equal keys writes its cell's range: its first sample the start, its last the end
+    and the run's farthest light depth (cells without samples are never read: no pass over them)."""
     k = wp.tid() + offset
     key = keys[k]
     if key < cells:
@@ -190,6 +193,12 @@ def cell_ranges(
             start[y, x] = k
         if k == n - 1 or keys[k + 1] != key:
             end[y, x] = k + 1
+            m = float(-1.0e30)
+            j = k
+            while j >= 0 and keys[j] == key:
+                m = wp.max(m, depth[j])
+                j -= 1
+            zmax[y, x] = m
 
 
 @wp.kernel
@@ -214,25 +223,6 @@ def gather_sorted(
     s_tmax[k] = tmax[i]
     s_depth[k] = view_of(lv, origin[i])[2]
     rank[i] = k
-
-
-@wp.kernel
-def cell_depth_max(
-    offset: int,
-    width: int,
-    start: wp.array2d[wp.int32],
-    end: wp.array2d[wp.int32],
-    depth: wp.array[float],
-    # outputs
-    zmax: wp.array2d[float],
-):
-    c = wp.tid() + offset
-    y = c // width
-    x = c - y * width
-    m = float(-1.0e30)
-    for k in range(start[y, x], end[y, x]):
-        m = wp.max(m, depth[k])
-    zmax[y, x] = m
 
 
 @dataclass
@@ -287,8 +277,7 @@ def build_grid(view: LightView, origin: wp.array, dir: wp.array, tmax: wp.array,
     rank = wp.full(max(n, 1), -1, dtype=wp.int32, device=device)
     if inserted:
         launch_chunked(gather_sorted, inserted, inputs=[lv, values, origin, dir, tmax], outputs=[t.origin, t.dir, t.tmax, depth, rank], device=device)
-        launch_chunked(cell_ranges, inserted, inputs=[inserted, w, cells, keys], outputs=[t.start, t.end], device=device)
-    launch_chunked(cell_depth_max, cells, inputs=[w, t.start, t.end, depth], outputs=[t.zmax], device=device, min_chunk=1 << 14)
+        launch_chunked(cell_ranges, inserted, inputs=[inserted, w, cells, keys, depth], outputs=[t.start, t.end, t.zmax], device=device)
     t.points, t.indices, t.cut, t.has_cutouts = points, indices, cut, int(has_cutouts)
     t.blocked = wp.empty(m, dtype=wp.int32, device=device)
     t.pairs = wp.empty((h, w), dtype=wp.int32, device=device)
