@@ -15,6 +15,7 @@ texels below, stored flat (vec2) with the level offsets of :func:`level_offsets`
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import warp as wp
@@ -29,7 +30,7 @@ def merge_range(a: wp.vec2, b: wp.vec2) -> wp.vec2:
 
 
 @wp.func
-def texels_below(pyr: wp.array[wp.vec2], src_off: int, n: int, i: int):
+def texels_below(pyr: wp.array(dtype=Any), src_off: int, n: int, i: int):
     """The 2 x 2 texels of the level below (2n per side, at ``src_off``) under texel ``i`` of a level of ``n`` per side."""
     y = i // n
     x = i - y * n
@@ -100,13 +101,7 @@ def pyramid_level_bounds(
 ):
     """Level of ``n`` per side from the level below: min, min, min, max of the 2 x 2 texels."""
     i = wp.tid() + offset
-    y = i // n
-    x = i - y * n
-    m = 2 * n
-    a = pyr[src_off + (2 * y) * m + 2 * x]
-    b = pyr[src_off + (2 * y) * m + 2 * x + 1]
-    c = pyr[src_off + (2 * y + 1) * m + 2 * x]
-    d = pyr[src_off + (2 * y + 1) * m + 2 * x + 1]
+    a, b, c, d = texels_below(pyr, src_off, n, i)
     lo = wp.min(wp.min(a, b), wp.min(c, d))
     hi = wp.max(wp.max(a, b), wp.max(c, d))
     pyr[dst_off + i] = wp.vec4(lo[0], lo[1], lo[2], hi[3])

@@ -406,12 +406,10 @@ def edge_stencil(
     may_shadow: int,
     # outputs
     edge: wp.array[wp.int32],
-    level_used: wp.array[wp.int32],
 ):
     """Potential shadow-edge pixels (1), from the mip-mapped variance shadow map."""
     i = wp.tid() + offset
     edge[i] = 0
-    level_used[i] = -1
     if not gb_covered(gb, i):
         return
     p = gb.pos[i]
@@ -460,7 +458,6 @@ def edge_stencil(
     e = wp.max(xmax - xmin, ymax - ymin)
     lev = int(wp.ceil(wp.log2(wp.max(e, 1.0))))
     lev = wp.clamp(lev, 0, levels - 1)
-    level_used[i] = lev
     # t: the footprint's nearest depth less a slack. The texels read span up to 2^(lev+1) base texels,
     # over which the receiver's own depth (in the map as its nearest depth per texel) spreads by
     # r = slope 2^(lev+1); a receiver alone then has mean >= t_lo - r and standard deviation <= r / sqrt(12),
@@ -817,13 +814,12 @@ class IZB(Technique):
                 v = dm.view
                 pyr, offs = build_moments_pyramid(dm.depth, v.near, v.far, dev)
                 edge = wp.empty(gb.count, dtype=wp.int32, device=dev)
-                lev = wp.empty(gb.count, dtype=wp.int32, device=dev)
                 scale = 1.0 / (v.far - v.near) if v.far > v.near else 1.0
                 launch_chunked(edge_stencil, gb.count,
                                inputs=[gb.gpu(), cam, v.gpu(), pyr, wp.array(offs, dtype=wp.int32, device=dev), len(offs) - 1,
                                        p.shadow_map_size, scale, p.edge_threshold, p.min_variance, p.stencil_bias,
                                        int(p.stencil_rule == "listing"), may_shadow],
-                               outputs=[edge, lev], device=dev)
+                               outputs=[edge], device=dev)
                 return {stencil: edge_counters(edge, gb)}
 
             ctx.add_pass(ctx.pass_name("izb_stencil", light), inputs=(gbuf, depth), outputs=(stencil,), run=run_stencil, light=light)
