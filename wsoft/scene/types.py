@@ -155,8 +155,93 @@ class Camera:
 
 
 @dataclass
+class Prototype:
+    """Geometry shared by instances (a PointInstancer's prototype, or the prototype of instanceable
+    prims), in the prototype root's own frame: the same per-triangle fields as :class:`Scene`'s
+    triangle soup, indices into its own ``points``. ``tri_prim`` indexes ``Scene.prims`` (the
+    prototype's mesh prims); ``tri_closed`` as :func:`wsoft.scene.usd.closed_orientation` gives it
+    in the prototype's frame."""
+
+    path: str
+    points: np.ndarray  # [V, 3] float32, prototype frame
+    triangles: np.ndarray  # [T, 3] int32
+    tri_prim: np.ndarray  # [T] int32 -> Scene.prims
+    tri_material: np.ndarray  # [T] int32 -> Scene.materials
+    tri_uv: np.ndarray  # [T, 3, 2] float32
+    tri_double_sided: np.ndarray  # [T] bool
+    tri_closed: np.ndarray  # [T] int8
+    tri_face: np.ndarray  # [T] int32
+
+    @property
+    def triangle_count(self) -> int:
+        return int(self.triangles.shape[0])
+
+
+@dataclass
+class Instances:
+    """Instanced geometry kept instanced (``load_scene(..., instancing=True)``): ``prototypes`` once,
+    and per instance the prototype it places and its prototype-to-world transform.
+
+    ``xform[i]`` is 4x4 float64, column-vector convention (world = xform @ [p, 1]); a transform with a
+    negative determinant mirrors (its triangles' winding flips in world space). ``prim[i]`` indexes
+    ``Scene.prims``: the instance's own prim (an instanceable prim, or the PointInstancer that
+    places it); ``instance_id[i]``: the PointInstancer's instance index, -1 for an instanceable
+    prim; ``dynamic[i]``: the instance moves over time (time-sampled instancer attributes or a
+    moving transform)."""
+
+    prototypes: list[Prototype]
+    proto: np.ndarray  # [I] int32 -> prototypes
+    xform: np.ndarray  # [I, 4, 4] float64
+    prim: np.ndarray  # [I] int32 -> Scene.prims
+    instance_id: np.ndarray  # [I] int32
+    dynamic: np.ndarray  # [I] bool
+
+    @property
+    def count(self) -> int:
+        return int(self.proto.shape[0])
+
+    @property
+    def prototype_triangles(self) -> int:
+        """Triangles stored once (the prototypes')."""
+        return int(sum(p.triangle_count for p in self.prototypes))
+
+    @property
+    def instanced_triangles(self) -> int:
+        """Triangles the instances place in the world (what flattening would store)."""
+        per = np.array([p.triangle_count for p in self.prototypes], np.int64)
+        return int(per[self.proto].sum()) if self.count else 0
+
+    @cached_property
+    def world_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per instance the world bounds of its prototype's triangles: (lo [I, 3], hi [I, 3]) float64,
+        from the 8 corners of the prototype's own bounds (a box that holds the instance)."""
+        plo = np.array([p.points[np.unique(p.triangles)].min(axis=0) if p.triangle_count else np.zeros(3) for p in self.prototypes], np.float64)
+        phi = np.array([p.points[np.unique(p.triangles)].max(axis=0) if p.triangle_count else np.zeros(3) for p in self.prototypes], np.float64)
+        lo, hi = plo[self.proto], phi[self.proto]
+        c = 0.5 * (lo + hi)
+        e = 0.5 * (hi - lo)
+        M = self.xform[:, :3, :3]
+        wc = np.einsum("ijk,ik->ij", M, c) + self.xform[:, :3, 3]
+        we = np.einsum("ijk,ik->ij", np.abs(M), e)
+        return wc - we, wc + we
+
+    def corners(self) -> np.ndarray:
+        """The 8 corners of every instance's world bounds, float32 [8 I, 3] (stand-ins for the
+        instances' vertices where a view is fitted to casters: every instanced vertex lies in the box)."""
+        lo, hi = self.world_bounds
+        out = np.empty((self.count, 8, 3), np.float64)
+        for k in range(8):
+            out[:, k] = np.where([(k >> 0) & 1, (k >> 1) & 1, (k >> 2) & 1], hi, lo)
+        return out.reshape(-1, 3).astype(np.float32)
+
+
+@dataclass
 class Scene:
-    """A loaded stage as a world-space triangle soup plus lights and cameras."""
+    """A loaded stage as a world-space triangle soup plus lights and cameras.
+
+    With ``instances`` (``load_scene(..., instancing=True)`` on a stage with PointInstancers or
+    instanceable prims), the triangle soup holds only the geometry that is not instanced and
+    ``instances`` the rest, each prototype once; :meth:`flattened` gives the whole soup."""
 
     path: str
     points: np.ndarray  # [V, 3] float32
@@ -184,25 +269,42 @@ class Scene:
     render_settings: RenderSettings | None = None  # the UsdRender settings it was loaded with (wsoft.scene.render_settings)
     render_settings_source: str = "none"  # how they were chosen: flag, metadata, GetStageRenderSettings or none
     purposes: tuple[str, ...] = ("default", "render")  # the UsdGeomImageable purposes that were loaded
+    instances: Instances | None = None  # instanced geometry kept instanced (None: everything is in the soup)
 
     @property
     def triangle_count(self) -> int:
         return int(self.triangles.shape[0])
 
+    @property
+    def total_triangles(self) -> int:
+        """Triangles in the world: the soup's plus those the instances place."""
+        return self.triangle_count + (self.instances.instanced_triangles if self.instances is not None else 0)
+
+    @property
+    def instanced(self) -> bool:
+        """Does the scene keep instances (``instances`` holds at least one)?"""
+        return self.instances is not None and self.instances.count > 0
+
     @cached_property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """World bounds of the points that triangles use (computed once: scenes are not edited in place)."""
-        if len(self.points) == 0:
-            return np.zeros(3), np.zeros(3)
-        used = self.caster_points if self.triangle_count else self.points
+        """World bounds of the points that triangles use, instances' bounds included (computed once:
+        scenes are not edited in place)."""
+        used = self.caster_points
+        if len(used) == 0:
+            if len(self.points) == 0:
+                return np.zeros(3), np.zeros(3)
+            used = self.points
         return used.min(axis=0).astype(np.float64), used.max(axis=0).astype(np.float64)
 
     @cached_property
     def caster_points(self) -> np.ndarray:
-        """The vertices of the triangles (points no triangle uses are not casters), float32 [N, 3]."""
-        if self.triangle_count == 0:
-            return np.zeros((0, 3), np.float32)
-        return self.points[np.unique(self.triangles)]
+        """The vertices of the triangles (points no triangle uses are not casters), float32 [N, 3];
+        of an instanced scene, the soup's plus the corners of every instance's world bounds
+        (:meth:`Instances.corners`: every instanced vertex lies inside its box)."""
+        own = self.points[np.unique(self.triangles)] if self.triangle_count else np.zeros((0, 3), np.float32)
+        if self.instanced:
+            return np.concatenate([own, self.instances.corners()]).astype(np.float32)
+        return own
 
     @property
     def diagonal(self) -> float:
