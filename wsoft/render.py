@@ -553,6 +553,7 @@ class Built:
     visibility: dict[str, list[Key]]
     channels: dict[str, Key]
     skipped: dict[str, list[tuple[Light, str]]]
+    instancing: dict = dataclasses.field(default_factory=lambda: {"mode": "none"})  # instancing_plan: instances kept, flattened, or none
 
     @property
     def requested(self) -> list[Key]:
@@ -577,10 +578,14 @@ def build_graph(scene: Scene, technique, *, width: int | None = None, height: in
         raise SceneError(f"no shadow-casting light{why}", file=scene.path)
     techs = as_techniques(technique, params or {})
     labels = technique_labels(techs)
+    instancing = instancing_plan(scene, techs, labels)
+    if instancing["mode"] == "flattened" and strict:
+        scene = flatten_for(scene, instancing)
     lights = [scene.find_light(str(light))] if light else list(scene.lights)
     fr = frame_setup(scene, width, height, camera)
     ctx = RenderContext(scene, fr.camera, fr.width, fr.height, device, pixel_samples, framing=fr)
     built = Built(ctx, labels, techs, {}, {}, {}, {})
+    built.instancing = instancing
     for tech, label in zip(techs, labels):
         tctx = ctx.technique(tech, label)
         mine, skipped = supported_lights(tech, scene, lights)
@@ -594,6 +599,35 @@ def build_graph(scene: Scene, technique, *, width: int | None = None, height: in
         built.visibility[label] = [visibility_of(ctx, tctx, l) for l in mine]
         built.channels[label] = _add_resolve(ctx, tech, label, mine, built.visibility[label], single=len(techs) == 1)
     return built
+
+
+FLATTEN_LIMIT = 20_000_000  # instanced triangles beyond which a stage is not flattened for a technique that needs it
+
+
+def instancing_plan(scene: Scene, techs: list, labels: list[str]) -> dict:
+    """How ``scene``'s instances are drawn for ``techs``: ``mode`` ``none`` (the stage has none),
+    ``kept`` (every technique keeps them: prototypes once, :mod:`wsoft.scene.instancing`) or
+    ``flattened`` (a technique reads the triangle soup: ``needs`` lists (label, reason))."""
+    if not scene.instanced:
+        return {"mode": "none"}
+    inst = scene.instances
+    needs = [(label, t.instancing_why()) for t, label in zip(techs, labels) if t.instancing_why()]
+    return {"mode": "flattened" if needs else "kept", "needs": needs, "instances": inst.count, "prototypes": len(inst.prototypes),
+            "prototype_triangles": inst.prototype_triangles, "instanced_triangles": inst.instanced_triangles,
+            "soup_triangles": scene.triangle_count}
+
+
+def flatten_for(scene: Scene, plan: dict) -> Scene:
+    """``scene`` flattened for the techniques of ``plan`` that read the triangle soup; an error when
+    it would hold more than :data:`FLATTEN_LIMIT` triangles (name the techniques and those that keep instances)."""
+    who = "; ".join(f"{label} ({why})" for label, why in plan["needs"])
+    if scene.total_triangles > FLATTEN_LIMIT:
+        from wsoft.techniques import TECHNIQUES
+
+        keep = ", ".join(n for n, t in sorted(TECHNIQUES.items()) if not t.instancing_refusal)
+        raise ParameterError(f"{who}: needs the stage flattened, {scene.total_triangles:,} triangles from {plan['instances']:,} instances "
+                             f"(more than {FLATTEN_LIMIT:,}); techniques that keep instances: {keep}", file=scene.path)
+    return scene.flattened()
 
 
 def supported_lights(tech, scene: Scene, lights: list[Light]) -> tuple[list[Light], list[tuple[Light, str]]]:
@@ -725,8 +759,8 @@ def frames_of(built: Built, res: Resources, records: list[dict], total_ms: float
     base = {
         "device": ctx.device,
         "threads": cpu_threads() if ctx.device == "cpu" else None,
-        "scene": {"path": scene.path, "triangles": scene.triangle_count, "time": scene.time, "up_axis": scene.up_axis,
-                  "meters_per_unit": scene.meters_per_unit},
+        "scene": {"path": scene.path, "triangles": scene.total_triangles, "time": scene.time, "up_axis": scene.up_axis,
+                  "meters_per_unit": scene.meters_per_unit, "instancing": built.instancing},
         "width": ctx.framing.out_size[0] if ctx.framing is not None else ctx.width,  # the written image (the data window)
         "height": ctx.framing.out_size[1] if ctx.framing is not None else ctx.height,
         "pixel_samples": ctx.pixel_samples,
@@ -736,7 +770,7 @@ def frames_of(built: Built, res: Resources, records: list[dict], total_ms: float
     }
     out = scene.render_settings.output if scene.render_settings is not None else None
     exr_names = {"V": out.visibility_var, "V_stderr": f"{out.visibility_var}_stderr"} if out is not None else {}
-    frame_counters = {**ctx.counters["frame"], "triangles": scene.triangle_count, "pixels": ctx.width * ctx.height,
+    frame_counters = {**ctx.counters["frame"], "triangles": scene.total_triangles, "pixels": ctx.width * ctx.height,
                       "gbuffer_samples": ctx.width * ctx.height * ctx.pixel_samples}
     frames = {}
     single = len(built.labels) == 1
@@ -910,7 +944,8 @@ def plan(scene: Scene, techniques: list[str] | None = None, *, width: int | None
 
     out = {
         "scene": scene.path,
-        "triangles": scene.triangle_count,
+        "triangles": scene.total_triangles,
+        "instancing": instancing_plan(scene, [], []),
         "up_axis": scene.up_axis,
         "meters_per_unit": scene.meters_per_unit,
         "lights": [{"path": l.path, "kind": l.kind_name, "size": l.size_description(), "shadow": shadow_controls(scene, l)}
@@ -932,6 +967,8 @@ def plan(scene: Scene, techniques: list[str] | None = None, *, width: int | None
     for name in techniques or sorted(TECHNIQUES):
         built = build_graph(scene, name, width=width, height=height, camera=camera, light=light, device="cpu", strict=False)
         label = built.labels[0]
+        if built.instancing["mode"] == "flattened":
+            out.setdefault("flattened_for", {})[name] = built.instancing["needs"][0][1]
         if built.skipped[label]:
             out["not_applicable"][name] = [{"light": l.path, "reason": why} for l, why in built.skipped[label]]
         if label in built.channels:

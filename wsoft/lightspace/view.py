@@ -77,6 +77,41 @@ class ViewGPU:
     height: int
 
 
+def boxes_in_view(view: "LightView", lo: np.ndarray, hi: np.ndarray, pad_texels: float = 2.0) -> tuple[np.ndarray, np.ndarray]:
+    """Which world boxes (``lo``, ``hi``: [N, 3]) can put a fragment in ``view``, conservatively: a
+    box is out when it lies wholly beyond the far depth, wholly before a perspective view's near
+    plane, or (wholly in front of the view's origin) wholly outside its window widened by
+    ``pad_texels``. Also per box whether a perspective view's origin lies inside it (its closed
+    surfaces then keep every face). Returns (seen [N] bool, origin_inside [N] bool)."""
+    lo = np.asarray(lo, np.float64).reshape(-1, 3)
+    hi = np.asarray(hi, np.float64).reshape(-1, 3)
+    n = len(lo)
+    if n == 0:
+        return np.zeros(0, bool), np.zeros(0, bool)
+    corners = np.stack([np.where([(k >> 0) & 1, (k >> 1) & 1, (k >> 2) & 1], hi, lo) for k in range(8)], axis=1)  # [N, 8, 3]
+    v = to_frame(corners.reshape(-1, 3), view.origin, view.axes).reshape(n, 8, 3)
+    z = v[..., 2]
+    l, r, b, t = view.window
+    px = pad_texels * (r - l) / view.width
+    py = pad_texels * (t - b) / view.height
+    seen = ~(z.min(axis=1) > view.far)
+    if view.persp:
+        seen &= ~(z.max(axis=1) < view.near)
+        front = z.min(axis=1) > 0.0
+        with np.errstate(divide="ignore", invalid="ignore"):
+            x = v[..., 0] / np.where(front[:, None], z, 1.0)
+            y = v[..., 1] / np.where(front[:, None], z, 1.0)
+        out = front & ((x.max(axis=1) < l - px) | (x.min(axis=1) > r + px) | (y.max(axis=1) < b - py) | (y.min(axis=1) > t + py))
+        seen &= ~out
+        o = np.asarray(view.origin, np.float64)
+        inside = np.all((lo <= o) & (o <= hi), axis=1)
+    else:
+        out = (v[..., 0].max(axis=1) < l - px) | (v[..., 0].min(axis=1) > r + px) | (v[..., 1].max(axis=1) < b - py) | (v[..., 1].min(axis=1) > t + py)
+        seen &= ~out
+        inside = np.zeros(n, bool)
+    return seen, inside
+
+
 @dataclass
 class LightView:
     """Where a light looks: frame, window and depth range. Texel (0, 0) is at (l, b)."""

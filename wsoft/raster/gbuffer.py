@@ -27,6 +27,7 @@ from wsoft.lightspace.view import ViewGPU, in_front_of_light, view_of
 from wsoft.parallel import launch_chunked
 from wsoft.raster.camera import CameraGPU
 from wsoft.scene.device import Surfaces, DeviceScene, surface_present
+from wsoft.scene.instancing import InstancesGPU, nearest_instance_hit
 
 
 @wp.func
@@ -63,10 +64,12 @@ def camera_ray(cam: CameraGPU, width: int, height: int, fx: float, fy: float):
 
 
 @wp.func
-def cast_primary(mesh: wp.uint64, cut: Surfaces, has_cutouts: int, cam: CameraGPU, width: int, height: int, fx: float, fy: float):
-    """The camera ray through image point (``fx``, ``fy``) (:func:`camera_ray`) against the scene:
-    (found 0/1, world point, viewer-facing normal, triangle, u, v, camera distance). Alpha-tested
-    through cutouts; back faces of single-sided meshes skipped."""
+def cast_primary(mesh: wp.uint64, cut: Surfaces, has_cutouts: int, inst: InstancesGPU, cam: CameraGPU, width: int, height: int,
+                 fx: float, fy: float):
+    """The camera ray through image point (``fx``, ``fy``) (:func:`camera_ray`) against the scene
+    (the soup's ``mesh``, then the instances of ``inst``, :mod:`wsoft.scene.instancing`): (found
+    0/1, world point, viewer-facing normal, triangle (combined index), u, v, camera distance).
+    Alpha-tested through cutouts; back faces of single-sided meshes skipped."""
     o, d, t0, t1 = camera_ray(cam, width, height, fx, fy)
     start = o + d * t0
     remaining = t1 - t0
@@ -97,6 +100,18 @@ def cast_primary(mesh: wp.uint64, cut: Surfaces, has_cutouts: int, cam: CameraGP
                     start = start + d * step
                     travelled += step
                     remaining -= step
+    if inst.count > 0:
+        reach = t1 - t0
+        if found == 1:
+            reach = travelled - t0
+        ifound, it, iface, iu, iv, inrm = nearest_instance_hit(inst, cut, has_cutouts, o + d * t0, d, reach)
+        if ifound == 1:
+            found = 1
+            face = iface
+            bu = iu
+            bv = iv
+            n = inrm
+            travelled = t0 + it
     p = o + d * travelled
     if wp.dot(n, d) > 0.0:
         n = -n
@@ -117,6 +132,7 @@ def trace_gbuffer(
     mesh: wp.uint64,
     cut: Surfaces,
     has_cutouts: int,
+    inst: InstancesGPU,
     cam: CameraGPU,
     width: int,
     height: int,
@@ -136,7 +152,7 @@ def trace_gbuffer(
     row = pix // width
     col = pix - row * width
     so = pixel_sample_offset(s, spp)
-    found, p, n, face, bu, bv, d = cast_primary(mesh, cut, has_cutouts, cam, width, height, float(col) + so[0], float(row) + so[1])
+    found, p, n, face, bu, bv, d = cast_primary(mesh, cut, has_cutouts, inst, cam, width, height, float(col) + so[0], float(row) + so[1])
     if found == 1:
         pos[idx] = p
         nrm[idx] = n
@@ -325,7 +341,7 @@ def render_gbuffer(ds: DeviceScene, cam: CameraGPU, width: int, height: int, spp
     launch_chunked(
         trace_gbuffer,
         n,
-        inputs=[ds.mesh.id, ds.cutouts, int(alpha_tested and ds.has_cutouts), cam, width, height, spp],
+        inputs=[ds.mesh.id, ds.cutouts, int(alpha_tested and ds.has_cutouts), ds.inst, cam, width, height, spp],
         outputs=[g.pos, g.nrm, g.dist, g.prim, g.uv, g.bary],
         device=dev,
     )

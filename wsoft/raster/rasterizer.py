@@ -47,7 +47,7 @@ from typing import Callable
 import numpy as np
 import warp as wp
 
-from wsoft.lightspace.view import DEPTH_CLEAR, LightView, ViewGPU, texel_of, view_of
+from wsoft.lightspace.view import DEPTH_CLEAR, LightView, ViewGPU, boxes_in_view, texel_of, view_of
 from wsoft.parallel import cpu_threads, ensure_loaded, launch_chunked, run_tasks
 from wsoft.scene.device import CULL_SKIP, DeviceScene, Surfaces, face_surfaces, surface_present, view_surfaces, without_culling
 
@@ -451,8 +451,24 @@ def _make_raster_triangle(persp: bool, spec: FragmentSpec, conservative: bool, a
     return wp.func(raster_triangle, module="unique")
 
 
-def _make_kernel(persp: bool, spec: FragmentSpec, conservative: bool, alpha: bool, listed: bool, defer_big: bool, inner: bool = False):
-    """One thread per (band of rows, triangle): project, cull, clip at the near plane, scan-convert."""
+@wp.struct
+class InstanceBatch:
+    """The instances of one prototype, for an instanced run (:meth:`Rasterizer.run`): work item
+    ``k`` is triangle ``k % ntri`` of the prototype (``points`` / ``indices`` then hold the
+    prototypes', :class:`~wsoft.scene.instancing.DeviceInstances`) placed by instance ``k // ntri``."""
+
+    to_world: wp.array[wp.mat44]  # [n] the instances' transforms
+    cull_off: wp.array[wp.int32]  # [n] 1: keep every face of this instance (the view's origin is in its bounds)
+    mirrored: wp.array[wp.int32]  # [n] 1: its winding flips (closed faces' outward side is the other one)
+    ntri: int  # the prototype's triangles
+    first: int  # its first triangle in ``indices``
+    tri0: int  # its first triangle's combined index (cutouts, cull flags, the fragment's ``tri``)
+
+
+def _make_kernel(persp: bool, spec: FragmentSpec, conservative: bool, alpha: bool, listed: bool, defer_big: bool, inner: bool = False,
+                 instanced: bool = False):
+    """One thread per (band of rows, triangle): project, cull, clip at the near plane, scan-convert.
+    ``instanced``: work items are (instance, prototype triangle) pairs of an :class:`InstanceBatch`."""
     Target = spec.target
     raster_triangle = _make_raster_triangle(persp, spec, conservative, alpha, inner)
 
@@ -466,6 +482,7 @@ def _make_kernel(persp: bool, spec: FragmentSpec, conservative: bool, alpha: boo
         indices: wp.array[wp.int32],
         lv: ViewGPU,
         cut: Surfaces,
+        batch: InstanceBatch,
         # outputs
         target: Target,
         big: wp.array[wp.int32],
@@ -474,15 +491,35 @@ def _make_kernel(persp: bool, spec: FragmentSpec, conservative: bool, alpha: boo
         # exceeds big_texels (or that cross the near plane) are only flagged in big, for a banded pass
         bi, t = wp.tid()
         band = bi + band_start
-        tri = t + offset
+        item = t + offset
         if wp.static(listed):
-            tri = tri_list[tri]
+            item = tri_list[item]
         row0 = band * band_rows
         row1 = wp.min(row0 + band_rows, lv.height)
-        pa = points[indices[3 * tri]]
-        pb = points[indices[3 * tri + 1]]
-        pc = points[indices[3 * tri + 2]]
-        cull = cut.cull[tri]
+        tri = item  # the combined triangle index
+        cull = int(0)
+        pa = wp.vec3(0.0)
+        pb = wp.vec3(0.0)
+        pc = wp.vec3(0.0)
+        if wp.static(instanced):
+            i = item // batch.ntri
+            k = item - i * batch.ntri
+            tri = batch.tri0 + k
+            m = batch.to_world[i]
+            g = batch.first + k
+            pa = wp.transform_point(m, points[indices[3 * g]])
+            pb = wp.transform_point(m, points[indices[3 * g + 1]])
+            pc = wp.transform_point(m, points[indices[3 * g + 2]])
+            cull = cut.cull[tri]
+            if batch.cull_off[i] != 0:
+                cull = 0
+            elif batch.mirrored[i] != 0:
+                cull = -cull  # the transform turns the outward side inward
+        else:
+            pa = points[indices[3 * tri]]
+            pb = points[indices[3 * tri + 1]]
+            pc = points[indices[3 * tri + 2]]
+            cull = cut.cull[tri]
         if cull == CULL_SKIP:
             return
         if cull != 0:
@@ -512,14 +549,14 @@ def _make_kernel(persp: bool, spec: FragmentSpec, conservative: bool, alpha: boo
             tc = texel_of(lv, c)
         if wp.static(defer_big):
             if clipped:
-                big[tri] = 1
+                big[item] = 1
                 return
             bw = wp.min(wp.max(ta[0], wp.max(tb[0], tc[0])), float(lv.width)) - wp.max(wp.min(ta[0], wp.min(tb[0], tc[0])), 0.0)
             bh = wp.min(wp.max(ta[1], wp.max(tb[1], tc[1])), float(lv.height)) - wp.max(wp.min(ta[1], wp.min(tb[1], tc[1])), 0.0)
             if bw < 0.0 or bh < 0.0:
                 return
             if bw * bh > big_texels:
-                big[tri] = 1
+                big[item] = 1
                 return
         alpha_on = int(0)
         if wp.static(alpha):
@@ -599,24 +636,35 @@ class Rasterizer:
     inner: bool = False
     _kernels: dict = field(default_factory=dict)
 
-    def kernel(self, listed: bool, defer_big: bool):
-        key = (listed, defer_big)
+    def kernel(self, listed: bool, defer_big: bool, instanced: bool = False):
+        key = (listed, defer_big, instanced)
         if key not in self._kernels:
-            self._kernels[key] = _make_kernel(self.persp, self.spec, self.conservative, self.alpha, listed, defer_big, self.inner)
+            self._kernels[key] = _make_kernel(self.persp, self.spec, self.conservative, self.alpha, listed, defer_big, self.inner, instanced)
         return self._kernels[key]
 
     def run(self, points: wp.array, indices: wp.array, cut: Surfaces, view, target, device: str, *,
-            triangles: wp.array | None = None, initialized: bool = True, strategy: str = "auto") -> RasterStats:
+            triangles: wp.array | None = None, initialized: bool = True, strategy: str = "auto",
+            batch: "InstanceBatch | None" = None, batch_count: int = 0) -> RasterStats:
         """Rasterize the triangles (all of ``indices``, or the index list ``triangles``) into ``target``.
 
         ``initialized = False``: ``target`` holds no data yet; the CPU's first worker clears it as
         its private target (saves a clear and a merge). ``strategy``: ``auto`` (private targets
-        when the fragment can merge, else bands), ``private`` or ``bands``."""
+        when the fragment can merge, else bands), ``private`` or ``bands``. ``batch``: rasterize
+        ``batch_count`` instances of one prototype instead (:class:`InstanceBatch`; ``points`` and
+        ``indices`` are then the prototypes', ``triangles`` must be None)."""
         lv = view.gpu() if isinstance(view, LightView) else view
         if bool(lv.persp) != self.persp:
             raise ValueError("the view's projection does not match the rasterizer's")
         w, h = lv.width, lv.height
-        ntri = indices.shape[0] // 3 if triangles is None else triangles.shape[0]
+        instanced = batch is not None
+        if instanced and triangles is not None:
+            raise ValueError("an instanced run takes no triangle list")
+        if instanced:
+            ntri = int(batch_count) * int(batch.ntri)
+        else:
+            ntri = indices.shape[0] // 3 if triangles is None else triangles.shape[0]
+            batch = _no_batch(device)
+        items = ntri if instanced else indices.shape[0] // 3  # what the big flags are indexed by
         listed = triangles is not None
         no_list = triangles if listed else wp.zeros(1, dtype=wp.int32, device=device)
         no_big = wp.zeros(1, dtype=wp.int32, device=device)
@@ -627,7 +675,7 @@ class Rasterizer:
             raise ValueError(f"fragment {self.spec.name} cannot merge private targets")
 
         def launch(kernel, tgt, start, count, nbands, band_rows, band_start=0, tri_list=no_list, big_texels=0.0, big=no_big):
-            wp.launch(kernel, dim=(nbands, count), inputs=[start, band_start, band_rows, tri_list, float(big_texels), points, indices, lv, cut],
+            wp.launch(kernel, dim=(nbands, count), inputs=[start, band_start, band_rows, tri_list, float(big_texels), points, indices, lv, cut, batch],
                       outputs=[tgt, big], device=device)
 
         if ntri == 0:
@@ -638,23 +686,23 @@ class Rasterizer:
             if not initialized and self.spec.clear is not None:
                 self.spec.clear(target, device)
             nb = (h + GPU_BAND_ROWS - 1) // GPU_BAND_ROWS
-            launch(self.kernel(listed, False), target, 0, ntri, nb, GPU_BAND_ROWS)
+            launch(self.kernel(listed, False, instanced), target, 0, ntri, nb, GPU_BAND_ROWS)
             stats.bands = nb
             return stats
         if strategy == "bands":
             if not initialized and self.spec.clear is not None:
                 self.spec.clear(target, device)
-            self._bands(launch, self.kernel(listed, False), target, ntri, h, no_list, stats, device)
+            self._bands(launch, self.kernel(listed, False, instanced), target, ntri, h, no_list, stats, device)
             return stats
         # CPU phase 1: each worker rasterizes interleaved chunks of small triangles into its own target
-        kernel1 = self.kernel(listed, True)
+        kernel1 = self.kernel(listed, True, instanced)
         ensure_loaded(kernel1, device)
         target_bytes = 4 * w * h
         nmaps = max(1, min(cpu_threads(), PRIVATE_BUDGET // max(target_bytes, 1), (ntri + CPU_CHUNK - 1) // CPU_CHUNK))
         own = 0 if initialized else 1  # workers that adopt the (uninitialised) target itself
         privates = [target] * own + [self.spec.private(target, device) for _ in range(nmaps - own)]
         chunks = [(s, min(CPU_CHUNK, ntri - s)) for s in range(0, ntri, CPU_CHUNK)]
-        big = wp.zeros(indices.shape[0] // 3, dtype=wp.int32, device=device)  # flags by triangle index
+        big = wp.zeros(items, dtype=wp.int32, device=device)  # flags by triangle index (by work item in an instanced run)
 
         def worker(m):
             def run():
@@ -672,7 +720,7 @@ class Rasterizer:
         stats.big_triangles = int(len(big_list))
         if len(big_list):
             blist = wp.array(big_list, dtype=wp.int32, device=device)
-            self._bands(launch, self.kernel(True, False), target, len(big_list), h, blist, stats, device)
+            self._bands(launch, self.kernel(True, False, instanced), target, len(big_list), h, blist, stats, device)
         return stats
 
     @staticmethod
@@ -691,6 +739,19 @@ class Rasterizer:
 
 
 _RASTERIZERS: dict[tuple, Rasterizer] = {}
+_NO_BATCH: dict[str, InstanceBatch] = {}
+
+
+def _no_batch(device: str) -> InstanceBatch:
+    """The batch a run without instances passes (never read)."""
+    if device not in _NO_BATCH:
+        b = InstanceBatch()
+        b.to_world = wp.array(np.eye(4, dtype=np.float32)[None], dtype=wp.mat44, device=device)
+        b.cull_off = wp.zeros(1, dtype=wp.int32, device=device)
+        b.mirrored = wp.zeros(1, dtype=wp.int32, device=device)
+        b.ntri, b.first, b.tri0 = 1, 0, 0
+        _NO_BATCH[device] = b
+    return _NO_BATCH[device]
 
 
 def make_rasterizer(view, fragment_func, *, conservative: bool = False, alpha: bool = False, inner: bool = False) -> Rasterizer:
@@ -729,6 +790,7 @@ class DepthMap:
     inner: bool = False  # texels certainly blocked (inner coverage, farthest depth), else DEPTH_CLEAR
     private_maps: int = 0  # CPU worker maps merged into ``depth`` (temporaries, freed)
     big_triangles: int = 0  # CPU: triangles rasterized in the banded second pass
+    instances_drawn: int = 0  # instanced scene: instances whose bounds reach the view (drawn)
 
     def arrays(self) -> dict[str, wp.array]:
         return {"depth": self.depth}
@@ -768,9 +830,46 @@ def rasterize(
     if faces != "all":
         surfaces = face_surfaces(ds, view.origin if view.persp else None, faces)
     elif inner:
-        surfaces = without_culling(ds.cutouts, ds.indices.shape[0] // 3, dev)
+        surfaces = without_culling(ds.cutouts, ds.tri_total, dev)
     else:
         surfaces = view_surfaces(ds, view.origin if view.persp else None)  # no far-face skipping around a light inside a closed mesh
     st = r.run(ds.points, ds.indices, surfaces, view, target, dev, triangles=subset, initialized=False)
+    placed = 0
+    if ds.instances is not None:
+        if inner or faces != "all" or triangles is not None:
+            raise ValueError("an instanced scene's maps draw every face of every caster (no inner coverage, face subsets or triangle lists)")
+        placed = rasterize_instances(r, ds, surfaces, view, target)
     return DepthMap(view=view, depth=target.depth, alpha_tested=alpha, conservative=conservative or inner, inner=inner,
-                    private_maps=st.private_targets, big_triangles=st.big_triangles)
+                    private_maps=st.private_targets, big_triangles=st.big_triangles, instances_drawn=placed)
+
+
+def rasterize_instances(r: Rasterizer, ds: DeviceScene, surfaces: Surfaces, view: LightView, target) -> int:
+    """Draw an instanced scene's instances into ``target`` (already holding the soup): per
+    prototype one run over (instance, triangle) pairs, for the instances whose world bounds can
+    reach the view (:func:`~wsoft.lightspace.view.boxes_in_view`). Returns how many were drawn."""
+    di = ds.instances
+    dev = ds.device
+    seen, origin_inside = boxes_in_view(view, di.lo, di.hi)
+    drawn = 0
+    for p in range(len(di.proto_ntri)):
+        sel = np.flatnonzero(seen & (di.proto == p))
+        if len(sel) == 0 or di.proto_ntri[p] == 0:
+            continue
+        b = InstanceBatch()
+        b.to_world = wp.array(di.to_world[sel].astype(np.float32), dtype=wp.mat44, device=dev)
+        b.cull_off = wp.array(origin_inside[sel].astype(np.int32), dtype=wp.int32, device=dev)
+        b.mirrored = wp.array(di.mirrored[sel].astype(np.int32), dtype=wp.int32, device=dev)
+        b.ntri = int(di.proto_ntri[p])
+        b.first = int(di.proto_first[p])
+        b.tri0 = int(di.tri_base + di.proto_first[p])
+        # work items are int32: a prototype's instances go in runs of at most 2^30 items
+        per_run = max(1, (1 << 30) // b.ntri)
+        for a in range(0, len(sel), per_run):
+            part = sel[a: a + per_run]
+            if a or len(part) < len(sel):
+                b.to_world = wp.array(di.to_world[part].astype(np.float32), dtype=wp.mat44, device=dev)
+                b.cull_off = wp.array(origin_inside[part].astype(np.int32), dtype=wp.int32, device=dev)
+                b.mirrored = wp.array(di.mirrored[part].astype(np.int32), dtype=wp.int32, device=dev)
+            r.run(di.proto_points, di.proto_indices, surfaces, view, target, dev, initialized=True, batch=b, batch_count=len(part))
+        drawn += len(sel)
+    return drawn

@@ -32,7 +32,9 @@ from wsoft.lightspace.samples import LightSamples, SamplePattern, sample_coords,
 from wsoft.parallel import launch_chunked
 from wsoft.raster.gbuffer import GBufferGPU, gb_covered, gb_pixel
 from wsoft.lightspace.bitmask import popcount
+from wsoft.errors import ParameterError
 from wsoft.scene.device import DeviceScene, Surfaces, occluded, shadow_surfaces
+from wsoft.scene.instancing import InstancesGPU, occluded_instances
 from wsoft.scene.packets import PACKET, PackedBVH, packed_bvh, packet_f, trace_receiver_packet
 
 TRAVERSALS = ("auto", "packet", "ray")
@@ -92,6 +94,7 @@ def trace_visibility(
     mesh: wp.uint64,
     cut: Surfaces,
     has_cutouts: int,
+    inst: InstancesGPU,
     light: LightGPU,
     ls: LightSamples,
     gb: GBufferGPU,
@@ -116,8 +119,10 @@ def trace_visibility(
         r = light_point(light, p, c)
         d = wp.vec3(r[0], r[1], r[2])
         if in_front(n, d):
-            if not occluded(mesh, cut, has_cutouts, o, d, shadow_ray_length(r[3], dmax, off)):
-                visible += 1
+            tm = shadow_ray_length(r[3], dmax, off)
+            if not occluded(mesh, cut, has_cutouts, o, d, tm):
+                if not occluded_instances(inst, cut, has_cutouts, o, d, tm):
+                    visible += 1
     v, e = visible_fraction(visible, samples)
     vis[i] = v
     stderr[i] = e
@@ -217,6 +222,11 @@ def trace_reference(ds: DeviceScene, light: LightGPU, gb, pattern: SamplePattern
     vis = wp.empty(n, dtype=float, device=ds.device)
     err = wp.empty(n, dtype=float, device=ds.device)
     mode = resolve_traversal(traversal, ds.device, pattern.count)
+    if ds.instances is not None and mode == "packet":  # packets walk the soup's BVH only: rays reach instances one by one
+        if traversal == "packet":
+            raise ParameterError("traversal=packet does not reach instances (the stage was loaded with instancing): "
+                                 "use traversal=ray or auto, or load it flattened")
+        mode = "ray"
     pb, pstats = packed_bvh(ds) if mode == "packet" else (None, {})
     if mode == "packet" and pb is None:  # a BVH too deep for the packets' stack
         mode = "ray"
@@ -241,7 +251,7 @@ def trace_reference(ds: DeviceScene, light: LightGPU, gb, pattern: SamplePattern
     launch_chunked(
         trace_visibility,
         n,
-        inputs=[ds.mesh.id, cut, has_cutouts, light, pattern.on(ds.device, disk), gb.gpu(), eps, dmax],
+        inputs=[ds.mesh.id, cut, has_cutouts, ds.inst, light, pattern.on(ds.device, disk), gb.gpu(), eps, dmax],
         outputs=[vis, err],
         device=ds.device,
         min_chunk=256,
@@ -300,6 +310,7 @@ def trace_shadow_rays(
     mesh: wp.uint64,
     cut: Surfaces,
     has_cutouts: int,
+    inst: InstancesGPU,
     origin: wp.array[wp.vec3],
     dir: wp.array[wp.vec3],
     tmax: wp.array[float],
@@ -307,7 +318,7 @@ def trace_shadow_rays(
     hit: wp.array[wp.int32],
 ):
     r = wp.tid() + offset
-    if occluded(mesh, cut, has_cutouts, origin[r], dir[r], tmax[r]):
+    if occluded(mesh, cut, has_cutouts, origin[r], dir[r], tmax[r]) or occluded_instances(inst, cut, has_cutouts, origin[r], dir[r], tmax[r]):
         hit[r] = 1
     else:
         hit[r] = 0
@@ -372,6 +383,8 @@ def trace_shadow_ray_packets(
 def trace_ray_packets(ds: DeviceScene, origin: wp.array, dir: wp.array, tmax: wp.array, per: int) -> wp.array:
     """Occlusion (1 = blocked) of explicit rays laid out ``per`` to a receiver with one origin
     (as :func:`shadow_rays` writes them), traced in packets; equal to :func:`trace_rays`."""
+    if ds.instances is not None:
+        raise ValueError("packets walk the soup's BVH only: an instanced scene's rays go through trace_rays")
     pb, pstats = packed_bvh(ds)
     if pb is None:
         raise ValueError(pstats["error"])
@@ -385,5 +398,5 @@ def trace_ray_packets(ds: DeviceScene, origin: wp.array, dir: wp.array, tmax: wp
 def trace_rays(ds: DeviceScene, origin: wp.array, dir: wp.array, tmax: wp.array) -> wp.array:
     """Occlusion (1 = blocked) of explicit rays, chunked across CPU threads."""
     hit = wp.empty(origin.shape[0], dtype=wp.int32, device=ds.device)
-    launch_chunked(trace_shadow_rays, origin.shape[0], inputs=[ds.mesh.id, ds.cutouts, ds.has_cutouts, origin, dir, tmax], outputs=[hit], device=ds.device, min_chunk=4096)
+    launch_chunked(trace_shadow_rays, origin.shape[0], inputs=[ds.mesh.id, ds.cutouts, ds.has_cutouts, ds.inst, origin, dir, tmax], outputs=[hit], device=ds.device, min_chunk=4096)
     return hit

@@ -120,14 +120,21 @@ def occluded(mesh: wp.uint64, cut: Surfaces, has_cutouts: int, origin: wp.vec3, 
     return True
 
 
+CULL_SKIP = wp.constant(2)  # a cull flag: the light-view rasterizer skips the triangle whichever way it faces
+
+
 @dataclass
 class DeviceScene:
-    """Arrays of one scene on one device (built by the ``upload_scene`` pass)."""
+    """Arrays of one scene on one device (built by the ``upload_scene`` pass).
+
+    Per-triangle arrays span the *combined* triangle space of :mod:`wsoft.scene.instancing`: the
+    soup's triangles (``mesh``, ``points``, ``indices``), then the prototypes' of an instanced scene
+    (``instances``); ``tri_total`` counts both."""
 
     device: str
     mesh: wp.Mesh
     points: wp.array
-    indices: wp.array  # flat [3T] int32
+    indices: wp.array  # flat [3T] int32 (the soup's triangles)
     cutouts: Surfaces
     has_cutouts: int
     culled_closed: int  # triangles of closed surfaces whose far-facing side the light view may skip
@@ -141,12 +148,15 @@ class DeviceScene:
     diagonal: float
     lo: np.ndarray
     hi: np.ndarray
+    tri_total: int = 0  # triangles in the combined space (soup + prototypes)
+    instances: object = None  # wsoft.scene.instancing.DeviceInstances, or None
+    inst: object = None  # its InstancesGPU (an empty one when the scene has no instances): kernels take it
     packed: tuple | None = None  # (PackedBVH or None, its stats), built by wsoft.scene.packets.packed_bvh on first use
     linked: dict = field(default_factory=dict)  # excluded prims -> (Surfaces, has_cutouts), built by shadow_surfaces
 
     def arrays(self) -> dict[str, wp.array]:
         c = self.cutouts
-        return {
+        out = {
             "points": self.points,
             "indices": self.indices,
             "tri_albedo": self.tri_albedo,
@@ -154,17 +164,57 @@ class DeviceScene:
             "tri_uv": c.tri_uv,
             "tex_data": c.tex_data,
         }
+        if self.instances is not None:
+            out["proto_points"] = self.instances.proto_points
+            out["proto_indices"] = self.instances.proto_indices
+        return out
+
+
+def _combined(scene: Scene) -> dict[str, np.ndarray]:
+    """The per-triangle fields over the combined space (the soup, then every prototype's triangles;
+    a soup with no triangle beside instances gets one zero-area stand-in, culled from every map)."""
+    parts = [dict(material=scene.tri_material, uv=scene.tri_uv, ds=scene.tri_double_sided,
+                  closed=np.zeros(scene.triangle_count, np.int8) if scene.tri_closed is None else scene.tri_closed,
+                  prim=scene.tri_prim, skip=np.zeros(scene.triangle_count, bool),
+                  baked=None if scene.tri_baked is None else scene.tri_baked)]
+    if scene.triangle_count == 0:
+        parts = [dict(material=np.zeros(1, np.int32), uv=np.zeros((1, 3, 2), np.float32), ds=np.ones(1, bool), closed=np.zeros(1, np.int8),
+                      prim=np.full(1, -1, np.int32), skip=np.ones(1, bool), baked=None)]
+    nsoup = max(scene.triangle_count, 1)
+    if scene.instanced:
+        for p in scene.instances.prototypes:
+            parts.append(dict(material=p.tri_material, uv=p.tri_uv, ds=p.tri_double_sided, closed=p.tri_closed, prim=p.tri_prim,
+                              skip=np.zeros(p.triangle_count, bool), baked=None))
+    out = {k: np.concatenate([np.asarray(q[k]) for q in parts]) for k in ("material", "uv", "ds", "closed", "prim", "skip")}
+    total = len(out["prim"])
+    baked = np.full((total, 3, 3), np.nan, np.float32)
+    if parts[0]["baked"] is not None and scene.triangle_count:
+        baked[: scene.triangle_count] = parts[0]["baked"]
+    out["baked"] = baked
+    out["soup"] = nsoup
+    return out
 
 
 def upload_scene(scene: Scene, device: str) -> DeviceScene:
-    """Copy the scene's triangles, cutouts and textures to ``device`` and build a BVH."""
-    if scene.triangle_count == 0:
+    """Copy the scene's triangles, cutouts and textures to ``device`` and build a BVH (and, for an
+    instanced scene, the prototypes' BVHs and the top level over the instances,
+    :mod:`wsoft.scene.instancing`)."""
+    if scene.triangle_count == 0 and not scene.instanced:
         from wsoft.errors import SceneError
 
         raise SceneError("the stage has no visible mesh triangles", file=scene.path)
-    pts = wp.array(scene.points.astype(np.float32), dtype=wp.vec3, device=device)
-    idx = wp.array(scene.triangles.reshape(-1).astype(np.int32), dtype=wp.int32, device=device)
+    from wsoft.scene.instancing import empty_instances, upload_instances
+
+    comb = _combined(scene)
+    nsoup = int(comb["soup"])
+    if scene.triangle_count:
+        soup_pts, soup_tri = scene.points.astype(np.float32), scene.triangles.reshape(-1).astype(np.int32)
+    else:  # everything is instanced: a zero-area stand-in that no ray hits
+        soup_pts, soup_tri = np.zeros((3, 3), np.float32), np.arange(3, dtype=np.int32)
+    pts = wp.array(soup_pts, dtype=wp.vec3, device=device)
+    idx = wp.array(soup_tri, dtype=wp.int32, device=device)
     mesh = wp.Mesh(points=pts, indices=idx)
+    total = len(comb["prim"])
 
     cut_ids = {}
     for i, m in enumerate(scene.materials):
@@ -173,7 +223,7 @@ def upload_scene(scene: Scene, device: str) -> DeviceScene:
     lut = np.full(max(len(scene.materials), 1), -1, np.int32)
     for i, c in cut_ids.items():
         lut[i] = c
-    tri_cut = lut[scene.tri_material] if scene.triangle_count else np.zeros(0, np.int32)
+    tri_cut = lut[comb["material"]]
     cut_mats = [scene.materials[i] for i in cut_ids]
     tex_offsets, off = [], 0
     for t in scene.textures:
@@ -189,14 +239,15 @@ def upload_scene(scene: Scene, device: str) -> DeviceScene:
 
     cut = Surfaces()
     cut.tri_cut = arr(tri_cut.astype(np.int32), wp.int32)
-    cut.double_sided = arr(scene.tri_double_sided.astype(np.int32), wp.int32)
-    cull = np.zeros(scene.triangle_count, np.int32) if scene.tri_closed is None else scene.tri_closed.astype(np.int32)
+    cut.double_sided = arr(comb["ds"].astype(np.int32), wp.int32)
+    cull = comb["closed"].astype(np.int32)
     # a cutout lets the inside of a closed surface be seen: no culling for prims that have cutouts
-    if scene.triangle_count and np.any(tri_cut >= 0):
-        cut_prims = np.unique(scene.tri_prim[tri_cut >= 0])
-        cull[np.isin(scene.tri_prim, cut_prims)] = 0
+    if np.any(tri_cut >= 0):
+        cut_prims = np.unique(comb["prim"][tri_cut >= 0])
+        cull[np.isin(comb["prim"], cut_prims)] = 0
+    cull[comb["skip"]] = int(CULL_SKIP)
     cut.cull = arr(cull, wp.int32)
-    cut.tri_uv = wp.array(scene.tri_uv.reshape(-1, 2).astype(np.float32), dtype=wp.vec2, device=device)
+    cut.tri_uv = wp.array(comb["uv"].reshape(-1, 2).astype(np.float32), dtype=wp.vec2, device=device)
     cut.threshold = arr([m.opacity_threshold for m in cut_mats], wp.float32)
     cut.opacity = arr([m.opacity for m in cut_mats], wp.float32)
     cut.tex = arr([m.texture for m in cut_mats], wp.int32)
@@ -206,15 +257,12 @@ def upload_scene(scene: Scene, device: str) -> DeviceScene:
     cut.tex_wrap_s = arr([t.wrap_s for t in scene.textures], wp.int32)
     cut.tex_wrap_t = arr([t.wrap_t for t in scene.textures], wp.int32)
     cut.tex_data = wp.array(tex_data.astype(np.float32), dtype=wp.float32, device=device)
-    albedo = np.array([m.albedo for m in scene.materials], np.float32)[scene.tri_material]
-    if scene.tri_baked is not None and scene.triangle_count:
-        baked = scene.tri_baked.astype(np.float32)
-        has_baked = np.isfinite(baked[:, 0, 0]).astype(np.int32)
-    else:
-        baked = np.zeros((max(scene.triangle_count, 1), 3, 3), np.float32)
-        has_baked = np.zeros(max(scene.triangle_count, 1), np.int32)
+    albedo = np.array([m.albedo for m in scene.materials], np.float32)[comb["material"]]
+    baked = comb["baked"]
+    has_baked = np.isfinite(baked[:, 0, 0]).astype(np.int32)
     lo, hi = scene.bounds
-    closed_lo, closed_hi = _closed_bounds(scene, cull)
+    closed_lo, closed_hi = _closed_bounds(scene, cull[: scene.triangle_count])
+    inst = upload_instances(scene.instances, nsoup, device) if scene.instanced else None
     return DeviceScene(
         device=device,
         mesh=mesh,
@@ -222,9 +270,9 @@ def upload_scene(scene: Scene, device: str) -> DeviceScene:
         indices=idx,
         cutouts=cut,
         has_cutouts=int(bool(cut_ids) and bool(np.any(tri_cut >= 0))),
-        culled_closed=int(np.count_nonzero(cull)),
+        culled_closed=int(np.count_nonzero((cull != 0) & (cull != int(CULL_SKIP)))),
         cull_host=cull,
-        tri_prim=np.asarray(scene.tri_prim, np.int32),
+        tri_prim=np.asarray(comb["prim"], np.int32),
         closed_lo=closed_lo,
         closed_hi=closed_hi,
         tri_albedo=wp.array(albedo, dtype=wp.vec3, device=device),
@@ -233,6 +281,9 @@ def upload_scene(scene: Scene, device: str) -> DeviceScene:
         diagonal=scene.diagonal,
         lo=lo,
         hi=hi,
+        tri_total=total,
+        instances=inst,
+        inst=inst.gpu if inst is not None else empty_instances(device),
     )
 
 
@@ -241,16 +292,13 @@ def _closed_bounds(scene: Scene, cull: np.ndarray) -> tuple[np.ndarray, np.ndarr
     n = max(len(scene.prims), int(scene.tri_prim.max()) + 1 if scene.triangle_count else 0, 1)
     lo = np.full((n, 3), np.inf)
     hi = np.full((n, 3), -np.inf)
-    sel = np.flatnonzero(cull != 0)
+    sel = np.flatnonzero((cull != 0) & (cull != int(CULL_SKIP)))
     if sel.size:
         pts = scene.points[scene.triangles[sel]].astype(np.float64)  # [k, 3, 3]
         prims = scene.tri_prim[sel]
         np.minimum.at(lo, prims, pts.min(axis=1))
         np.maximum.at(hi, prims, pts.max(axis=1))
     return lo, hi
-
-
-CULL_SKIP = wp.constant(2)  # a cull flag: the light-view rasterizer skips the triangle whichever way it faces
 
 
 def view_cull(ds: "DeviceScene", origin: np.ndarray | None) -> np.ndarray | None:
@@ -284,8 +332,9 @@ def face_surfaces(ds: "DeviceScene", origin: np.ndarray | None, faces: str) -> S
     through one), ``open`` — every face of the surfaces that are not closed for this view."""
     cull = view_cull(ds, origin)
     cull = ds.cull_host if cull is None else cull
+    skip = cull == int(CULL_SKIP)
     if faces == "back":
-        flags = np.where(cull != 0, -cull, int(CULL_SKIP))
+        flags = np.where(skip, int(CULL_SKIP), np.where(cull != 0, -cull, int(CULL_SKIP)))
     elif faces == "open":
         flags = np.where(cull != 0, int(CULL_SKIP), 0)
     else:

@@ -22,6 +22,8 @@ LIGHT_DISTANT = 3
 LIGHT_POINT = 4  # SphereLight with treatAsPoint or radius 0
 LIGHT_KIND_NAMES = {LIGHT_RECT: "rect", LIGHT_DISK: "disk", LIGHT_SPHERE: "sphere", LIGHT_DISTANT: "distant", LIGHT_POINT: "point"}
 
+EXACT_CASTER_POINTS = 4_000_000  # instanced vertices up to which Scene.caster_points holds them all (else instance box corners)
+
 WRAP_REPEAT = 0
 WRAP_MIRROR = 1
 WRAP_CLAMP = 2
@@ -225,6 +227,24 @@ class Instances:
         we = np.einsum("ijk,ik->ij", np.abs(M), e)
         return wc - we, wc + we
 
+    def placed_vertices(self) -> int:
+        """Vertices the instances place in the world (each prototype's used vertices, per instance)."""
+        per = np.array([len(np.unique(p.triangles)) if p.triangle_count else 0 for p in self.prototypes], np.int64)
+        return int(per[self.proto].sum()) if self.count else 0
+
+    def world_vertices(self) -> np.ndarray:
+        """Every instance's used prototype vertices in world space, float32 [placed_vertices, 3]
+        (computed in float64 and rounded once, as the flattening loader does)."""
+        out = []
+        for j, p in enumerate(self.prototypes):
+            sel = np.flatnonzero(self.proto == j)
+            if len(sel) == 0 or p.triangle_count == 0:
+                continue
+            v = p.points[np.unique(p.triangles)].astype(np.float64)
+            M = self.xform[sel]
+            out.append((np.einsum("ijk,vk->ivj", M[:, :3, :3], v) + M[:, None, :3, 3]).reshape(-1, 3).astype(np.float32))
+        return np.concatenate(out) if out else np.zeros((0, 3), np.float32)
+
     def corners(self) -> np.ndarray:
         """The 8 corners of every instance's world bounds, float32 [8 I, 3] (stand-ins for the
         instances' vertices where a view is fitted to casters: every instanced vertex lies in the box)."""
@@ -298,12 +318,17 @@ class Scene:
 
     @cached_property
     def caster_points(self) -> np.ndarray:
-        """The vertices of the triangles (points no triangle uses are not casters), float32 [N, 3];
-        of an instanced scene, the soup's plus the corners of every instance's world bounds
-        (:meth:`Instances.corners`: every instanced vertex lies inside its box)."""
+        """The vertices of the triangles (points no triangle uses are not casters), float32 [N, 3].
+        Of an instanced scene: the soup's plus the instances' vertices in world space
+        (:meth:`Instances.world_vertices`, the same points as the flattened stage's) up to
+        :data:`EXACT_CASTER_POINTS` of them, beyond that the corners of every instance's world
+        bounds (:meth:`Instances.corners`: every instanced vertex lies inside its box, so a view
+        fitted to them still maps every caster, a little more widely)."""
         own = self.points[np.unique(self.triangles)] if self.triangle_count else np.zeros((0, 3), np.float32)
         if self.instanced:
-            return np.concatenate([own, self.instances.corners()]).astype(np.float32)
+            inst = self.instances
+            extra = inst.world_vertices() if inst.placed_vertices() <= EXACT_CASTER_POINTS else inst.corners()
+            return np.concatenate([own, extra]).astype(np.float32)
         return own
 
     @property
@@ -312,8 +337,15 @@ class Scene:
         return max(float(np.linalg.norm(hi - lo)), 1e-6)
 
     def cutout_triangle_counts(self) -> dict[str, int]:
-        """Material path -> number of triangles using that cutout material."""
-        counts = np.bincount(self.tri_material, minlength=len(self.materials)) if self.triangle_count else []
+        """Material path -> number of triangles using that cutout material (instanced triangles
+        counted once per instance that places them)."""
+        nm = max(len(self.materials), 1)
+        counts = np.bincount(self.tri_material, minlength=nm) if self.triangle_count else np.zeros(nm, np.int64)
+        if self.instanced:
+            placed = np.bincount(self.instances.proto, minlength=len(self.instances.prototypes))
+            for p, k in zip(self.instances.prototypes, placed):
+                if k and p.triangle_count:
+                    counts = counts + k * np.bincount(p.tri_material, minlength=nm)[:nm]
         return {m.path: int(counts[i]) for i, m in enumerate(self.materials) if m.is_cutout and counts[i] > 0}
 
     @property

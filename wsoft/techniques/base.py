@@ -99,6 +99,10 @@ class Technique:
     # line); supports() then refuses a light with a finite distance, naming the attribute. Every
     # technique honours collection:shadowLink (its maps and rays see only a light's casters).
     distance_refusal: ClassVar[str] = ""
+    # instanced stages (load_scene(..., instancing=True)): "" when the technique's passes draw and
+    # trace instances as they are (prototypes once, wsoft.scene.instancing), else why it needs the
+    # triangle soup; the frame graph then flattens the stage for it (wsoft.render.instancing_plan)
+    instancing_refusal: ClassVar[str] = "its passes read the flattened triangle soup"
 
     def __init__(self, params):
         self.params = params
@@ -144,6 +148,11 @@ class Technique:
             return f"inputs:shadow:distance = {light.shadow_distance:g} cannot be honoured: {self.distance_refusal}"
         return None
 
+    def instancing_why(self) -> str:
+        """"" when this instance (its parameters) keeps a stage's instances, else why it needs the
+        triangle soup (:attr:`instancing_refusal` unless a parameter changes it)."""
+        return self.instancing_refusal
+
     def bake_support(self) -> str | None:
         """``None`` when the technique answers for any points given their positions and normals,
         so that it can bake visibility into a stage (:mod:`wsoft.bake`: its G-buffer holds mesh
@@ -173,6 +182,7 @@ class Technique:
             "name": cls.name,
             "summary": cls.summary,
             "reads": list(cls.reads),
+            "keeps_instances": not cls.instancing_refusal,
             "writes": list(cls.writes),
             "parameters": [
                 {"name": f.name, "type": getattr(hints.get(f.name), "__name__", str(f.type)), "default": f.default,

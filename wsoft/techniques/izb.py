@@ -81,6 +81,7 @@ from wsoft.lightspace.view import ViewGPU, fit_light_view, receiver_plane_affine
 from wsoft.params import check_ranges
 from wsoft.parallel import launch_chunked
 from wsoft.raster.camera import CameraGPU, camera_gpu, subpixel_pattern
+from wsoft.scene.instancing import InstancesGPU
 from wsoft.raster.gbuffer import GBufferGPU, camera_ray, cast_primary, gb_covered, gb_pixel
 from wsoft.raster.rasterizer import make_rasterizer
 from wsoft.reference import ray_epsilon, ray_offset, ray_origin
@@ -242,6 +243,7 @@ def sub_samples(
     pixels: wp.array[wp.int32],
     pattern: wp.array[wp.vec2],
     mesh: wp.uint64,
+    inst: InstancesGPU,
     cut: Surfaces,
     has_cutouts: int,
     cam: CameraGPU,
@@ -295,7 +297,7 @@ def sub_samples(
                 recast[k] = 0
                 store_sample(base + k, True, L, o + d * t, nc, eps, dmax, True, origin, dir, tmax, state, insert)
     if recast[k] == 1:
-        found, p, n, face, bu, bv, dist = cast_primary(mesh, cut, has_cutouts, cam, gb.width, gb.height, fx, fy)
+        found, p, n, face, bu, bv, dist = cast_primary(mesh, cut, has_cutouts, inst, cam, gb.width, gb.height, fx, fy)
         store_sample(base + k, found != 0, L, p, n, eps, dmax, True, origin, dir, tmax, state, insert)
 
 
@@ -658,6 +660,7 @@ def bounds_stencil(
     may_shadow: int,
     pattern: wp.array[wp.vec2],
     mesh: wp.uint64,
+    inst: InstancesGPU,
     cut: Surfaces,
     has_cutouts: int,
     mixed: wp.array[wp.int32],
@@ -696,7 +699,7 @@ def bounds_stencil(
     ns = pattern.shape[0]
     for s in range(ns):
         off = pattern[s]
-        found, q, m, face, bu, bv, dist = cast_primary(mesh, cut, has_cutouts, cam, gb.width, gb.height,
+        found, q, m, face, bu, bv, dist = cast_primary(mesh, cut, has_cutouts, inst, cam, gb.width, gb.height,
                                                        float(xy[0]) + off[0], float(xy[1]) + off[1])
         h = slot[i] * ns + s
         hit_found[h] = found
@@ -719,6 +722,7 @@ class IZB(Technique):
     """Irregular z-buffer hard shadows (exact per eye sample) with adaptive eye-view anti-aliasing."""
 
     name = "izb"
+    instancing_refusal = "its light pass, stencil maps and sub-pixel rays walk the triangle soup"
     summary = "irregular z-buffer: exact hard shadows of the light's centre per eye sample, adaptive eye-view anti-aliasing (Galoppo)"
     Params = IZBParams
     reads = ("gbuffer", "scene.triangles", "scene.textures", "light_depth_conservative")
@@ -797,7 +801,7 @@ class IZB(Technique):
                 launch_chunked(bounds_stencil, gb.count,
                                inputs=[gb.gpu(), cam, v.gpu(), L, pyr, closed_faces, wp.array(offs, dtype=wp.int32, device=dev), len(offs) - 1,
                                        p.shadow_map_size, p.bounds_bias * max(v.far - v.near, 1e-12), p.bounds_texels,
-                                       ray_epsilon(gb, light), may_shadow, wp.array(pat, dtype=wp.vec2, device=dev), ds.mesh.id, ds.cutouts,
+                                       ray_epsilon(gb, light), may_shadow, wp.array(pat, dtype=wp.vec2, device=dev), ds.mesh.id, ds.inst, ds.cutouts,
                                        int(ds.has_cutouts), mixed, hits["slot"]],
                                outputs=[edge, probed, hits["pos"], hits["nrm"], hits["found"]], device=dev)
                 counters["stencil_probed_pixels"] = int(probed.numpy().sum())
@@ -864,7 +868,7 @@ class IZB(Technique):
                 mixed = hits["mixed"]
                 recast = wp.empty(len(pixels) * n_sub, dtype=wp.int32, device=dev)
                 launch_chunked(sub_samples, len(pixels) * n_sub,
-                               inputs=[n0, n_sub, pix, wp.array(pat, dtype=wp.vec2, device=dev), ds.mesh.id, ds.cutouts,
+                               inputs=[n0, n_sub, pix, wp.array(pat, dtype=wp.vec2, device=dev), ds.mesh.id, ds.inst, ds.cutouts,
                                        int(ds.has_cutouts), cam, gb.gpu(), mixed, mode, hits["probed"], hits["slot"], hits["pos"],
                                        hits["nrm"], hits["found"], L, eps, dmax],
                                outputs=outs + [recast], device=dev)
@@ -895,7 +899,7 @@ class IZB(Technique):
             lo, hi = scene.bounds
             view = fit_light_view(light, pts if len(pts) else np.zeros((1, 3)), lo, hi, p.grid_size,
                                   casters=scene.caster_points if light.kind == LIGHT_DISTANT else None)
-            T = ds.indices.shape[0] // 3
+            T = ds.tri_total
             grid = build_grid(view, smp["origin"], smp["dir"], smp["tmax"], smp["insert"], ds.points, ds.indices,
                               without_culling(ds.cutouts, T, dev), ds.has_cutouts, dev)
             ll = grid.list_lengths

@@ -42,6 +42,7 @@ class Reference(Technique):
     """Ray-traced visible fraction of the light with many stratified samples."""
 
     name = "reference"
+    instancing_refusal = ""  # rays go through the instances' top-level BVH (wsoft.scene.instancing)
     summary = "ray-traced ground truth: stratified light samples, BVH any-hit, alpha-tested, with standard error"
     Params = ReferenceParams
     reads = ("gbuffer", "scene.bvh", "scene.triangles", "scene.textures")
@@ -57,6 +58,11 @@ class Reference(Technique):
         if self.params.casters == "dynamic" and (scene.tri_dynamic is None or not scene.tri_dynamic.any()):
             return "casters=dynamic but the scene has no dynamic prims"
         return None
+
+    def instancing_why(self) -> str:
+        if self.params.casters == "dynamic":
+            return "casters=dynamic traces the soup's dynamic triangles"
+        return ""
 
     def add_passes(self, ctx, light):
         p = self.params
