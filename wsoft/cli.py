@@ -141,10 +141,11 @@ def output_of(scene, out: str | None) -> str:
 
 def cmd_render(args) -> int:
     import wsoft
+    from wsoft.render import load_stage
 
     for path, what in ((args.out, "--out"), (args.stats, "--stats"), (args.png, "--png")):
         check_output(path, what)
-    scene = wsoft.load_scene(scene_arg(args.scene), time=args.time, render_settings=args.render_settings)
+    scene = load_stage(scene_arg(args.scene), time=args.time, render_settings=args.render_settings, instancing=args.instancing)
     out = output_of(scene, args.out)
     params = _parse_sets(args.set)
     with PassProgress(args.technique) as progress:
@@ -175,8 +176,9 @@ def _compile_note(ms: float) -> str:
 
 def cmd_plan(args) -> int:
     import wsoft
+    from wsoft.render import load_stage
 
-    scene = wsoft.load_scene(scene_arg(args.scene), time=args.time, render_settings=args.render_settings)
+    scene = load_stage(scene_arg(args.scene), time=args.time, render_settings=args.render_settings, instancing=args.instancing)
     techs = args.technique or None
     p = wsoft.plan(scene, techs, light=args.light, camera=args.camera)
     if args.json:
@@ -192,6 +194,15 @@ def cmd_plan(args) -> int:
     if fr["product"]:
         print(f"render product: {fr['product']}: V as {fr['visibility_var']!r}" + (f", default output {fr['product_name']}" if fr["product_name"] else ""))
     print(f"purposes loaded: {', '.join(p['purposes']) or '(none)'}")
+    inst = p["instancing"]
+    if inst["mode"] == "none":
+        print("instancing: none (no instances kept: the stage has none, or it was flattened)")
+    else:
+        print(f"instancing: kept, {inst['instances']:,} instances of {inst['prototypes']} prototypes "
+              f"({inst['prototype_triangles']:,} prototype triangles placed as {inst['instanced_triangles']:,}; "
+              f"{inst['soup_triangles']:,} triangles not instanced)")
+    for name, why in p.get("flattened_for", {}).items():
+        print(f"{name}: renders the stage flattened ({why})")
     print("shadow-casting lights:" + ("" if p["lights"] else " (none)"))
     for l in p["lights"]:
         print(f"  {l['path']:<32} {l['kind']:<8} {l['size']}")
@@ -262,10 +273,11 @@ def _technique_sets(names: list[str], sets: list[str] | None) -> list[tuple[str,
 def cmd_compare(args) -> int:
     """Render techniques and the reference in one graph; write EXR/PNG of each and a time / error table."""
     import wsoft
+    from wsoft.render import load_stage
     from wsoft.io import write_gray_png
 
     check_output(args.out_dir, "--out-dir", folder=True)
-    scene = wsoft.load_scene(scene_arg(args.scene), time=args.time, render_settings=args.render_settings)
+    scene = load_stage(scene_arg(args.scene), time=args.time, render_settings=args.render_settings, instancing=args.instancing)
     names = list(dict.fromkeys(args.technique or ["hard"]))
     techs = _technique_sets(names, args.set)
     with PassProgress("compare") as progress:
@@ -379,6 +391,8 @@ def cmd_bench(args) -> int:
     return run_sweep(args.sweep, quick=args.quick, device=args.device, out_dir=args.out_dir, fresh=args.fresh, scenes=args.scenes)
 
 
+_INST_HELP = ("PointInstancers and instanceable prims: keep them instanced (prototypes once), flatten them, or auto "
+              "(default: keep them when they place more than 4M triangles)")
 _RS_HELP = ("RenderSettings prim to use (default: the stage metadata renderSettingsPrimPath, else "
             "UsdRender.Settings.GetStageRenderSettings, else none); --width/--height/--camera override its values")
 
@@ -402,6 +416,7 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--camera", help="camera prim path (default: the render settings' camera, else the stage's first camera, else automatic)")
     r.add_argument("--render-settings", metavar="PRIM", help=_RS_HELP)
     r.add_argument("--light", help="light path or name for V (default: every shadow-casting light; V = the first)")
+    r.add_argument("--instancing", choices=("auto", "keep", "flatten"), default="auto", help=_INST_HELP)
     r.add_argument("--time", type=float, help="USD time code (default: the stage's start time)")
     r.add_argument("--device", help="cpu or cuda:N (default: cuda:0 when available, else cpu)")
     r.add_argument("--pixel-samples", type=int, default=1, help="G-buffer samples per pixel")
@@ -424,6 +439,7 @@ def main(argv: list[str] | None = None) -> int:
     c.add_argument("--camera")
     c.add_argument("--render-settings", metavar="PRIM", help=_RS_HELP)
     c.add_argument("--light")
+    c.add_argument("--instancing", choices=("auto", "keep", "flatten"), default="auto", help=_INST_HELP)
     c.add_argument("--time", type=float)
     c.add_argument("--device")
     c.add_argument("--out-dir", default="out", help="where the images, stats and the compare table are written")
@@ -435,6 +451,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--light")
     p.add_argument("--camera")
     p.add_argument("--render-settings", metavar="PRIM", help=_RS_HELP)
+    p.add_argument("--instancing", choices=("auto", "keep", "flatten"), default="auto", help=_INST_HELP)
     p.add_argument("--time", type=float)
     p.add_argument("--json", action="store_true")
     p.set_defaults(fn=cmd_plan)

@@ -886,11 +886,32 @@ def render(
     return fs[built.labels[0]]
 
 
+INSTANCING_MODES = ("auto", "keep", "flatten")
+AUTO_KEEP_TRIANGLES = 4_000_000  # instancing=auto keeps instances when they place more triangles than this
+
+
+def load_stage(path, *, time: float | None = None, render_settings: str | None = None, instancing: str = "auto") -> Scene:
+    """Load a stage for rendering. ``instancing``: ``keep`` — PointInstancers and instanceable prims
+    stay instances (prototypes once; techniques that read the triangle soup get it flattened by
+    the frame graph, :func:`instancing_plan`); ``flatten`` — one triangle soup (every instance's
+    copy); ``auto`` (default) — keep them when they place more than :data:`AUTO_KEEP_TRIANGLES`
+    triangles (a stage that would not fit flattened), else flatten (the soup lets the reference
+    trace in packets, faster on CPU than rays through the top level)."""
+    if instancing not in INSTANCING_MODES:
+        raise ParameterError(f"instancing {instancing!r} is not one of {', '.join(INSTANCING_MODES)}")
+    if instancing == "flatten":
+        return load_scene(path, time=time, render_settings=render_settings)
+    scene = load_scene(path, time=time, render_settings=render_settings, instancing=True)
+    if instancing == "auto" and scene.instanced and scene.instances.instanced_triangles <= AUTO_KEEP_TRIANGLES:
+        return scene.flattened()
+    return scene
+
+
 def with_render_settings(scene, render_settings: str | None, time_code: float | None = None) -> Scene:
     """``scene`` (a :class:`Scene` or what :func:`load_scene` opens) loaded with the render
     settings ``render_settings`` (None: as it is, or the stage's own)."""
     if not isinstance(scene, Scene):
-        return load_scene(scene, time=time_code, render_settings=render_settings)
+        return load_stage(scene, time=time_code, render_settings=render_settings)
     if render_settings is None:
         return scene
     have = scene.render_settings.path if scene.render_settings is not None else None
