@@ -7,9 +7,11 @@ Usage::
 
 NAME is one of: box_plane, contact, multi_light, cutout, city, penumbra_ramp,
 lightmapped_bridge, tower, tunnel_fan, ogre, plants, dinosaurs, fig1_plant,
-fig8_tree, palm_dino (a file name with extension is accepted too).  The last
-six (organic paper-analog scenes: creatures, plants, trees) are built by
-``organic.py``.
+fig8_tree, palm_dino, fence_perforated, fence_mesh, hl2_like, factory, greece
+(a file name with extension is accepted too).  The organic paper-analog scenes
+(ogre ... palm_dino: creatures, plants, trees) are built by ``organic.py``; the
+soft textured shadow volume analogs (fence_perforated ... greece) by
+``stsv_scenes.py``.
 The default output folder is the folder holding this script.  Every run with
 the same arguments writes byte-identical files: all randomness uses fixed
 seeds and nothing time-dependent is written.
@@ -1335,6 +1337,25 @@ def _organic(name: str) -> Callable[[str], dict[str, object]]:
 
 for _name in ("ogre", "plants", "dinosaurs", "fig1_plant", "fig8_tree", "palm_dino"):
     SCENES[_name] = _organic(_name)
+
+
+def _stsv(name: str) -> Callable[[str], dict[str, object]]:
+    """Scene from stsv_scenes.py (Forest et al. 2009 analogs), imported on first use."""
+
+    def run(out_dir: str) -> dict[str, object]:
+        here = os.path.dirname(os.path.abspath(__file__))
+        if here not in sys.path:
+            sys.path.insert(0, here)
+        import stsv_scenes
+
+        return stsv_scenes.STSV_SCENES[name](out_dir)
+
+    run.__name__ = "scene_" + name
+    return run
+
+
+for _name in ("fence_perforated", "fence_mesh", "hl2_like", "factory", "greece"):
+    SCENES[_name] = _stsv(_name)
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:

@@ -408,7 +408,7 @@ class Scene:
 
     def changed(self) -> None:
         """Forget device copies and derived values after the arrays were edited in place."""
-        for k in ("_device_cache", "bounds", "caster_points", "_dynamic_subset", "_casting"):
+        for k in ("_device_cache", "bounds", "caster_points", "_dynamic_subset", "_casting", "_adjacency"):
             self.__dict__.pop(k, None)
 
     def light_label(self, light: Light) -> str:

@@ -1,0 +1,418 @@
+"""Analogs of the test scenes of Forest, Barthe, Guennebaud and Paulin 2009 (soft textured shadow
+volumes): perforated (alpha-tested) triangles beside opaque meshes, for ``pwedge``, ``dcs`` and
+their STSV part.
+
+* ``fence_perforated`` / ``fence_mesh`` (Fig. 11): one wire fence as 2 perforated triangles, and
+  the same fence with its wires modelled as ~230k opaque triangles matching the texture's pattern.
+* ``hl2_like`` (Fig. 7a): ~4k perforated triangles (foliage cards, fences) outdoors, opaque
+  buildings, 2 distant lights.
+* ``factory`` (Fig. 7b): high-poly opaque machinery, 14 perforated triangles (grates), 4 sphere
+  lights close to the geometry.
+* ``greece`` (Fig. 7c): ~26k leaf triangles (two per leaf card), columns and ground, 3 lights.
+
+Deterministic (fixed seeds, nothing time-dependent). Only called through ``generate.py``.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+
+import numpy as np
+from PIL import Image
+from pxr import Gf, Sdf, UsdGeom, UsdLux, UsdShade, Vt
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+from generate import (  # noqa: E402
+    MeshData,
+    box_mesh,
+    grid_box_mesh,
+    grid_quad_mesh,
+    make_camera,
+    make_material,
+    make_mesh,
+    merge_meshes,
+    new_stage,
+    prism_z,
+    set_doc_string,
+    torus_z,
+    translate_mesh,
+    triangle_count,
+    z_sphere,
+)
+
+# --------------------------------------------------------------------------- textures
+
+FENCE_TILE = 16  # texels per fence cell; the wires are the 2 texels around each cell border
+FENCE_CELLS = (128, 72)  # cells along the fence and up it
+FENCE_SIZE = (4.0, 2.25)  # metres: 3.125 cm cells
+FENCE_BASE = 0.1  # bottom edge height
+
+
+def write_png(path: str, opaque: np.ndarray, rgb=(120, 120, 125)) -> None:
+    """RGBA PNG, alpha 255 where ``opaque`` (row 0 = the image's top), else 0."""
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    img = np.zeros(opaque.shape + (4,), np.uint8)
+    img[opaque] = (*rgb, 255)
+    Image.fromarray(img, "RGBA").save(path, format="PNG", optimize=False)
+
+
+def fence_tile() -> np.ndarray:
+    t = np.arange(FENCE_TILE)
+    wire = (t < 1) | (t >= FENCE_TILE - 1)
+    return wire[:, None] | wire[None, :]
+
+
+def leaf_alpha(size: int = 64) -> np.ndarray:
+    """A leaf: a pointed ellipse along the image's vertical axis with a few notches."""
+    yy, xx = (np.mgrid[0:size, 0:size] + 0.5) / size
+    x, y = (xx - 0.5) * 2.0, (yy - 0.5) * 2.0
+    width = 0.75 * np.sqrt(np.clip(1.0 - y * y, 0, 1)) * (1.0 - 0.25 * (y > 0.5))
+    notch = 0.08 * np.sin(9 * math.pi * y)
+    return np.abs(x) < width + notch - 0.05
+
+
+def foliage_alpha(size: int = 64, seed: int = 4) -> np.ndarray:
+    """A cluster of small leaves on a card: random discs."""
+    rng = np.random.default_rng(seed)
+    yy, xx = (np.mgrid[0:size, 0:size] + 0.5) / size
+    m = np.zeros((size, size), bool)
+    for c, r in zip(rng.uniform(0.12, 0.88, (30, 2)), rng.uniform(0.04, 0.1, 30)):
+        m |= (xx - c[0]) ** 2 + (yy - c[1]) ** 2 < r * r
+    return m
+
+
+def grate_alpha(size: int = 32) -> np.ndarray:
+    t = np.arange(size)
+    bar = (t % 8) < 3
+    return bar[:, None] | bar[None, :]
+
+
+def cutout_material(stage, path: str, color, texture: str, wrap: str = "repeat") -> UsdShade.Material:
+    """UsdPreviewSurface whose opacity is the alpha of ``texture`` (opacityThreshold 0.5)."""
+    looks = Sdf.Path(path).GetParentPath()
+    if not stage.GetPrimAtPath(looks):
+        UsdGeom.Scope.Define(stage, looks)
+    mat = UsdShade.Material.Define(stage, path)
+    surf = UsdShade.Shader.Define(stage, path + "/PreviewSurface")
+    surf.CreateIdAttr("UsdPreviewSurface")
+    surf.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(*color))
+    surf.CreateInput("roughness", Sdf.ValueTypeNames.Float).Set(0.7)
+    surf.CreateInput("opacityThreshold", Sdf.ValueTypeNames.Float).Set(0.5)
+    reader = UsdShade.Shader.Define(stage, path + "/StReader")
+    reader.CreateIdAttr("UsdPrimvarReader_float2")
+    reader.CreateInput("varname", Sdf.ValueTypeNames.String).Set("st")
+    reader.CreateOutput("result", Sdf.ValueTypeNames.Float2)
+    tex = UsdShade.Shader.Define(stage, path + "/AlphaTexture")
+    tex.CreateIdAttr("UsdUVTexture")
+    tex.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(Sdf.AssetPath(texture))
+    tex.CreateInput("wrapS", Sdf.ValueTypeNames.Token).Set(wrap)
+    tex.CreateInput("wrapT", Sdf.ValueTypeNames.Token).Set(wrap)
+    tex.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set("raw")
+    tex.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(reader.ConnectableAPI(), "result")
+    tex.CreateOutput("a", Sdf.ValueTypeNames.Float)
+    surf.CreateInput("opacity", Sdf.ValueTypeNames.Float).ConnectToSource(tex.ConnectableAPI(), "a")
+    mat.CreateSurfaceOutput().ConnectToSource(surf.ConnectableAPI(), "surface")
+    return mat
+
+
+def cards(stage, path: str, corners: np.ndarray, uv_max, material) -> int:
+    """Double-sided quads (``corners`` [Q, 4, 3], counter-clockwise) with face-varying ``st``
+    from (0, 0) to ``uv_max`` (each quad split into 2 perforated triangles on load)."""
+    q = len(corners)
+    m = (corners.reshape(-1, 3), [4] * q, list(range(4 * q)))
+    mesh = make_mesh(stage, path, m, True, material)
+    u, v = uv_max
+    st = np.tile(np.array([(0, 0), (u, 0), (u, v), (0, v)], np.float32), (q, 1))
+    UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.faceVarying).Set(
+        Vt.Vec2fArray.FromNumpy(st))
+    return 2 * q
+
+
+def ground(stage, half: float, n: int = 1, color=(0.7, 0.68, 0.62)) -> int:
+    g = grid_quad_mesh((-half, -half, 0.0), (2 * half, 0, 0), (0, 2 * half, 0), n, n)
+    make_mesh(stage, "/World/Ground", g, False, make_material(stage, "/World/Looks/GroundMat", color))
+    return triangle_count(g[1])
+
+
+def sphere_light(stage, path: str, pos, radius: float, intensity: float) -> None:
+    light = UsdLux.SphereLight.Define(stage, path)
+    light.CreateRadiusAttr(float(radius))
+    light.CreateIntensityAttr(float(intensity))
+    light.AddTranslateOp().Set(Gf.Vec3d(*map(float, pos)))
+
+
+def distant_light(stage, path: str, toward, angle: float, intensity: float) -> None:
+    """DistantLight whose light arrives from direction ``toward`` (it emits along -toward)."""
+    from generate import look_at_xform
+
+    light = UsdLux.DistantLight.Define(stage, path)
+    light.CreateAngleAttr(float(angle))
+    light.CreateIntensityAttr(float(intensity))
+    t = np.asarray(toward, float)
+    t /= np.linalg.norm(t)
+    up = (0.0, 1.0, 0.0) if abs(t[2]) > 0.9 else (0.0, 0.0, 1.0)
+    light.AddTransformOp().Set(look_at_xform(t * 100.0, (0.0, 0.0, 0.0), up))
+
+
+def quad_at(c, u, v) -> np.ndarray:
+    """The 4 corners of a quad centred at ``c`` with half-axes ``u`` and ``v`` (CCW about u x v)."""
+    c, u, v = (np.asarray(a, float) for a in (c, u, v))
+    return np.stack([c - u - v, c + u - v, c + u + v, c - u + v])
+
+
+# --------------------------------------------------------------------------- fences
+
+
+def fence_quad() -> np.ndarray:
+    w, h = FENCE_SIZE
+    return np.array([[(-w / 2, 0.0, FENCE_BASE), (w / 2, 0.0, FENCE_BASE), (w / 2, 0.0, FENCE_BASE + h), (-w / 2, 0.0, FENCE_BASE + h)]])
+
+
+def fence_common(stage, out_dir: str) -> int:
+    tris = ground(stage, 4.0)
+    sphere_light(stage, "/World/Light", (0.6, 2.2, 3.2), 0.35, 40.0)
+    make_camera(stage, (1.2, -4.5, 2.6), (0.0, 1.0, 0.6), (0, 0, 1), clip=(0.1, 100.0))
+    return tris
+
+
+def scene_fence_perforated(out_dir: str) -> dict[str, object]:
+    path = os.path.join(out_dir, "fence_perforated.usda")
+    write_png(os.path.join(out_dir, "textures", "fence_alpha.png"), fence_tile())
+    stage = new_stage(path, "Z")
+    tris = fence_common(stage, out_dir)
+    mat = cutout_material(stage, "/World/Looks/FenceMat", (0.5, 0.5, 0.52), "textures/fence_alpha.png")
+    tris += cards(stage, "/World/Fence", fence_quad(), FENCE_CELLS, mat)
+    set_doc_string(stage.GetPrimAtPath("/World"), "wsoft:doc", (
+        "Forest et al. 2009 Fig. 11a analog: a %g x %g m wire fence in the plane y = 0 (bottom at z = %g) as "
+        "2 double-sided perforated triangles; textures/fence_alpha.png (a %d x %d tile: wires are the 2 texels "
+        "around its border) repeated %d x %d times, opacityThreshold 0.5. Ground 8 x 8; a sphere light "
+        "(radius 0.35) behind the fence. fence_mesh.usdc is the same fence as opaque geometry."
+        % (FENCE_SIZE + (FENCE_BASE, FENCE_TILE, FENCE_TILE) + FENCE_CELLS)))
+    stage.GetRootLayer().Save()
+    return {"file": path, "triangles": tris}
+
+
+def fence_wires() -> MeshData:
+    """The fence texture's opaque pattern as geometry: a square bar (side = the wire width) along
+    every cell border, one bar per cell side (12 triangles each)."""
+    w, h = FENCE_SIZE
+    nu, nv = FENCE_CELLS
+    cell = w / nu
+    t = 2.0 * cell / FENCE_TILE  # the wire: 2 texels of the tile
+    xs = -w / 2 + cell * np.arange(nu + 1)
+    zs = FENCE_BASE + cell * np.arange(nv + 1)
+    los, his = [], []
+    for i in range(nu + 1):  # vertical wires, one bar per cell
+        x0, x1 = max(xs[i] - t / 2, -w / 2), min(xs[i] + t / 2, w / 2)
+        for j in range(nv):
+            los.append((x0, -t / 2, zs[j] + t / 2 if j else zs[j]))
+            his.append((x1, t / 2, zs[j + 1] - t / 2 if j < nv - 1 else zs[j + 1]))
+    for j in range(nv + 1):  # horizontal wires, one bar per cell, including the crossings
+        z0, z1 = max(zs[j] - t / 2, FENCE_BASE), min(zs[j] + t / 2, FENCE_BASE + h)
+        for i in range(nu):
+            los.append((xs[i] - t / 2 if i else xs[i], -t / 2, z0))
+            his.append((xs[i + 1] + t / 2 if i < nu - 1 else xs[i + 1], t / 2, z1))
+    lo, hi = np.asarray(los), np.asarray(his)
+    _, counts, idx = box_mesh((0, 0, 0), (1, 1, 1))
+    unit = np.array([[(i >> k) & 1 for k in range(3)] for i in range(8)], float)
+    pts = lo[:, None, :] + unit[None] * (hi - lo)[:, None, :]
+    n = len(lo)
+    idx = (np.asarray(idx)[None, :] + 8 * np.arange(n)[:, None]).reshape(-1).tolist()
+    return pts.reshape(-1, 3), counts * n, idx
+
+
+def scene_fence_mesh(out_dir: str) -> dict[str, object]:
+    path = os.path.join(out_dir, "fence_mesh.usdc")
+    stage = new_stage(path, "Z")
+    tris = fence_common(stage, out_dir)
+    wires = fence_wires()
+    make_mesh(stage, "/World/Fence", wires, False, make_material(stage, "/World/Looks/FenceMat", (0.5, 0.5, 0.52)))
+    tris += triangle_count(wires[1])
+    set_doc_string(stage.GetPrimAtPath("/World"), "wsoft:doc", (
+        "Forest et al. 2009 Fig. 11b analog: fence_perforated's fence with its wires modelled as %d closed "
+        "square bars (%d opaque triangles) where the texture is opaque; same ground, light and camera."
+        % (len(wires[1]) // 6, triangle_count(wires[1]))))
+    stage.GetRootLayer().Save()
+    return {"file": path, "triangles": tris}
+
+
+# --------------------------------------------------------------------------- hl2_like
+
+
+def foliage_tree(rng, base, n_cards: int, height: float, radius: float) -> np.ndarray:
+    """``n_cards`` foliage cards scattered in a crown (random orientation)."""
+    out = []
+    for _ in range(n_cards):
+        d = rng.normal(size=3)
+        d /= np.linalg.norm(d)
+        c = np.asarray(base) + (0, 0, height) + d * radius * rng.uniform(0.3, 1.0) * (1, 1, 0.8)
+        a = rng.normal(size=3)
+        a /= np.linalg.norm(a)
+        b = np.cross(a, rng.normal(size=3))
+        b /= np.linalg.norm(b)
+        s = rng.uniform(0.35, 0.6)
+        out.append(quad_at(c, a * s, np.cross(b, a) * s))
+    return np.array(out)
+
+
+def scene_hl2_like(out_dir: str) -> dict[str, object]:
+    path = os.path.join(out_dir, "hl2_like.usdc")
+    write_png(os.path.join(out_dir, "textures", "fence_alpha.png"), fence_tile())
+    write_png(os.path.join(out_dir, "textures", "foliage_alpha.png"), foliage_alpha(), (60, 120, 50))
+    stage = new_stage(path, "Z")
+    rng = np.random.default_rng(2009)
+    tris = ground(stage, 30.0, 100)
+    bmat = make_material(stage, "/World/Looks/BuildingMat", (0.65, 0.6, 0.55))
+    stage.DefinePrim("/World/Buildings", "Xform")
+    for k, (x, y, sx, sy, sz) in enumerate([(-14, 8, 6, 5, 8), (-4, 14, 8, 5, 10), (9, 12, 5, 6, 7), (15, -2, 5, 7, 9),
+                                            (-16, -10, 6, 6, 6), (4, -16, 7, 5, 8), (-6, -2, 3, 3, 4), (12, -14, 4, 4, 5)]):
+        b = grid_box_mesh((x - sx / 2, y - sy / 2, 0.0), (x + sx / 2, y + sy / 2, float(sz)), (16, 16, 24))
+        make_mesh(stage, f"/World/Buildings/B{k}", b, False, bmat)
+        tris += triangle_count(b[1])
+    fol = cutout_material(stage, "/World/Looks/FoliageMat", (0.25, 0.5, 0.2), "textures/foliage_alpha.png")
+    stage.DefinePrim("/World/Trees", "Xform")
+    trunk_mat = make_material(stage, "/World/Looks/TrunkMat", (0.4, 0.3, 0.2))
+    perforated = 0
+    positions = [(x, y) for x in (-20, -10, 0, 10, 20) for y in (-20, -8, 4, 20)] + [(-24, 0), (24, 6), (-2, 24), (6, -24), (0, 0), (8, 2)]
+    for k, (x, y) in enumerate(positions[:25]):
+        x, y = x + rng.uniform(-2, 2), y + rng.uniform(-2, 2)
+        h = rng.uniform(3.0, 5.0)
+        trunk = prism_z(8, 0.15, 0.0, h, center=(x, y))
+        make_mesh(stage, f"/World/Trees/T{k:02d}/Trunk", trunk, False, trunk_mat)
+        tris += triangle_count(trunk[1])
+        c = cards(stage, f"/World/Trees/T{k:02d}/Foliage", foliage_tree(rng, (x, y, 0), 76, h, 1.8), (1, 1), fol)
+        perforated += c
+        tris += c
+    fmat = cutout_material(stage, "/World/Looks/FenceMat", (0.5, 0.5, 0.52), "textures/fence_alpha.png")
+    segs = []
+    n_fence = (4002 - perforated) // 2  # fence panels 2 m wide, 1.5 m tall, along a broken line
+    for i in range(n_fence):
+        a = 2.0 * math.pi * i / n_fence
+        r = 27.0 + 0.5 * math.sin(5 * a)
+        c = (r * math.cos(a), r * math.sin(a), 0.8)
+        tdir = np.array([-math.sin(a), math.cos(a), 0.0])
+        segs.append(quad_at(c, tdir * (math.pi * r / n_fence), (0, 0, 0.75)))
+    c = cards(stage, "/World/Fence", np.array(segs), (32, 24), fmat)
+    perforated += c
+    tris += c
+    distant_light(stage, "/World/Sun", (0.5, -0.35, 0.8), 1.0, 3.0)
+    distant_light(stage, "/World/Sky", (-0.6, 0.5, 0.6), 4.0, 1.0)
+    make_camera(stage, (-22.0, -22.0, 9.0), (0.0, 0.0, 1.5), (0, 0, 1), focal=20.0, clip=(0.1, 300.0))
+    set_doc_string(stage.GetPrimAtPath("/World"), "wsoft:doc", (
+        "Forest et al. 2009 Fig. 7a (HL2) analog: %d perforated triangles outdoors — 25 trees of 76 "
+        "double-sided foliage cards (textures/foliage_alpha.png) on opaque trunks, and a ring fence of "
+        "double-sided panels (textures/fence_alpha.png) — among 8 opaque gridded buildings on a 60 x 60 gridded "
+        "ground; 2 distant lights (sun angle 1 deg, sky 4 deg). %d triangles." % (perforated, tris)))
+    stage.GetRootLayer().Save()
+    return {"file": path, "triangles": tris, "perforated": perforated}
+
+
+# --------------------------------------------------------------------------- factory
+
+
+def scene_factory(out_dir: str) -> dict[str, object]:
+    path = os.path.join(out_dir, "factory.usdc")
+    write_png(os.path.join(out_dir, "textures", "grate_alpha.png"), grate_alpha())
+    stage = new_stage(path, "Z")
+    tris = ground(stage, 10.0, 20)
+    metal = make_material(stage, "/World/Looks/MetalMat", (0.55, 0.57, 0.6), roughness=0.4)
+    paint = make_material(stage, "/World/Looks/PaintMat", (0.7, 0.45, 0.15))
+    stage.DefinePrim("/World/Machines", "Xform")
+    parts = []
+    for k in range(6):  # tanks: high-poly cylinders with toroidal rings
+        x, y = -6.0 + 2.4 * k, 3.0 * (-1) ** k
+        parts.append(prism_z(256, 0.8, 0.0, 3.0, center=(x, y)))
+        for z in (0.6, 1.5, 2.4):
+            parts.append(translate_mesh(torus_z(0.85, 0.07, 160, 24), (x, y, z)))
+        parts.append(translate_mesh(z_sphere(0.8, 96, 48), (x, y, 3.0)))
+    m = merge_meshes(parts)
+    make_mesh(stage, "/World/Machines/Tanks", m, False, metal)
+    tris += triangle_count(m[1])
+    pipes = []
+    for k in range(5):  # horizontal pipes along x (prisms turned: (x, y, z) -> (z, x, y))
+        p = prism_z(96, 0.12, -8.0, 8.0)
+        p = (p[0][:, [2, 0, 1]] + (0.0, -1.0 + 0.5 * k, 4.0 + 0.3 * (k % 2)), p[1], p[2])
+        pipes.append(p)
+    m = merge_meshes(pipes)
+    make_mesh(stage, "/World/Machines/Pipes", m, False, paint)
+    tris += triangle_count(m[1])
+    g = cutout_material(stage, "/World/Looks/GrateMat", (0.3, 0.3, 0.32), "textures/grate_alpha.png")
+    grates = [quad_at((-6.0 + 2.4 * k, 0.0, 2.0), (1.0, 0, 0), (0, 1.4, 0)) for k in range(6)]
+    grates.append(quad_at((0.0, 0.0, 5.0), (7.5, 0, 0), (0, 1.5, 0)))
+    c = cards(stage, "/World/Grates", np.array(grates), (4, 6), g)
+    tris += c
+    for k, pos in enumerate([(-4.8, 0.0, 3.2), (2.4, 0.0, 3.4), (-1.0, 1.2, 5.8), (5.0, -1.5, 1.0)]):
+        sphere_light(stage, f"/World/Lamp{k}", pos, 0.15, 8.0)
+    make_camera(stage, (3.0, -9.0, 6.0), (-1.0, 0.5, 1.5), (0, 0, 1), focal=18.0, clip=(0.1, 100.0))
+    set_doc_string(stage.GetPrimAtPath("/World"), "wsoft:doc", (
+        "Forest et al. 2009 Fig. 7b (factory) analog: high-poly opaque machinery (6 tanks of 256-sided "
+        "cylinders, domes and toroidal rings; 5 pipes), 14 perforated triangles (7 double-sided grates, "
+        "textures/grate_alpha.png): 6 walkways between the tanks at z = 2 and one long catwalk at z = 5; "
+        "4 small sphere lights (radius 0.15) close to the geometry. %d triangles." % tris))
+    stage.GetRootLayer().Save()
+    return {"file": path, "triangles": tris, "perforated": c}
+
+
+# --------------------------------------------------------------------------- greece
+
+
+def scene_greece(out_dir: str) -> dict[str, object]:
+    path = os.path.join(out_dir, "greece.usdc")
+    write_png(os.path.join(out_dir, "textures", "leaf_alpha.png"), leaf_alpha(), (70, 130, 40))
+    stage = new_stage(path, "Z")
+    rng = np.random.default_rng(1896)
+    tris = ground(stage, 12.0, 40, color=(0.8, 0.75, 0.62))
+    marble = make_material(stage, "/World/Looks/MarbleMat", (0.9, 0.88, 0.84))
+    cols = []
+    for i in range(6):
+        for j in (-1, 1):
+            x, y = -5.0 + 2.0 * i, 2.5 * j
+            cols.append(prism_z(48, 0.3, 0.3, 4.0, center=(x, y)))
+            cols.append(box_mesh((x - 0.4, y - 0.4, 0.0), (x + 0.4, y + 0.4, 0.3)))
+            cols.append(box_mesh((x - 0.4, y - 0.4, 4.0), (x + 0.4, y + 0.4, 4.3)))
+    cols.append(grid_box_mesh((-6.0, -3.2, 4.3), (6.0, 3.2, 4.8), (48, 24, 2)))  # architrave
+    m = merge_meshes(cols)
+    make_mesh(stage, "/World/Temple", m, False, marble)
+    tris += triangle_count(m[1])
+    leaf = cutout_material(stage, "/World/Looks/LeafMat", (0.3, 0.55, 0.2), "textures/leaf_alpha.png", wrap="clamp")
+    stage.DefinePrim("/World/Vines", "Xform")
+    leaves = 0
+    n_leaves = 13075  # 26,150 perforated triangles, as the paper's Greece scene
+    per = [n_leaves // 5 + (1 if k < n_leaves % 5 else 0) for k in range(5)]
+    for k, n in enumerate(per):  # 5 leafy vines/bushes: over the architrave and at the columns
+        centre = np.array([(-4.0, 0.0, 5.2), (3.0, 0.0, 5.2), (-7.5, -4.0, 1.5), (7.5, 4.0, 1.8), (0.0, -6.0, 1.2)][k])
+        radius = np.array([(2.5, 2.5, 0.8), (2.5, 2.5, 0.8), (1.6, 1.6, 1.5), (1.6, 1.6, 1.8), (2.5, 1.2, 1.2)][k])
+        c = centre + rng.normal(0, 0.5, (n, 3)) * radius
+        c[:, 2] = np.maximum(c[:, 2], 0.15)
+        a = rng.normal(size=(n, 3))
+        a /= np.linalg.norm(a, axis=1, keepdims=True)
+        b = np.cross(a, rng.normal(size=(n, 3)))
+        b /= np.linalg.norm(b, axis=1, keepdims=True)
+        s = rng.uniform(0.06, 0.12, (n, 1))
+        u, v = b * s * 0.6, a * s
+        quads = np.stack([c - u - v, c + u - v, c + u + v, c - u + v], 1)
+        leaves += cards(stage, f"/World/Vines/V{k}", quads, (1, 1), leaf)
+    tris += leaves
+    sphere_light(stage, "/World/Light0", (6.0, -7.0, 9.0), 0.8, 30.0)
+    sphere_light(stage, "/World/Light1", (-7.0, -4.0, 6.0), 0.5, 15.0)
+    sphere_light(stage, "/World/Light2", (0.0, 6.0, 7.0), 0.6, 15.0)
+    make_camera(stage, (9.0, -12.0, 6.0), (0.0, 0.0, 2.0), (0, 0, 1), focal=20.0, clip=(0.1, 200.0))
+    set_doc_string(stage.GetPrimAtPath("/World"), "wsoft:doc", (
+        "Forest et al. 2009 Fig. 7c (Greece) analog: %d perforated leaf triangles (%d double-sided leaf "
+        "cards of 2 triangles, textures/leaf_alpha.png, in 5 vines and bushes /World/Vines/V*) around a "
+        "colonnade of 12 columns under an architrave (/World/Temple); 24 x 24 ground; 3 sphere lights. "
+        "%d triangles." % (leaves, leaves // 2, tris)))
+    stage.GetRootLayer().Save()
+    return {"file": path, "triangles": tris, "perforated": leaves}
+
+
+STSV_SCENES = {
+    "fence_perforated": scene_fence_perforated,
+    "fence_mesh": scene_fence_mesh,
+    "hl2_like": scene_hl2_like,
+    "factory": scene_factory,
+    "greece": scene_greece,
+}
