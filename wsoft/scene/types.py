@@ -173,6 +173,13 @@ class Prototype:
     tri_double_sided: np.ndarray  # [T] bool
     tri_closed: np.ndarray  # [T] int8
     tri_face: np.ndarray  # [T] int32
+    tri_dynamic: np.ndarray | None = None  # [T] bool: dynamic caster in every instance (None: none is)
+    tri_baked: np.ndarray | None = None  # [T, 3, 3] float32 baked light per corner, NaN where absent (None: no mesh has any)
+    root: str = ""
+    """The prim the meshes were read under, their names in ``Scene.prims`` start with it: a
+    PointInstancer prototype's root (``path``), or the instanceable prim whose instance proxies
+    were read (``path`` is then USD's prototype, ``/__Prototype_N``)."""
+    prim_points: np.ndarray | None = None  # [M, 3] int64: (Scene.prims index, first, count) of each mesh's points in ``points``
 
     @property
     def triangle_count(self) -> int:
@@ -337,15 +344,14 @@ class Scene:
         return max(float(np.linalg.norm(hi - lo)), 1e-6)
 
     def cutout_triangle_counts(self) -> dict[str, int]:
-        """Material path -> number of triangles using that cutout material (instanced triangles
-        counted once per instance that places them)."""
-        nm = max(len(self.materials), 1)
-        counts = np.bincount(self.tri_material, minlength=nm) if self.triangle_count else np.zeros(nm, np.int64)
+        """Material path -> number of triangles using that cutout material (the instances' included:
+        a prototype's triangles once per instance)."""
+        counts = np.bincount(self.tri_material, minlength=len(self.materials)).astype(np.int64) if self.triangle_count else np.zeros(len(self.materials), np.int64)
         if self.instanced:
-            placed = np.bincount(self.instances.proto, minlength=len(self.instances.prototypes))
-            for p, k in zip(self.instances.prototypes, placed):
-                if k and p.triangle_count:
-                    counts = counts + k * np.bincount(p.tri_material, minlength=nm)[:nm]
+            per = np.bincount(self.instances.proto, minlength=len(self.instances.prototypes))
+            for p, n in zip(self.instances.prototypes, per):
+                if n and p.triangle_count:
+                    counts += n * np.bincount(p.tri_material, minlength=len(self.materials)).astype(np.int64)[: len(counts)]
         return {m.path: int(counts[i]) for i, m in enumerate(self.materials) if m.is_cutout and counts[i] > 0}
 
     @property
@@ -407,9 +413,134 @@ class Scene:
         return cache[device], True
 
     def changed(self) -> None:
-        """Forget device copies and derived values after the arrays were edited in place."""
-        for k in ("_device_cache", "bounds", "caster_points", "_dynamic_subset", "_casting", "_adjacency"):
+        """Forget device copies and derived values after the arrays were edited in place (and the
+        stage :meth:`flattened` would load again: it flattens the edited arrays instead)."""
+        for k in ("_device_cache", "bounds", "caster_points", "_dynamic_subset", "_casting", "_flattened", "_source", "_adjacency"):
             self.__dict__.pop(k, None)
+        if self.instances is not None:
+            self.instances.__dict__.pop("world_bounds", None)
+
+    def flattened(self) -> "Scene":
+        """The whole scene as one triangle soup: what ``load_scene(..., instancing=False)`` gives
+        (same time, render settings and purposes). ``self`` when nothing is instanced. A scene
+        :func:`~wsoft.scene.usd.load_scene` returned loads its stage again, flat; a scene built by
+        hand (or edited, see :meth:`changed`) has its instances flattened here (:meth:`_flatten_instances`).
+        Built once."""
+        if not self.instanced:
+            return self
+        if "_flattened" not in self.__dict__:
+            source = self.__dict__.get("_source")
+            if source is not None:
+                from wsoft.scene.usd import load_scene
+
+                stage_or_path, time, render_settings = source
+                flat = load_scene(stage_or_path, time=time, render_settings=render_settings, instancing=False)
+            else:
+                flat = self._flatten_instances()
+            self.__dict__["_flattened"] = flat
+        return self.__dict__["_flattened"]
+
+    def _flatten_instances(self) -> "Scene":
+        """:meth:`flattened` in numpy: the soup, then every instance's prototype triangles moved to the
+        world by its transform (float32 points, as the loader keeps them), their winding flipped where
+        the transform mirrors and zero-area triangles dropped (as the loader drops them). Instanced
+        meshes are named as the flat loader names them (``mesh@instancer[i]``, or the instance proxy's
+        path); a light's ``shadow_excluded`` leaves out the meshes of the prims it left out."""
+        from dataclasses import replace
+
+        inst = self.instances
+        soup_prims = np.ones(len(self.prims), bool)
+        for proto in inst.prototypes:
+            soup_prims[proto.tri_prim] = False
+            if proto.prim_points is not None:
+                soup_prims[proto.prim_points[:, 0]] = False
+        soup_prims[inst.prim] = False
+        soup_prims[np.unique(self.tri_prim)] = True
+        old_ids = np.flatnonzero(soup_prims)
+        remap = np.full(len(self.prims), -1, np.int64)
+        remap[old_ids] = np.arange(len(old_ids))
+        prims = [self.prims[i] for i in old_ids]
+        old_pp = self.prim_points if self.prim_points is not None and len(self.prim_points) == len(self.prims) else None
+        prim_points = [tuple(old_pp[i]) for i in old_ids] if old_pp is not None else []
+        n_soup = self.triangle_count
+        baked_any = self.tri_baked is not None or any(p.tri_baked is not None for p in inst.prototypes)
+        parts = {k: [] for k in ("pts", "tris", "prim", "mat", "uv", "ds", "cl", "dyn", "bk", "face")}
+        parts["pts"].append(self.points.astype(np.float32))
+        parts["tris"].append(self.triangles.astype(np.int64))
+        parts["prim"].append(remap[self.tri_prim] if n_soup else np.zeros(0, np.int64))
+        parts["mat"].append(self.tri_material)
+        parts["uv"].append(self.tri_uv)
+        parts["ds"].append(self.tri_double_sided)
+        parts["cl"].append(self.tri_closed if self.tri_closed is not None else np.zeros(n_soup, np.int8))
+        parts["dyn"].append(self.tri_dynamic if self.tri_dynamic is not None else np.zeros(n_soup, bool))
+        parts["bk"].append(self.tri_baked if self.tri_baked is not None else np.full((n_soup, 3, 3), np.nan, np.float32))
+        parts["face"].append(self.tri_face if self.tri_face is not None else np.zeros(n_soup, np.int32))
+        excluded_of = {}  # flat prim index -> (prototype mesh prim, instance prim) it comes from
+        nverts = len(self.points)
+        for k in range(inst.count):
+            proto = inst.prototypes[int(inst.proto[k])]
+            if proto.triangle_count == 0:
+                continue
+            M = inst.xform[k]
+            with np.errstate(over="ignore", invalid="ignore"):
+                pw = (proto.points.astype(np.float64) @ M[:3, :3].T + M[:3, 3]).astype(np.float32)
+            # a mirroring instance: the winding flips in the world (the corners, and what is per corner)
+            flip = [0, 2, 1] if np.linalg.det(M[:3, :3]) < 0 else [0, 1, 2]
+            tris = proto.triangles.astype(np.int64)[:, flip]
+            q = pw.astype(np.float64)[tris]
+            keep = np.linalg.norm(np.cross(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]), axis=1) > 0.0
+            where = self.prims[int(inst.prim[k])]
+            # one flat prim per prototype mesh prim, named as the flat loader names it
+            mesh_ids = np.unique(proto.tri_prim)
+            local = np.full(int(mesh_ids.max()) + 1, -1, np.int64)
+            for m in mesh_ids:
+                name = self.prims[int(m)]
+                if inst.instance_id[k] >= 0:
+                    name = f"{name}@{where}[{int(inst.instance_id[k])}]"
+                elif proto.root and name.startswith(proto.root):
+                    name = where + name[len(proto.root):]
+                local[m] = len(prims)
+                excluded_of[len(prims)] = (int(m), int(inst.prim[k]))
+                prims.append(name)
+                first, count = 0, 0
+                if proto.prim_points is not None:
+                    row = proto.prim_points[proto.prim_points[:, 0] == m]
+                    if len(row):
+                        first, count = int(row[0, 1]) + nverts, int(row[0, 2])
+                prim_points.append((first, count))
+            n = int(keep.sum())
+            parts["pts"].append(pw)
+            parts["tris"].append(tris[keep] + nverts)
+            nverts += len(pw)
+            parts["prim"].append(local[proto.tri_prim[keep]])
+            parts["mat"].append(proto.tri_material[keep])
+            parts["uv"].append(proto.tri_uv[keep][:, flip])
+            parts["ds"].append(proto.tri_double_sided[keep])
+            parts["cl"].append(proto.tri_closed[keep])
+            dyn = proto.tri_dynamic[keep] if proto.tri_dynamic is not None else np.zeros(n, bool)
+            parts["dyn"].append(dyn | bool(inst.dynamic[k]))
+            parts["bk"].append(proto.tri_baked[keep][:, flip] if proto.tri_baked is not None else np.full((n, 3, 3), np.nan, np.float32))
+            parts["face"].append(proto.tri_face[keep])
+
+        lights = []
+        for light in self.lights:
+            if light.shadow_excluded:
+                out = set(light.shadow_excluded)
+                ex = [int(remap[i]) for i in light.shadow_excluded if remap[i] >= 0]
+                ex += [j for j, (m, w) in excluded_of.items() if m in out or w in out]
+                light = replace(light, shadow_excluded=tuple(sorted(ex)))
+            lights.append(light)
+        cat = np.concatenate
+        flat = replace(
+            self, points=cat(parts["pts"]).astype(np.float32), triangles=cat(parts["tris"]).astype(np.int32).reshape(-1, 3),
+            tri_prim=cat(parts["prim"]).astype(np.int32), tri_material=cat(parts["mat"]).astype(np.int32),
+            tri_uv=cat(parts["uv"]).astype(np.float32).reshape(-1, 3, 2), tri_double_sided=cat(parts["ds"]).astype(bool),
+            tri_closed=cat(parts["cl"]).astype(np.int8), tri_dynamic=cat(parts["dyn"]).astype(bool),
+            tri_baked=cat(parts["bk"]).astype(np.float32) if baked_any else None, tri_face=cat(parts["face"]).astype(np.int32),
+            prims=prims, prim_points=np.asarray(prim_points, np.int64).reshape(-1, 2) if old_pp is not None else None,
+            lights=lights, warnings=list(self.warnings), instances=None,
+        )
+        return flat
 
     def light_label(self, light: Light) -> str:
         """How channels and stats name a light: its prim name, or its path when two lights share the name."""

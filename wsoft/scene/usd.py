@@ -24,8 +24,10 @@ from wsoft.scene.types import (
     LIGHT_SPHERE,
     WRAP_NAMES,
     Camera,
+    Instances,
     Light,
     Material,
+    Prototype,
     Scene,
     SkippedLight,
     Texture,
@@ -49,7 +51,7 @@ def _pxr():
     return Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade
 
 
-def load_scene(path_or_stage, time: float | None = None, render_settings: str | None = None) -> Scene:
+def load_scene(path_or_stage, time: float | None = None, render_settings: str | None = None, instancing: bool = False) -> Scene:
     """Load a USD stage (a file path or an open ``Usd.Stage``) at ``time``.
 
     ``time=None`` uses the stage's start time code when it has an authored time range,
@@ -62,6 +64,31 @@ def load_scene(path_or_stage, time: float | None = None, render_settings: str | 
     diagnostics while opening (a missing sublayer, reference or ``.mtlx``) become one
     ``warning`` line each on the scene, naming the layer; a file USD cannot parse is an error
     carrying the parser's own ``file:line:col`` message.
+
+    ``instancing``: False (the default) flattens instanced geometry into the triangle soup, one copy
+    of a prototype's meshes per instance. True keeps it instanced in ``Scene.instances``
+    (:class:`~wsoft.scene.types.Instances`), each prototype's meshes read once in its own frame:
+
+    - a ``UsdGeom.PointInstancer`` (not one inside another's prototype: that one is ignored with a
+      warning, as when flat) places its prototypes (each read in its root's frame, its root's own
+      transform in the instance's) with one instance per id its ``invisibleIds`` and inactive ids
+      leave shown; the same checks and errors as when flat;
+    - an instanceable prim (``IsInstance()``) places its USD prototype (read through the first
+      instance's proxies, in the instance prim's frame; nested instances inside it are flattened
+      into it). Material bindings and purposes resolve on each instance's proxies (they may come
+      from above the instance): an instance whose meshes resolve to other materials, or to another
+      set of meshes of an included purpose, gets a prototype of its own. An instanceable prim that
+      is itself a mesh, light or camera, or whose prototype holds a light, a camera or a
+      PointInstancer, is read as when flat (its meshes go to the soup; a PointInstancer inside is
+      kept instanced);
+    - ``Scene.prims`` names the prototype meshes (a PointInstancer prototype's mesh path; the first
+      instance's proxy path) and the instance prims (the instanceable prim, the PointInstancer),
+      with empty ``prim_points`` rows; the soup may be empty.
+
+    A stage with no instances gives the flat scene (``instances`` None). A shadow-casting light
+    whose ``collection:shadowLink`` leaves out any caster of a stage with instances gives the flat
+    load, with a warning (per-instance shadow linking is not kept instanced).
+    :meth:`Scene.flattened <wsoft.scene.types.Scene.flattened>` loads the flat scene on demand.
     """
     Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = _pxr()
     from pxr import UsdUtils
@@ -75,8 +102,15 @@ def load_scene(path_or_stage, time: float | None = None, render_settings: str | 
         _check_time(time, file)
         stage = open_stage(file)
     _check_time(time, file)
-    scene = _StageReader(stage, file, time, render_settings).read()
+    reader = _StageReader(stage, file, time, render_settings, instancing=instancing)
+    scene = reader.read()
+    if reader.linked_light is not None:
+        scene = _StageReader(stage, file, time, render_settings).read()
+        scene.warnings.append(f"{file}: {reader.linked_light}: collection:shadowLink leaves out casters and the stage has "
+                              "instances: loaded flat (instancing off; per-instance shadow linking is not kept instanced)")
     scene.warnings[:0] = diagnostic_lines(delegate.TakeUncoalescedDiagnostics(), file)
+    if instancing:
+        scene.__dict__["_source"] = (stage if isinstance(path_or_stage, Usd.Stage) else file, time, render_settings)
     return scene
 
 
@@ -135,7 +169,7 @@ def diagnostic_lines(diagnostics, file: str) -> list[str]:
 
 
 class _StageReader:
-    def __init__(self, stage, file: str, time: float | None, render_settings: str | None = None):
+    def __init__(self, stage, file: str, time: float | None, render_settings: str | None = None, instancing: bool = False):
         Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = _pxr()
         self.stage = stage
         self.file = file
@@ -154,6 +188,9 @@ class _StageReader:
         self.textures: list[Texture] = []
         self.texture_index: dict[tuple, int] = {}
         self.dynamic_cache: dict[str, bool] = {}
+        self.dynamic_stop = None  # a prim is_dynamic does not walk up past (an instance prim, while reading its prototype)
+        self.instancing = instancing
+        self.linked_light = None  # instancing: a light whose shadowLink leaves out casters (the load is then done flat)
         self.render_settings, self.render_settings_source = read_render_settings(self, render_settings)
         self.purposes = self.render_settings.included_purposes if self.render_settings else DEFAULT_PURPOSES
 
@@ -199,8 +236,12 @@ class _StageReader:
         tri_face, prim_points = [], []
         lights, unshadowed, skipped, cameras, shadow_lights = [], [], [], [], []
         nverts = 0
+        inst = _InstanceBuilder(prims, prim_points) if self.instancing else None
         it = iter(Usd.PrimRange.Stage(self.stage, Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)))
         for prim in it:
+            if inst is not None and prim.IsInstance() and self.read_instance(prim, inst):
+                it.PruneChildren()  # its prototype is placed, not flattened
+                continue
             if prim.IsA(UsdGeom.Imageable):
                 img = UsdGeom.Imageable(prim)
                 if img.ComputeVisibility(self.timecode) == UsdGeom.Tokens.invisible:
@@ -231,6 +272,9 @@ class _StageReader:
 
             if prim.IsA(UsdGeom.PointInstancer):
                 it.PruneChildren()  # its prototypes are drawn only where it places them
+                if inst is not None:
+                    self.read_instancer_instances(prim, inst)
+                    continue
                 for mesh, name in self.read_instancer(prim):
                     add_mesh(mesh, name)
             elif prim.IsA(UsdGeom.Mesh):
@@ -260,6 +304,8 @@ class _StageReader:
 
         for lp, light in shadow_lights:
             self.read_shadow_controls(lp, light, prims)
+        if inst is not None and inst.count:
+            self.linked_light = self.light_linking_instances(shadow_lights, inst)
         if pts:
             points = np.concatenate(pts).astype(np.float32)
             triangles = np.concatenate(tris).astype(np.int32)
@@ -293,6 +339,7 @@ class _StageReader:
             render_settings=rs,
             render_settings_source=self.render_settings_source,
             purposes=tuple(self.purposes),
+            instances=inst.instances() if inst is not None and inst.count else None,
         )
         return scene
 
@@ -336,18 +383,18 @@ class _StageReader:
         return light
 
     # -- point instancers ----------------------------------------------------------
-    def read_instancer(self, prim):
-        """The meshes a ``UsdGeom.PointInstancer`` places, one copy per instance (flattened): the
-        instance transforms from USD's own ``ComputeInstanceTransformsAtTime`` (positions,
-        orientations, scales, the prototypes' own transforms) with the mask of ``invisibleIds``
-        and inactive ids applied to them and to ``protoIndices``, each prototype's meshes read
-        once per instance. Yields (mesh, name) with name ``mesh@instancer[i]``."""
+    def instancer_parts(self, prim):
+        """What a ``UsdGeom.PointInstancer`` places, checked: (protoIndices [N] int64, USD's instance
+        transforms (``ComputeInstanceTransformsAtTime``: positions, orientations, scales, the
+        prototypes' own transforms; row-vector matrices), shown [N] bool (the mask of
+        ``invisibleIds`` and inactive ids), the instancer's world matrix, moving (its instances move
+        over time), {prototype index: (root prim, its meshes)}); None when it places nothing."""
         Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = _pxr()
         pi = UsdGeom.PointInstancer(prim)
         protos = pi.GetPrototypesRel().GetForwardedTargets()
         indices = self.get(pi.GetProtoIndicesAttr())
         if indices is None or len(indices) == 0:
-            return
+            return None
         indices = np.asarray(indices, np.int64)
         if not protos:
             raise self.err(prim, f"PointInstancer has {len(indices)} instances but no prototypes")
@@ -383,6 +430,18 @@ class _StageReader:
                 elif q.IsA(UsdGeom.Gprim):
                     self.warn(q, f"{q.GetTypeName()} is not a Mesh; ignored (convert it to a mesh to cast shadows)")
             meshes_of[j] = (root, found)
+        return indices, xforms, keep, M_pi, moving, meshes_of
+
+    def read_instancer(self, prim):
+        """The meshes a ``UsdGeom.PointInstancer`` places, one copy per instance (flattened): the
+        instance transforms from USD's own ``ComputeInstanceTransformsAtTime`` (positions,
+        orientations, scales, the prototypes' own transforms) with the mask of ``invisibleIds``
+        and inactive ids applied to them and to ``protoIndices``, each prototype's meshes read
+        once per instance. Yields (mesh, name) with name ``mesh@instancer[i]``."""
+        parts = self.instancer_parts(prim)
+        if parts is None:
+            return
+        indices, xforms, keep, M_pi, moving, meshes_of = parts
         for i in np.nonzero(keep)[0]:
             root, found = meshes_of[int(indices[i])]
             # the instance transform maps the prototype root's own frame (its xform included) into the
@@ -397,6 +456,130 @@ class _StageReader:
                         yield mesh, f"{q.GetPath()}@{prim.GetPath()}[{int(i)}]"
             finally:
                 self.world_override = None
+
+    def read_instancer_instances(self, prim, inst: "_InstanceBuilder") -> None:
+        """A ``UsdGeom.PointInstancer`` kept instanced (``instancing``): the checks of
+        :meth:`instancer_parts`, each prototype a placed instance uses read once in its root's frame
+        (shared by every instancer that names the same root), one instance per shown id with
+        world(instancer) @ USD's instance transform, dynamic when the instancer moves its instances."""
+        parts = self.instancer_parts(prim)
+        if parts is None:
+            return
+        indices, xforms, keep, M_pi, moving, meshes_of = parts
+        shown = np.flatnonzero(keep)
+        if not len(shown):
+            return
+        protos = np.full(len(meshes_of), -1, np.int64)
+        for j in np.unique(indices[shown]):
+            root, found = meshes_of[int(j)]
+            key = ("PointInstancer", str(root.GetPath()))
+            if key not in inst.proto_of:
+                self.world_override = (root, np.eye(4))  # the root's own frame
+                try:
+                    meshes = [(m, str(q.GetPath())) for q in found for m in [self.read_mesh(q)] if m is not None]
+                finally:
+                    self.world_override = None
+                inst.add_prototype(key, str(root.GetPath()), str(root.GetPath()), meshes)
+            protos[j] = inst.proto_of[key]
+        X = np.array([np.array(xforms[int(i)], dtype=np.float64).T for i in shown]).reshape(-1, 4, 4)
+        W = M_pi @ X
+        placed = protos[indices[shown]] >= 0  # a prototype without triangles places nothing
+        if placed.any():
+            where = inst.add_prim(str(prim.GetPath()))
+            inst.add(protos[indices[shown]][placed], W[placed], where, shown[placed], moving)
+
+    # -- instanceable prims --------------------------------------------------------
+    def read_instance(self, prim, inst: "_InstanceBuilder") -> bool:
+        """An instanceable prim kept instanced (``instancing``): its USD prototype's meshes, read once
+        through the proxies of the first instance that resolves them alike (material bindings and
+        purposes resolve on the proxies, and may come from above the instance), in the instance
+        prim's frame; nested instances inside are flattened into it. False (read it as when flat)
+        for an invisible prim, one that is itself a mesh, light, camera or PointInstancer, or one
+        whose prototype holds a light, a camera or a PointInstancer."""
+        Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = _pxr()
+        if prim.IsA(UsdGeom.Imageable) and UsdGeom.Imageable(prim).ComputeVisibility(self.timecode) == UsdGeom.Tokens.invisible:
+            return False
+        if prim.IsA(UsdGeom.Gprim) or _placed_apart(prim, UsdGeom, UsdLux):
+            return False
+        ppath = str(prim.GetPrototype().GetPath())
+        ipath = prim.GetPath()
+        if ppath not in inst.scan:
+            meshes, others, mixed = [], [], False
+            sub = iter(Usd.PrimRange(prim, Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)))
+            next(sub)  # the instance prim itself
+            for q in sub:
+                if q.IsA(UsdGeom.Imageable) and UsdGeom.Imageable(q).ComputeVisibility(self.timecode) == UsdGeom.Tokens.invisible:
+                    sub.PruneChildren()
+                    continue
+                if _placed_apart(q, UsdGeom, UsdLux):
+                    mixed = True
+                    break
+                if q.IsA(UsdGeom.Mesh):
+                    meshes.append(q.GetPath().MakeRelativePath(ipath))
+                elif q.IsA(UsdGeom.Gprim):
+                    others.append(q.GetPath().MakeRelativePath(ipath))
+            inst.scan[ppath] = None if mixed else (meshes, others)
+        scan = inst.scan[ppath]
+        if scan is None:
+            return False
+        meshes, others = scan
+        # how this instance resolves its prototype's meshes: purpose included, materials bound
+        resolved, proxies = [], []
+        for rel in meshes:
+            q = self.stage.GetPrimAtPath(ipath.AppendPath(rel))
+            if UsdGeom.Imageable(q).ComputePurpose() not in self.purposes:
+                resolved.append(None)
+                continue
+            subsets = UsdShade.MaterialBindingAPI(q).GetMaterialBindSubsets()
+            resolved.append((self.material_key(q, ipath), *(self.material_key(g.GetPrim(), ipath) for g in subsets)))
+            proxies.append(q)
+        key = (ppath, tuple(resolved))
+        if key not in inst.proto_of:
+            for rel in others:
+                q = self.stage.GetPrimAtPath(ipath.AppendPath(rel))
+                if UsdGeom.Imageable(q).ComputePurpose() in self.purposes:
+                    self.warn(q, f"{q.GetTypeName()} is not a Mesh; ignored (convert it to a mesh to cast shadows)")
+            self.world_override, self.dynamic_stop = (prim, np.eye(4)), prim  # the instance prim's frame
+            try:
+                read = [(m, str(q.GetPath())) for q in proxies for m in [self.read_mesh(q)] if m is not None]
+            finally:
+                self.world_override, self.dynamic_stop = None, None
+            inst.add_prototype(key, ppath, str(ipath), read)
+        j = inst.proto_of[key]
+        if j < 0:
+            return True  # nothing of it to draw
+        M = self.world(prim)
+        if not np.all(np.isfinite(M)):
+            raise self.err(prim, "world transform is not finite (NaN or inf in its xformOps or an ancestor's)")
+        inst.add(np.array([j]), M[None], inst.add_prim(str(ipath)), np.array([-1]), self.is_dynamic(prim, None))
+        return True
+
+    def material_key(self, prim, ipath):
+        """How an instance proxy's material binding tells prototypes apart: a material inside the
+        instance by its path relative to the instance prim (every instance has its own proxy of it,
+        the same material), any other by its index in the scene's materials."""
+        Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = _pxr()
+        material, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()
+        if material and material.GetPath().HasPrefix(ipath):
+            return str(material.GetPath().MakeRelativePath(ipath))
+        return self.material_for(prim)
+
+    def light_linking_instances(self, shadow_lights, inst: "_InstanceBuilder") -> str | None:
+        """The first shadow-casting light whose ``collection:shadowLink`` leaves out a caster of the
+        flat load (a soup prim, an instanced mesh as the flat loader names it), or None."""
+        Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = _pxr()
+        paths = None
+        for lp, light in shadow_lights:
+            if light.shadow_excluded:
+                return str(lp.GetPath())
+            link = UsdLux.LightAPI(lp).GetShadowLinkCollectionAPI()
+            if not link:
+                continue
+            query = link.ComputeMembershipQuery()
+            paths = inst.flat_paths() if paths is None else paths
+            if not all(query.IsPathIncluded(Sdf.Path(q)) for group in paths for q in group):
+                return str(lp.GetPath())
+        return None
 
     # -- meshes ------------------------------------------------------------------
     def read_mesh(self, prim):
@@ -477,7 +660,7 @@ class _StageReader:
         if mesh is not None and mesh.GetPointsAttr().GetNumTimeSamples() > 1:
             return True
         p = prim
-        while p and not p.IsPseudoRoot():
+        while p and not p.IsPseudoRoot() and p != self.dynamic_stop:
             key = str(p.GetPath())
             if key not in self.dynamic_cache:
                 attr = p.GetAttribute("wsoft:dynamic")
@@ -713,6 +896,99 @@ class _StageReader:
             tan_half = (0.5 * ha / f, 0.5 * va / f)
             offset = (ho / f, vo / f)
         return Camera(path=str(prim.GetPath()), to_world=M, orthographic=ortho, tan_half=tan_half, offset=offset, clip=clip)
+
+
+def _placed_apart(prim, UsdGeom, UsdLux) -> bool:
+    """Is ``prim`` something an instanceable prim's prototype cannot keep instanced: a light, a
+    camera or a PointInstancer?"""
+    type_name = prim.GetTypeName()
+    return (prim.IsA(UsdGeom.Camera) or prim.IsA(UsdGeom.PointInstancer) or prim.HasAPI(UsdLux.LightAPI)
+            or type_name in _HANDLED_LIGHTS or type_name.endswith("Light"))
+
+
+class _InstanceBuilder:
+    """The instances a load keeps (``load_scene(..., instancing=True)``) as the reader finds them:
+    prototypes by key, and per instance its prototype, transform, prim, id and dynamic flag. Shares
+    the reader's ``prims`` and ``prim_points`` lists (prototype meshes and instance prims get empty
+    ``prim_points`` rows: their points are not in the soup)."""
+
+    def __init__(self, prims: list[str], prim_points: list):
+        self.prims, self.prim_points = prims, prim_points
+        self.prim_index: dict[str, int] = {}
+        self.prototypes: list[Prototype] = []
+        self.proto_of: dict[tuple, int] = {}  # key -> index into prototypes (-1: no triangles)
+        self.scan: dict[str, tuple | None] = {}  # USD prototype path -> (mesh paths, other gprims) relative to the instance, None: read flat
+        self.proto, self.xform, self.prim, self.ids, self.dynamic = [], [], [], [], []
+
+    @property
+    def count(self) -> int:
+        return sum(len(p) for p in self.proto)
+
+    def add_prim(self, name: str) -> int:
+        if name not in self.prim_index:
+            self.prims.append(name)
+            self.prim_points.append((0, 0))
+            self.prim_index[name] = len(self.prims) - 1
+        return self.prim_index[name]
+
+    def add_prototype(self, key, path: str, root: str, meshes: list) -> None:
+        """Prototype ``key`` from the meshes read (``read_mesh`` tuples and their names), -1 when none."""
+        if not meshes:
+            self.proto_of[key] = -1
+            return
+        pts, tris, cols, prim_points, baked = [], [], {k: [] for k in ("prim", "mat", "uv", "ds", "cl", "dyn", "face")}, [], []
+        n = 0
+        for (p, t, m, uv, ds, closed, dynamic, bk, faces), name in meshes:
+            j = self.add_prim(name)
+            prim_points.append((j, n, len(p)))
+            pts.append(p)
+            tris.append(t + n)
+            n += len(p)
+            cols["prim"].append(np.full(len(t), j, np.int32))
+            cols["mat"].append(m)
+            cols["uv"].append(uv)
+            cols["ds"].append(np.full(len(t), ds, bool))
+            cols["cl"].append(np.full(len(t), closed, np.int8))
+            cols["dyn"].append(np.full(len(t), dynamic, bool))
+            cols["face"].append(faces.astype(np.int32))
+            baked.append((bk, len(t)))
+        dyn = np.concatenate(cols["dyn"])
+        self.proto_of[key] = len(self.prototypes)
+        self.prototypes.append(Prototype(
+            path=path, points=np.concatenate(pts).astype(np.float32), triangles=np.concatenate(tris).astype(np.int32),
+            tri_prim=np.concatenate(cols["prim"]), tri_material=np.concatenate(cols["mat"]).astype(np.int32),
+            tri_uv=np.concatenate(cols["uv"]).astype(np.float32), tri_double_sided=np.concatenate(cols["ds"]),
+            tri_closed=np.concatenate(cols["cl"]), tri_face=np.concatenate(cols["face"]),
+            tri_dynamic=dyn if dyn.any() else None, tri_baked=_baked(baked), root=root,
+            prim_points=np.asarray(prim_points, np.int64).reshape(-1, 3),
+        ))
+
+    def add(self, proto: np.ndarray, xform: np.ndarray, prim: int, ids: np.ndarray, dynamic: bool) -> None:
+        self.proto.append(np.asarray(proto, np.int32))
+        self.xform.append(np.asarray(xform, np.float64).reshape(-1, 4, 4))
+        self.prim.append(np.full(len(proto), prim, np.int32))
+        self.ids.append(np.asarray(ids, np.int32))
+        self.dynamic.append(np.full(len(proto), bool(dynamic), bool))
+
+    def instances(self) -> Instances:
+        return Instances(prototypes=self.prototypes, proto=np.concatenate(self.proto), xform=np.concatenate(self.xform),
+                         prim=np.concatenate(self.prim), instance_id=np.concatenate(self.ids), dynamic=np.concatenate(self.dynamic))
+
+    def flat_paths(self) -> set[tuple[str, ...]]:
+        """The prim paths a flat load's instanced meshes answer to in a shadowLink test: (the
+        prototype mesh, the PointInstancer) for an instancer's, (the instance proxy) for an
+        instanceable prim's."""
+        out = set()
+        for proto_k, prim_k, ids_k in zip(self.proto, self.prim, self.ids):
+            for pj, where, iid in {(int(a), int(b), int(c) >= 0) for a, b, c in zip(proto_k, prim_k, ids_k)}:
+                proto = self.prototypes[pj]
+                for m in np.unique(proto.tri_prim):
+                    name = self.prims[int(m)]
+                    if iid:
+                        out.add((name, self.prims[where]))
+                    else:
+                        out.add((self.prims[where] + name[len(proto.root):],))
+        return out
 
 
 def _read_asset(resolved: str) -> bytes | None:
