@@ -125,11 +125,18 @@ def test_plan_lists_a_point_light_instead_of_failing(tmp_path):
 @pytest.mark.parametrize("scene_name", usd_scenes.names())
 def test_finite_on_every_bundled_scene(scene_name):
     """Every technique, on every light of every bundled stage it supports: finite, in [0, 1]."""
-    scene = wsoft.load_scene(str(usd_scenes.path(scene_name)))
+    from wsoft.errors import ParameterError
+    from wsoft.render import load_stage
+
+    scene = load_stage(str(usd_scenes.path(scene_name)))  # as the command line loads it (forest keeps its instances)
     for name in NAMES:
         params = {"samples": 4} if name == "reference" else {"shadow_map_size": 256}
         lights = [l for l in scene.lights if create(name, params).supports(scene, l) is None]
         if not lights:
+            continue
+        if scene.instanced and create(name, params).instancing_why() and scene.total_triangles > 20_000_000:
+            with pytest.raises(ParameterError, match="needs the stage flattened"):
+                wsoft.render(scene, name, width=32, height=24, device="cpu", **params)
             continue
         f = wsoft.render(scene, name, width=32, height=24, device="cpu", **params)
         for ch in [k for k in f.channels if k.startswith("V")]:
