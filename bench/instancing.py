@@ -72,7 +72,9 @@ def _device_bytes(ds) -> int:
 
     for a in ds.arrays().values():
         add(a)
-    for name in ds.cutouts.vars:
+    from wsoft.scene.device import Surfaces
+
+    for name in Surfaces.vars:
         add(getattr(ds.cutouts, name))
     for a in (ds.tri_baked, ds.tri_has_baked):
         add(a)
