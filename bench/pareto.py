@@ -29,6 +29,12 @@ QUICK_SCENES = ("box_plane", "contact")
 CURVE_SEED = 1  # the reference's curve is independent of the ground truth (seed 0)
 
 
+# stages left out of the full sweep: forest (56M instanced triangles: techniques that read the triangle
+# soup cannot flatten it; its own evidence is `wsoft bench instancing`) and issue 13's analogs, added
+# after reports/pareto.md was made and measured by their own sweep once their techniques exist
+NOT_IN_PARETO = ("forest", "fence_perforated", "fence_mesh", "hl2_like", "factory", "greece")
+
+
 def scene_lights(name: str) -> list[str]:
     return [l.path for l in load(name).lights]
 
@@ -36,7 +42,7 @@ def scene_lights(name: str) -> list[str]:
 def cases(quick: bool, devices: list[str]) -> list[dict]:
     from wsoft import usd_scenes
 
-    names = QUICK_SCENES if quick else tuple(usd_scenes.names())
+    names = QUICK_SCENES if quick else tuple(n for n in usd_scenes.names() if n not in NOT_IN_PARETO)
     w, h = (160, 120) if quick else (640, 480)
     out = []
     for dev in devices:

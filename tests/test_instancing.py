@@ -200,3 +200,40 @@ def test_flattening_a_huge_instanced_stage_is_refused(pair, monkeypatch):
     with pytest.raises(ParameterError, match=r"izb \(its light pass.*needs the stage flattened.*techniques that keep instances: .*hard"):
         build_graph(inst, "izb", width=32, height=24)
     build_graph(inst, "hard", width=32, height=24)  # keeps instances: no limit
+
+
+def test_plan_says_what_keeps_instances(pair, monkeypatch):
+    import sys
+
+    from wsoft.render import plan
+
+    wr = sys.modules["wsoft.render"]
+    inst, _ = pair
+    p = plan(inst, ["hard", "izb"], width=32, height=24)
+    assert p["instancing"]["mode"] == "kept" and p["instancing"]["instances"] == 4
+    assert "izb" in p["flattened_for"] and "hard" not in p.get("flattened_for", {}) and "izb" in p["techniques"]
+    monkeypatch.setattr(wr, "FLATTEN_LIMIT", 10)
+    p = plan(inst, ["hard", "izb"], width=32, height=24)
+    assert "izb" not in p["techniques"] and "needs the stage flattened" in p["not_applicable"]["izb"][0]["reason"]
+
+
+def test_cli_instancing_flag(tmp_path):
+    """--instancing keep renders city with its instances kept; flatten and auto give one soup."""
+    import json
+    import subprocess
+    import sys
+
+    stats = {}
+    for mode in ("keep", "flatten", "auto"):
+        out = tmp_path / f"{mode}.json"
+        r = subprocess.run([sys.executable, "-m", "wsoft", "render", "city", "-t", "hard", "--width", "48", "--height", "36",
+                            "--set", "shadow_map_size=256", "--instancing", mode, "--out", str(tmp_path / f"{mode}.exr"), "--stats", str(out)],
+                           capture_output=True, text=True, timeout=600)
+        assert r.returncode == 0, r.stderr
+        stats[mode] = json.loads(out.read_text())
+    assert stats["keep"]["scene"]["instancing"]["mode"] == "kept" and stats["keep"]["scene"]["instancing"]["instances"] == 344
+    assert stats["flatten"]["scene"]["instancing"]["mode"] == "none" and stats["auto"]["scene"]["instancing"]["mode"] == "none"
+    assert stats["keep"]["scene"]["triangles"] == stats["flatten"]["scene"]["triangles"] == 1_041_866
+    r = subprocess.run([sys.executable, "-m", "wsoft", "render", "city", "-t", "hard", "--instancing", "sometimes", "--out", str(tmp_path / "x.exr")],
+                       capture_output=True, text=True, timeout=600)
+    assert r.returncode == 2 and "--instancing" in r.stderr

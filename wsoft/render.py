@@ -989,7 +989,12 @@ def plan(scene: Scene, techniques: list[str] | None = None, *, width: int | None
         built = build_graph(scene, name, width=width, height=height, camera=camera, light=light, device="cpu", strict=False)
         label = built.labels[0]
         if built.instancing["mode"] == "flattened":
-            out.setdefault("flattened_for", {})[name] = built.instancing["needs"][0][1]
+            why = built.instancing["needs"][0][1]
+            if scene.total_triangles > FLATTEN_LIMIT:  # render refuses it: say so instead of listing passes
+                out["not_applicable"][name] = [{"light": "(every light)", "reason": f"{why}: needs the stage flattened, "
+                                                f"{scene.total_triangles:,} triangles (more than {FLATTEN_LIMIT:,})"}]
+                continue
+            out.setdefault("flattened_for", {})[name] = why
         if built.skipped[label]:
             out["not_applicable"][name] = [{"light": l.path, "reason": why} for l, why in built.skipped[label]]
         if label in built.channels:
