@@ -99,25 +99,36 @@ def surface_present(cut: Surfaces, tri: int, w0: float, w1: float, w2: float) ->
 
 
 @wp.func
-def occluded(mesh: wp.uint64, cut: Surfaces, has_cutouts: int, origin: wp.vec3, dir: wp.vec3, max_t: float) -> bool:
-    """Is the segment origin + t*dir, t in (0, max_t), blocked? Any-hit, alpha-tested through cutouts."""
+def occluded_from(mesh: wp.uint64, tri0: int, cut: Surfaces, has_cutouts: int, origin: wp.vec3, dir: wp.vec3, max_t: float) -> bool:
+    """Is the segment origin + t*dir, t in (0, max_t), blocked by ``mesh`` (whose face ``f`` is the
+    triangle ``tri0 + f`` of ``cut``: 0 for the soup, a prototype's first combined index for an
+    instance, :mod:`wsoft.scene.instancing`)? Any-hit, alpha-tested through cutouts; 64 cutout layers
+    crossed count as blocked."""
     if has_cutouts == 0:
         return wp.mesh_query_ray_anyhit(mesh, origin, dir, max_t)
     o = origin
     remaining = max_t
+    blocked = bool(False)
     for _k in range(64):
-        q = wp.mesh_query_ray(mesh, o, dir, remaining)
-        if not q.result:
-            return False
-        # warp: p = p0*u + p1*v + p2*(1-u-v)
-        if surface_present(cut, q.face, q.u, q.v, 1.0 - q.u - q.v):
-            return True
-        step = q.t + 1.0e-5 * (1.0 + q.t)
-        o = o + dir * step
-        remaining = remaining - step
-        if remaining <= 0.0:
-            return False
-    return True
+        if remaining > 0.0 and not blocked:
+            q = wp.mesh_query_ray(mesh, o, dir, remaining)
+            if not q.result:
+                remaining = -1.0
+            elif surface_present(cut, tri0 + q.face, q.u, q.v, 1.0 - q.u - q.v):  # warp: p = p0*u + p1*v + p2*(1-u-v)
+                blocked = True
+            else:
+                step = q.t + 1.0e-5 * (1.0 + q.t)
+                o = o + dir * step
+                remaining = remaining - step
+    if remaining > 0.0 and not blocked:
+        return True
+    return blocked
+
+
+@wp.func
+def occluded(mesh: wp.uint64, cut: Surfaces, has_cutouts: int, origin: wp.vec3, dir: wp.vec3, max_t: float) -> bool:
+    """Is the segment origin + t*dir, t in (0, max_t), blocked by the soup? (:func:`occluded_from`)."""
+    return occluded_from(mesh, 0, cut, has_cutouts, origin, dir, max_t)
 
 
 CULL_SKIP = wp.constant(2)  # a cull flag: the light-view rasterizer skips the triangle whichever way it faces

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from wsoft.scene.device import Surfaces, surface_present
+from wsoft.scene.device import Surfaces, occluded_from, surface_present
 
 
 @wp.struct
@@ -38,31 +38,6 @@ class InstancesGPU:
     mirrored: wp.array[wp.int32]  # [I] 1: the transform's determinant is negative (winding flips)
     proto_mesh: wp.array[wp.uint64]  # [P] each prototype's wp.Mesh
     proto_tri0: wp.array[wp.int32]  # [P] the combined index of each prototype's first triangle
-
-
-@wp.func
-def occluded_from(mesh: wp.uint64, tri0: int, cut: Surfaces, has_cutouts: int, origin: wp.vec3, dir: wp.vec3, max_t: float) -> bool:
-    """Is the segment origin + t*dir, t in (0, max_t), blocked by ``mesh`` (whose face ``f`` is the
-    combined triangle ``tri0 + f``)? Any-hit, alpha-tested through cutouts."""
-    if has_cutouts == 0:
-        return wp.mesh_query_ray_anyhit(mesh, origin, dir, max_t)
-    o = origin
-    remaining = max_t
-    blocked = bool(False)
-    for _k in range(64):
-        if remaining > 0.0 and not blocked:
-            q = wp.mesh_query_ray(mesh, o, dir, remaining)
-            if not q.result:
-                remaining = -1.0
-            elif surface_present(cut, tri0 + q.face, q.u, q.v, 1.0 - q.u - q.v):  # warp: p = p0*u + p1*v + p2*(1-u-v)
-                blocked = True
-            else:
-                step = q.t + 1.0e-5 * (1.0 + q.t)
-                o = o + dir * step
-                remaining = remaining - step
-    if remaining > 0.0 and not blocked:
-        return True  # 64 cutout layers crossed: treated as blocked, as the flat query does
-    return blocked
 
 
 @wp.func
