@@ -26,7 +26,7 @@ import warp as wp
 from wsoft.lightspace.view import ViewGPU, in_front_of_light, view_of
 from wsoft.parallel import launch_chunked
 from wsoft.raster.camera import CameraGPU
-from wsoft.scene.device import Surfaces, DeviceScene, surface_present
+from wsoft.scene.device import Surfaces, DeviceScene, nearest_from, surface_present
 from wsoft.scene.instancing import InstancesGPU, nearest_instance_hit
 
 
@@ -71,35 +71,7 @@ def cast_primary(mesh: wp.uint64, cut: Surfaces, has_cutouts: int, inst: Instanc
     0/1, world point, viewer-facing normal, triangle (combined index), u, v, camera distance).
     Alpha-tested through cutouts; back faces of single-sided meshes skipped."""
     o, d, t0, t1 = camera_ray(cam, width, height, fx, fy)
-    start = o + d * t0
-    remaining = t1 - t0
-    travelled = t0
-    found = int(0)
-    face = int(-1)
-    bu = float(0.0)
-    bv = float(0.0)
-    n = wp.vec3(0.0)
-    for _k in range(64):
-        if found == 0 and remaining > 0.0:
-            q = wp.mesh_query_ray(mesh, start, d, remaining)
-            if not q.result:
-                remaining = -1.0
-            else:
-                ok = q.sign > 0.0 or cut.double_sided[q.face] != 0
-                if ok and has_cutouts != 0:
-                    ok = surface_present(cut, q.face, q.u, q.v, 1.0 - q.u - q.v)
-                if ok:
-                    found = 1
-                    face = q.face
-                    bu = q.u
-                    bv = q.v
-                    n = q.normal
-                    travelled += q.t
-                else:
-                    step = q.t + 1.0e-5 * (1.0 + q.t)
-                    start = start + d * step
-                    travelled += step
-                    remaining -= step
+    found, travelled, face, bu, bv, n = nearest_from(mesh, 0, cut, has_cutouts, o + d * t0, d, t1 - t0, t0)
     if inst.count > 0:
         reach = t1 - t0
         if found == 1:

@@ -126,6 +126,44 @@ def occluded_from(mesh: wp.uint64, tri0: int, cut: Surfaces, has_cutouts: int, o
 
 
 @wp.func
+def nearest_from(mesh: wp.uint64, tri0: int, cut: Surfaces, has_cutouts: int, start: wp.vec3, dir: wp.vec3, remaining: float,
+                 travelled: float):
+    """The nearest surface an eye ray meets in ``mesh`` (face ``f`` is the triangle ``tri0 + f`` of
+    ``cut``) along start + s*dir, s in (0, remaining): back faces of single-sided meshes skipped,
+    alpha-tested through cutouts (up to 64 surfaces stepped past). Returns (found 0/1, ``travelled``
+    plus the distance to the hit, triangle, u, v, the triangle's geometric normal in the mesh's frame)."""
+    found = int(0)
+    face = int(-1)
+    bu = float(0.0)
+    bv = float(0.0)
+    n = wp.vec3(0.0)
+    o = start
+    for _k in range(64):
+        if found == 0 and remaining > 0.0:
+            q = wp.mesh_query_ray(mesh, o, dir, remaining)
+            if not q.result:
+                remaining = -1.0
+            else:
+                tri = tri0 + q.face
+                ok = q.sign > 0.0 or cut.double_sided[tri] != 0
+                if ok and has_cutouts != 0:
+                    ok = surface_present(cut, tri, q.u, q.v, 1.0 - q.u - q.v)
+                if ok:
+                    found = 1
+                    face = tri
+                    bu = q.u
+                    bv = q.v
+                    n = q.normal
+                    travelled += q.t
+                else:
+                    step = q.t + 1.0e-5 * (1.0 + q.t)
+                    o = o + dir * step
+                    travelled += step
+                    remaining -= step
+    return found, travelled, face, bu, bv, n
+
+
+@wp.func
 def occluded(mesh: wp.uint64, cut: Surfaces, has_cutouts: int, origin: wp.vec3, dir: wp.vec3, max_t: float) -> bool:
     """Is the segment origin + t*dir, t in (0, max_t), blocked by the soup? (:func:`occluded_from`)."""
     return occluded_from(mesh, 0, cut, has_cutouts, origin, dir, max_t)

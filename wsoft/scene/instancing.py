@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from wsoft.scene.device import Surfaces, occluded_from, surface_present
+from wsoft.scene.device import Surfaces, nearest_from, occluded_from
 
 
 @wp.struct
@@ -81,32 +81,15 @@ def nearest_instance_hit(inst: InstancesGPU, cut: Surfaces, has_cutouts: int, or
         p = inst.proto[i]
         mesh = inst.proto_mesh[p]
         tri0 = inst.proto_tri0[p]
-        o = wp.transform_point(m, origin)
-        d = wp.transform_vector(m, dir)
-        travelled = float(0.0)
-        for _k in range(64):
-            if travelled < best:
-                h = wp.mesh_query_ray(mesh, o, d, best - travelled)
-                if not h.result:
-                    travelled = best
-                else:
-                    tri = tri0 + h.face
-                    ok = h.sign > 0.0 or cut.double_sided[tri] != 0
-                    if ok and has_cutouts != 0:
-                        ok = surface_present(cut, tri, h.u, h.v, 1.0 - h.u - h.v)
-                    if ok:
-                        best = travelled + h.t
-                        found = 1
-                        face = tri
-                        bu = h.u
-                        bv = h.v
-                        # a normal goes to world by the inverse transpose: (to_object)^T
-                        n = wp.normalize(wp.transform_vector(wp.transpose(m), h.normal))
-                        travelled = best
-                    else:
-                        step = h.t + 1.0e-5 * (1.0 + h.t)
-                        o = o + d * step
-                        travelled += step
+        f, t, tri, u, v, nrm = nearest_from(mesh, tri0, cut, has_cutouts, wp.transform_point(m, origin), wp.transform_vector(m, dir), best, 0.0)
+        if f == 1:
+            best = t
+            found = 1
+            face = tri
+            bu = u
+            bv = v
+            # a normal goes to world by the inverse transpose: (to_object)^T
+            n = wp.normalize(wp.transform_vector(wp.transpose(m), nrm))
     return found, best, face, bu, bv, n
 
 
