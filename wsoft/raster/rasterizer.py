@@ -855,21 +855,17 @@ def rasterize_instances(r: Rasterizer, ds: DeviceScene, surfaces: Surfaces, view
         sel = np.flatnonzero(seen & (di.proto == p))
         if len(sel) == 0 or di.proto_ntri[p] == 0:
             continue
-        b = InstanceBatch()
-        b.to_world = wp.array(di.to_world[sel].astype(np.float32), dtype=wp.mat44, device=dev)
-        b.cull_off = wp.array(origin_inside[sel].astype(np.int32), dtype=wp.int32, device=dev)
-        b.mirrored = wp.array(di.mirrored[sel].astype(np.int32), dtype=wp.int32, device=dev)
-        b.ntri = int(di.proto_ntri[p])
-        b.first = int(di.proto_first[p])
-        b.tri0 = int(di.tri_base + di.proto_first[p])
         # work items are int32: a prototype's instances go in runs of at most 2^30 items
-        per_run = max(1, (1 << 30) // b.ntri)
+        per_run = max(1, (1 << 30) // int(di.proto_ntri[p]))
         for a in range(0, len(sel), per_run):
             part = sel[a: a + per_run]
-            if a or len(part) < len(sel):
-                b.to_world = wp.array(di.to_world[part].astype(np.float32), dtype=wp.mat44, device=dev)
-                b.cull_off = wp.array(origin_inside[part].astype(np.int32), dtype=wp.int32, device=dev)
-                b.mirrored = wp.array(di.mirrored[part].astype(np.int32), dtype=wp.int32, device=dev)
+            b = InstanceBatch()
+            b.to_world = wp.array(di.to_world[part].astype(np.float32), dtype=wp.mat44, device=dev)
+            b.cull_off = wp.array(origin_inside[part].astype(np.int32), dtype=wp.int32, device=dev)
+            b.mirrored = wp.array(di.mirrored[part].astype(np.int32), dtype=wp.int32, device=dev)
+            b.ntri = int(di.proto_ntri[p])
+            b.first = int(di.proto_first[p])
+            b.tri0 = int(di.tri_base + di.proto_first[p])
             r.run(di.proto_points, di.proto_indices, surfaces, view, target, dev, initialized=True, batch=b, batch_count=len(part))
         drawn += len(sel)
     return drawn

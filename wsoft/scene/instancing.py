@@ -33,9 +33,7 @@ class InstancesGPU:
     count: int
     tlas: wp.uint64  # wp.Bvh over the instances' world bounds (0 when count == 0)
     to_object: wp.array[wp.mat44]  # [I] world -> prototype frame
-    to_world: wp.array[wp.mat44]  # [I] prototype frame -> world
     proto: wp.array[wp.int32]  # [I] prototype of each instance
-    mirrored: wp.array[wp.int32]  # [I] 1: the transform's determinant is negative (winding flips)
     proto_mesh: wp.array[wp.uint64]  # [P] each prototype's wp.Mesh
     proto_tri0: wp.array[wp.int32]  # [P] the combined index of each prototype's first triangle
 
@@ -122,7 +120,7 @@ class DeviceInstances:
         nv = int(self.proto_points.shape[0])
         nt = int(self.proto_indices.shape[0]) // 3
         ni = self.count
-        return 12 * nv + 12 * nt + 64 * nt + ni * (64 + 64 + 4 + 4) + 64 * max(ni, 1)
+        return 12 * nv + 12 * nt + 64 * nt + ni * (64 + 4) + 64 * max(ni, 1)
 
 
 def empty_instances(device: str) -> InstancesGPU:
@@ -131,9 +129,7 @@ def empty_instances(device: str) -> InstancesGPU:
     g.tlas = wp.uint64(0)
     eye = np.eye(4, dtype=np.float32)[None]
     g.to_object = wp.array(eye, dtype=wp.mat44, device=device)
-    g.to_world = wp.array(eye, dtype=wp.mat44, device=device)
     g.proto = wp.zeros(1, dtype=wp.int32, device=device)
-    g.mirrored = wp.zeros(1, dtype=wp.int32, device=device)
     g.proto_mesh = wp.zeros(1, dtype=wp.uint64, device=device)
     g.proto_tri0 = wp.zeros(1, dtype=wp.int32, device=device)
     return g
@@ -166,9 +162,7 @@ def upload_instances(inst, tri_base: int, device: str) -> DeviceInstances:
     g.count = int(inst.count)
     g.tlas = tlas.id
     g.to_object = wp.array(inv.astype(np.float32), dtype=wp.mat44, device=device)
-    g.to_world = wp.array(xf.astype(np.float32), dtype=wp.mat44, device=device)
     g.proto = wp.array(np.asarray(inst.proto, np.int32), dtype=wp.int32, device=device)
-    g.mirrored = wp.array(mirrored.astype(np.int32), dtype=wp.int32, device=device)
     g.proto_mesh = wp.array(np.array([m.id for m in meshes], np.uint64), dtype=wp.uint64, device=device)
     g.proto_tri0 = wp.array((tri_base + first).astype(np.int32), dtype=wp.int32, device=device)
     return DeviceInstances(
