@@ -96,22 +96,33 @@ def test_map_techniques_keep_instances(pair, tech):
 
 
 def test_depth_map_of_instances_equals_flat_map(device):
-    """Translated instances (their float32 vertices equal the flattened ones exactly): the
-    instanced map equals the flat map texel for texel, plain and conservative."""
+    """Translated instances (their float32 vertices equal the flattened ones exactly): the instanced
+    map equals the flat map texel for texel, plain and conservative. Mirrored ones: the same texels
+    written, depths within float rounding (a mirrored closed box's far faces are culled as the flat
+    scene's are; culling the wrong side would move depths by the box's thickness)."""
     from wsoft.lightspace.view import fit_light_view
     from wsoft.raster.rasterizer import rasterize
 
-    T = [(1, xf(t=(dx, dy, 0.25))) for dx in (-1.5, -0.5, 0.5, 1.5) for dy in (-1.0, 0.0, 1.0)] + [(0, xf(t=(0.25, 0.5, 0.5)))]
-    inst, flat = split(load_scene(CUTOUT), ["Fence", "Leaf"], T)
-    dsa, ga = gbuffer_of(inst, device)
-    dsb, gb = gbuffer_of(flat, device)
-    rec = gb.pos.numpy()[gb.prim.numpy() >= 0]
-    v = fit_light_view(flat.lights[0], rec, *flat.bounds, 512)
-    for conservative in (False, True):
-        ma = rasterize(dsa, v, True, conservative=conservative)
-        mb = rasterize(dsb, v, True, conservative=conservative)
-        assert np.array_equal(ma.depth.numpy(), mb.depth.numpy())
-        assert ma.instances_drawn == len(T)
+    from wsoft.lightspace.view import DEPTH_CLEAR
+
+    for sx in (1, -1):
+        T = [(1, xf(t=(dx, dy, 0.25), s=(sx, 1, 1))) for dx in (-1.5, -0.5, 0.5, 1.5) for dy in (-1.0, 0.0, 1.0)] + [(0, xf(t=(0.25, 0.5, 0.5)))]
+        inst, flat = split(load_scene(CUTOUT), ["Fence", "Leaf"], T)
+        dsa, ga = gbuffer_of(inst, device)
+        dsb, gb = gbuffer_of(flat, device)
+        rec = gb.pos.numpy()[gb.prim.numpy() >= 0]
+        v = fit_light_view(flat.lights[0], rec, *flat.bounds, 512)
+        for conservative in (False, True):
+            ma = rasterize(dsa, v, True, conservative=conservative)
+            mb = rasterize(dsb, v, True, conservative=conservative)
+            a, b = ma.depth.numpy(), mb.depth.numpy()
+            assert ma.instances_drawn == len(T)
+            if sx == 1:
+                assert np.array_equal(a, b)
+            else:  # the flattened mirrored mesh's winding is flipped: the same texels, depths interpolated in another corner order
+                assert np.array_equal(a == DEPTH_CLEAR, b == DEPTH_CLEAR)
+                w = b != DEPTH_CLEAR
+                assert np.abs(a[w] - b[w]).max() <= 1e-6 * np.abs(b[w]).max()
 
 
 def test_instances_outside_the_view_are_skipped_not_lost(device):
@@ -237,3 +248,22 @@ def test_cli_instancing_flag(tmp_path):
     r = subprocess.run([sys.executable, "-m", "wsoft", "render", "city", "-t", "hard", "--instancing", "sometimes", "--out", str(tmp_path / "x.exr")],
                        capture_output=True, text=True, timeout=600)
     assert r.returncode == 2 and "--instancing" in r.stderr
+
+
+@pytest.mark.parametrize("mirror", [1, -1])
+def test_light_inside_an_instanced_closed_box(mirror):
+    """A closed single-sided box placed around the light by an instance (mirrored or not): every
+    map must keep the box's faces (culling its far side would lose them all and light the ground, a
+    silent wrong answer); the ground is in shadow as in the flat scene and the reference."""
+    sc = load_scene(CUTOUT)
+    centre = np.array([2.5, 0.0, 0.9])  # the Leaf box's centre (1 x 1 x 0.6)
+    M = xf(t=(0, 0, 4)) @ xf(s=(2.0 * mirror, 2.0, 3.0)) @ xf(t=-centre)
+    inst, flat = split(sc, ["Fence", "Leaf"], [(1, M)])
+    assert inst.instances.count == 1
+    for tech in ("hard", "pcss", "reference"):
+        kw = {"samples": 16} if tech == "reference" else {"shadow_map_size": 256}
+        a = render(inst, tech, width=48, height=36, **kw)
+        b = render(flat, tech, width=48, height=36, **kw)
+        covered = a["A"] > 0 if "A" in a.channels else np.ones_like(a.V, bool)
+        assert a.V[covered].max() < 0.05, (tech, a.V[covered].max())
+        assert np.abs(a.V - b.V).mean() < 1e-3, tech
