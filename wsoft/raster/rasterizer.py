@@ -624,6 +624,32 @@ class RasterStats:
     bands: int = 0
 
 
+@dataclass
+class InstanceRun:
+    """The instances of one prototype to draw in a :meth:`Rasterizer.run`: ``count`` instances of the
+    :class:`InstanceBatch`, whose triangles index ``points`` / ``indices`` (the prototypes')."""
+
+    batch: object  # InstanceBatch
+    count: int
+    points: wp.array
+    indices: wp.array
+
+
+@dataclass
+class _Segment:
+    """What one part of a run draws: its geometry arrays, batch, work items (``ntri``), the length of
+    its big-triangle flags (``items``), whether it is listed / instanced, and its triangle list."""
+
+    points: wp.array
+    indices: wp.array
+    batch: object
+    ntri: int
+    items: int
+    listed: bool
+    instanced: bool
+    tri_list: wp.array
+
+
 @dataclass(eq=False)
 class Rasterizer:
     """Kernels of one (projection, fragment, conservative, alpha, inner) combination and their
@@ -644,39 +670,42 @@ class Rasterizer:
 
     def run(self, points: wp.array, indices: wp.array, cut: Surfaces, view, target, device: str, *,
             triangles: wp.array | None = None, initialized: bool = True, strategy: str = "auto",
-            batch: "InstanceBatch | None" = None, batch_count: int = 0) -> RasterStats:
+            batches: "list[InstanceRun] | None" = None) -> RasterStats:
         """Rasterize the triangles (all of ``indices``, or the index list ``triangles``) into ``target``.
 
         ``initialized = False``: ``target`` holds no data yet; the CPU's first worker clears it as
         its private target (saves a clear and a merge). ``strategy``: ``auto`` (private targets
-        when the fragment can merge, else bands), ``private`` or ``bands``. ``batch``: rasterize
-        ``batch_count`` instances of one prototype instead (:class:`InstanceBatch`; ``points`` and
-        ``indices`` are then the prototypes', ``triangles`` must be None)."""
+        when the fragment can merge, else bands), ``private`` or ``bands``. ``batches``: instances
+        drawn in the same run (:class:`InstanceRun`: one per prototype, its work items (instance,
+        prototype triangle)), sharing the CPU's private targets and their one merge with the
+        triangles of ``indices``."""
         lv = view.gpu() if isinstance(view, LightView) else view
         if bool(lv.persp) != self.persp:
             raise ValueError("the view's projection does not match the rasterizer's")
         w, h = lv.width, lv.height
-        instanced = batch is not None
-        if instanced and triangles is not None:
-            raise ValueError("an instanced run takes no triangle list")
-        if instanced:
-            ntri = int(batch_count) * int(batch.ntri)
-        else:
-            ntri = indices.shape[0] // 3 if triangles is None else triangles.shape[0]
-            batch = _no_batch(device)
-        items = ntri if instanced else indices.shape[0] // 3  # what the big flags are indexed by
         listed = triangles is not None
         no_list = triangles if listed else wp.zeros(1, dtype=wp.int32, device=device)
         no_big = wp.zeros(1, dtype=wp.int32, device=device)
+        # segments: the soup's triangles, then each prototype's instances
+        segs = [_Segment(points, indices, _no_batch(device), indices.shape[0] // 3 if triangles is None else triangles.shape[0],
+                         indices.shape[0] // 3, listed, False, no_list)]
+        for br in batches or ():
+            n = int(br.count) * int(br.batch.ntri)
+            segs.append(_Segment(br.points, br.indices, br.batch, n, n, False, True, no_list))
+        segs = [g for g in segs if g.ntri > 0]
+        ntri = sum(g.ntri for g in segs)
         stats = RasterStats()
         if strategy == "auto":
             strategy = "private" if self.spec.merge is not None else "bands"
         if strategy == "private" and self.spec.merge is None:
             raise ValueError(f"fragment {self.spec.name} cannot merge private targets")
 
-        def launch(kernel, tgt, start, count, nbands, band_rows, band_start=0, tri_list=no_list, big_texels=0.0, big=no_big):
-            wp.launch(kernel, dim=(nbands, count), inputs=[start, band_start, band_rows, tri_list, float(big_texels), points, indices, lv, cut, batch],
-                      outputs=[tgt, big], device=device)
+        def launcher(g: "_Segment"):
+            def launch(kernel, tgt, start, count, nbands, band_rows, band_start=0, tri_list=g.tri_list, big_texels=0.0, big=no_big):
+                wp.launch(kernel, dim=(nbands, count), inputs=[start, band_start, band_rows, tri_list, float(big_texels), g.points, g.indices, lv, cut,
+                                                               g.batch], outputs=[tgt, big], device=device)
+
+            return launch
 
         if ntri == 0:
             if not initialized and self.spec.clear is not None:
@@ -686,29 +715,34 @@ class Rasterizer:
             if not initialized and self.spec.clear is not None:
                 self.spec.clear(target, device)
             nb = (h + GPU_BAND_ROWS - 1) // GPU_BAND_ROWS
-            launch(self.kernel(listed, False, instanced), target, 0, ntri, nb, GPU_BAND_ROWS)
+            for g in segs:
+                launcher(g)(self.kernel(g.listed, False, g.instanced), target, 0, g.ntri, nb, GPU_BAND_ROWS)
             stats.bands = nb
             return stats
         if strategy == "bands":
             if not initialized and self.spec.clear is not None:
                 self.spec.clear(target, device)
-            self._bands(launch, self.kernel(listed, False, instanced), target, ntri, h, no_list, stats, device)
+            for g in segs:
+                self._bands(launcher(g), self.kernel(g.listed, False, g.instanced), target, g.ntri, h, g.tri_list, stats, device)
             return stats
         # CPU phase 1: each worker rasterizes interleaved chunks of small triangles into its own target
-        kernel1 = self.kernel(listed, True, instanced)
-        ensure_loaded(kernel1, device)
+        kernels1 = [self.kernel(g.listed, True, g.instanced) for g in segs]
+        for k in kernels1:
+            ensure_loaded(k, device)
         target_bytes = 4 * w * h
-        nmaps = max(1, min(cpu_threads(), PRIVATE_BUDGET // max(target_bytes, 1), (ntri + CPU_CHUNK - 1) // CPU_CHUNK))
+        nchunks = sum((g.ntri + CPU_CHUNK - 1) // CPU_CHUNK for g in segs)
+        nmaps = max(1, min(cpu_threads(), PRIVATE_BUDGET // max(target_bytes, 1), nchunks))
         own = 0 if initialized else 1  # workers that adopt the (uninitialised) target itself
         privates = [target] * own + [self.spec.private(target, device) for _ in range(nmaps - own)]
-        chunks = [(s, min(CPU_CHUNK, ntri - s)) for s in range(0, ntri, CPU_CHUNK)]
-        big = wp.zeros(items, dtype=wp.int32, device=device)  # flags by triangle index (by work item in an instanced run)
+        chunks = [(j, s0, min(CPU_CHUNK, g.ntri - s0)) for j, g in enumerate(segs) for s0 in range(0, g.ntri, CPU_CHUNK)]
+        bigs = [wp.zeros(g.items, dtype=wp.int32, device=device) for g in segs]  # flags by triangle index (by work item for instances)
+        launches = [launcher(g) for g in segs]
 
         def worker(m):
             def run():
                 self.spec.clear(privates[m], device)
-                for start, count in chunks[m::nmaps]:
-                    launch(kernel1, privates[m], start, count, 1, h, tri_list=no_list, big_texels=BIG_TRIANGLE_TEXELS, big=big)
+                for j, start, count in chunks[m::nmaps]:
+                    launches[j](kernels1[j], privates[m], start, count, 1, h, big_texels=BIG_TRIANGLE_TEXELS, big=bigs[j])
 
             return run
 
@@ -716,11 +750,12 @@ class Rasterizer:
         self.spec.merge(privates[own:], target, device)
         stats.private_targets = nmaps
         # CPU phase 2: large (and near-clipped) triangles, shared out by disjoint bands of rows
-        big_list = np.flatnonzero(big.numpy()).astype(np.int32)
-        stats.big_triangles = int(len(big_list))
-        if len(big_list):
-            blist = wp.array(big_list, dtype=wp.int32, device=device)
-            self._bands(launch, self.kernel(True, False, instanced), target, len(big_list), h, blist, stats, device)
+        for j, g in enumerate(segs):
+            big_list = np.flatnonzero(bigs[j].numpy()).astype(np.int32)
+            stats.big_triangles += int(len(big_list))
+            if len(big_list):
+                blist = wp.array(big_list, dtype=wp.int32, device=device)
+                self._bands(launches[j], self.kernel(True, False, g.instanced), target, len(big_list), h, blist, stats, device)
         return stats
 
     @staticmethod
@@ -833,29 +868,29 @@ def rasterize(
         surfaces = without_culling(ds.cutouts, ds.tri_total, dev)
     else:
         surfaces = view_surfaces(ds, view.origin if view.persp else None)  # no far-face skipping around a light inside a closed mesh
-    st = r.run(ds.points, ds.indices, surfaces, view, target, dev, triangles=subset, initialized=False)
-    placed = 0
+    runs, placed = [], 0
     if ds.instances is not None:
         if inner or faces != "all" or triangles is not None:
             raise ValueError("an instanced scene's maps draw every face of every caster (no inner coverage, face subsets or triangle lists)")
-        placed = rasterize_instances(r, ds, surfaces, view, target)
+        runs, placed = instance_runs(ds, view)
+    st = r.run(ds.points, ds.indices, surfaces, view, target, dev, triangles=subset, initialized=False, batches=runs)
     return DepthMap(view=view, depth=target.depth, alpha_tested=alpha, conservative=conservative or inner, inner=inner,
                     private_maps=st.private_targets, big_triangles=st.big_triangles, instances_drawn=placed)
 
 
-def rasterize_instances(r: Rasterizer, ds: DeviceScene, surfaces: Surfaces, view: LightView, target) -> int:
-    """Draw an instanced scene's instances into ``target`` (already holding the soup): per
-    prototype one run over (instance, triangle) pairs, for the instances whose world bounds can
-    reach the view (:func:`~wsoft.lightspace.view.boxes_in_view`). Returns how many were drawn."""
+def instance_runs(ds: DeviceScene, view: LightView) -> tuple[list[InstanceRun], int]:
+    """An instanced scene's instances to draw into ``view`` (for :meth:`Rasterizer.run`): per
+    prototype one :class:`InstanceRun` of the instances whose world bounds can reach the view
+    (:func:`~wsoft.lightspace.view.boxes_in_view`), split where its work items would pass 2^30
+    (they are int32). Returns (runs, instances drawn)."""
     di = ds.instances
     dev = ds.device
     seen, origin_inside = boxes_in_view(view, di.lo, di.hi)
-    drawn = 0
+    runs, drawn = [], 0
     for p in range(len(di.proto_ntri)):
         sel = np.flatnonzero(seen & (di.proto == p))
         if len(sel) == 0 or di.proto_ntri[p] == 0:
             continue
-        # work items are int32: a prototype's instances go in runs of at most 2^30 items
         per_run = max(1, (1 << 30) // int(di.proto_ntri[p]))
         for a in range(0, len(sel), per_run):
             part = sel[a: a + per_run]
@@ -866,6 +901,6 @@ def rasterize_instances(r: Rasterizer, ds: DeviceScene, surfaces: Surfaces, view
             b.ntri = int(di.proto_ntri[p])
             b.first = int(di.proto_first[p])
             b.tri0 = int(di.tri_base + di.proto_first[p])
-            r.run(di.proto_points, di.proto_indices, surfaces, view, target, dev, initialized=True, batch=b, batch_count=len(part))
+            runs.append(InstanceRun(b, len(part), di.proto_points, di.proto_indices))
         drawn += len(sel)
-    return drawn
+    return runs, drawn

@@ -81,7 +81,7 @@ class Hard(Technique):
     """Classic (hard) shadow map from the light's centre."""
 
     name = "hard"
-    instancing_refusal = ""  # its maps draw instances (wsoft.raster.rasterizer.rasterize_instances)
+    instancing_refusal = ""  # its maps draw instances (wsoft.raster.rasterizer.instance_runs)
     summary = "classic shadow map from the light's centre (binary visibility)"
     Params = HardParams
     reads = ("gbuffer", "light_depth")

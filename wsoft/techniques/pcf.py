@@ -83,7 +83,7 @@ class PCF(Technique):
     """Percentage-closer filtering with a fixed kernel."""
 
     name = "pcf"
-    instancing_refusal = ""  # its maps draw instances (wsoft.raster.rasterizer.rasterize_instances)
+    instancing_refusal = ""  # its maps draw instances (wsoft.raster.rasterizer.instance_runs)
     summary = "percentage-closer filtering: fixed kernel, grid or Poisson taps, receiver-plane bias"
     Params = PCFParams
     reads = ("gbuffer", "light_depth")

@@ -91,7 +91,7 @@ class VSM(Technique):
     """Variance shadow maps: blurred depth moments and Chebyshev's bound."""
 
     name = "vsm"
-    instancing_refusal = ""  # its maps draw instances (wsoft.raster.rasterizer.rasterize_instances)
+    instancing_refusal = ""  # its maps draw instances (wsoft.raster.rasterizer.instance_runs)
     summary = "variance shadow maps: blurred (d, d^2) moments, Chebyshev bound, light-bleeding reduction"
     Params = VSMParams
     reads = ("gbuffer", "light_depth")

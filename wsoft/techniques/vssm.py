@@ -187,7 +187,7 @@ class VSSM(Technique):
     """Variance soft shadow mapping: SAT of depth moments, Chebyshev blocker estimate, kernel subdivision."""
 
     name = "vssm"
-    instancing_refusal = ""  # its maps draw instances (wsoft.raster.rasterizer.rasterize_instances)
+    instancing_refusal = ""  # its maps draw instances (wsoft.raster.rasterizer.instance_runs)
     summary = "variance soft shadow mapping: SAT of depth moments, Chebyshev blocker estimate, subdivision of non-planar kernels"
     Params = VSSMParams
     reads = ("gbuffer", "light_depth")
