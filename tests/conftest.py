@@ -7,6 +7,7 @@ import os
 import numpy as np
 import pytest
 
+from wsoft.metrics.exact import parallel_rect_exact  # noqa: F401  (tests import it from here)
 from wsoft.bench.stages import add_box, add_camera, add_quad, add_rect_light, make_stage  # noqa: F401  (the tests' stage builders)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -38,25 +39,6 @@ def device(request):
 
 def scene_path(name: str) -> str:
     return os.path.join(SCENES, name)
-
-
-def parallel_rect_exact(px, py, light_z, occ_z, occ_half, light_half):
-    """Exact visible fraction of a square light (side 2*light_half at height light_z, centred on the
-    z axis) seen from ground points (px, py, 0) past a square occluder (side 2*occ_half at occ_z).
-
-    The occluder projects from each ground point onto the light plane as a square scaled by
-    light_z / occ_z about the point; the covered part of the light is the overlap of two
-    axis-aligned squares, so the answer is a product of 1-D overlaps.
-    """
-    s = light_z / occ_z
-
-    def overlap(p):
-        lo = p + (-occ_half - p) * s
-        hi = p + (occ_half - p) * s
-        a, b = np.maximum(lo, -light_half), np.minimum(hi, light_half)
-        return np.clip(b - a, 0, None) / (2 * light_half)
-
-    return 1.0 - overlap(np.asarray(px)) * overlap(np.asarray(py))
 
 
 def box_plane_ground_error(f, min_penumbra: int = 100):
