@@ -223,7 +223,10 @@ def dcs_visibility(
         lr = wp.length(dr)
         if lr > 0.0:
             base_count = count_crossings(bvh, tri_pts, o, dr / lr, lr)
-        # silhouette edges of the receiver's cell
+        # silhouette edges of the receiver's cell; sweep[s]: the normal of the swept plane o, r, s
+        sweep = points_t()
+        for s in range(S):
+            sweep[s] = wp.cross(xr - o, xs[s] - o)
         cell = receiver_cell(ebins.lv, o)
         e0 = ebins.start[cell]
         e1 = ebins.start[cell + 1]
@@ -238,16 +241,22 @@ def dcs_visibility(
                 sigma += side(wp.dot(ne, edge_pts[e, 3] - o))
             hr = wp.dot(ne, xr - o)
             nn = wp.dot(ne, ne)
-            if sigma != 0 and hr != 0.0 and nn > 0.0:
+            if sigma != 0 and nn > 0.0:
                 for s in range(S):
                     x = xs[s]
                     hs = wp.dot(ne, x - o)
-                    if hs * hr < 0.0:
-                        m = xr + (x - xr) * (hr / (hr - hs)) - o
-                        al = wp.dot(wp.cross(m, B), ne)
-                        be = wp.dot(wp.cross(A, m), ne)
-                        if al >= 0.0 and be >= 0.0 and al + be >= nn:
-                            cnt[s] = cnt[s] + sigma * side(hs)
+                    if (hs > 0.0) != (hr > 0.0):  # r and s on opposite sides of the plane o, a, b
+                        # a and b on opposite sides of the swept plane o, r, s: each corner's side is
+                        # computed alike for every edge it ends, so a sweep past a vertex is counted once
+                        ns = sweep[s]
+                        if (wp.dot(ns, A) > 0.0) != (wp.dot(ns, B) > 0.0):
+                            # the crossing lies before the light: m - o = alpha A + beta B, alpha + beta >= 1
+                            m = xr + (x - xr) * (hr / (hr - hs)) - o
+                            if wp.dot(wp.cross(m, B - A), ne) >= nn:
+                                sg = int(-1)
+                                if hs > 0.0:
+                                    sg = 1
+                                cnt[s] = cnt[s] + sigma * sg
     if has_stsv != 0:
         cell = receiver_cell(tbins.lv, o)
         t0 = tbins.start[cell]
