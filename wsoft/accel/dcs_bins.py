@@ -177,23 +177,34 @@ def grid_view(view: LightView, size: int) -> LightView:
     return replace(view, width=int(size), height=int(size))
 
 
-def build_bins(view: LightView, corners: np.ndarray, radius: float, tan_a: float, zr_max: float, device: str) -> Bins:
+MAX_PAIRS = 1 << 23  # (cell, primitive) pairs a light's lists may hold (32 MiB of items) before the grid is coarsened
+
+
+def build_bins(view: LightView, corners: np.ndarray, radius: float, tan_a: float, zr_max: float, device: str,
+               max_pairs: int = MAX_PAIRS) -> Bins:
     """Bin primitives (``corners`` [N, K, 3] float32, K = 2 edges or 3 triangles) into the cells of
     ``view`` (module docstring); ``radius``: the local light's bounding ball about the view's origin;
-    ``tan_a``: a distant light's half-angle tangent; ``zr_max``: the receivers' farthest view depth."""
-    lv = view.gpu()
-    cells = view.width * view.height
+    ``tan_a``: a distant light's half-angle tangent; ``zr_max``: the receivers' farthest view depth.
+    Wide footprints (a large light over many small casters) would make the lists quadratically
+    long: the grid is halved until they hold at most ``max_pairs`` pairs (or it is 8 x 8); a
+    receiver then tests a few more primitives, the pairs fall about fourfold per halving."""
     n, k = int(corners.shape[0]), int(corners.shape[1]) if corners.ndim == 3 else 0
-    rect_h = np.zeros((0, 4), np.int32)
-    if n:
-        c = wp.array(np.ascontiguousarray(corners, np.float32), dtype=wp.vec3, device=device)
-        rect = wp.empty(n, dtype=wp.vec4i, device=device)
-        launch_chunked(primitive_footprint, n, inputs=[lv, c, k, float(radius), float(tan_a), float(zr_max)], outputs=[rect],
-                       device=device, min_chunk=4096)
-        rect_h = rect.numpy()
-    whole = rect_h[:, 0] == -1
-    none = rect_h[:, 0] == -2
-    area = np.where(whole, cells, np.where(none, 0, (rect_h[:, 2] - rect_h[:, 0] + 1).astype(np.int64) * (rect_h[:, 3] - rect_h[:, 1] + 1)))
+    c = wp.array(np.ascontiguousarray(corners, np.float32), dtype=wp.vec3, device=device) if n else None
+    rect = wp.empty(max(n, 1), dtype=wp.vec4i, device=device)
+    while True:
+        lv = view.gpu()
+        cells = view.width * view.height
+        rect_h = np.zeros((0, 4), np.int32)
+        if n:
+            launch_chunked(primitive_footprint, n, inputs=[lv, c, k, float(radius), float(tan_a), float(zr_max)], outputs=[rect],
+                           device=device, min_chunk=4096)
+            rect_h = rect.numpy()[:n]
+        whole = rect_h[:, 0] == -1
+        none = rect_h[:, 0] == -2
+        area = np.where(whole, cells, np.where(none, 0, (rect_h[:, 2] - rect_h[:, 0] + 1).astype(np.int64) * (rect_h[:, 3] - rect_h[:, 1] + 1)))
+        if int(area.sum()) + n <= max_pairs or view.width <= 8:
+            break
+        view = grid_view(view, max(8, view.width // 2))
     per = area.astype(np.int64) + 1
     first = np.zeros(n + 1, np.int64)
     np.cumsum(per, out=first[1:])

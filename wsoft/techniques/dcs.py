@@ -52,7 +52,13 @@ inconsistent winding all follow one rule), and ``V`` only asks whether the count
    tests only the edges listed in its own cell and writes only its own result (no atomics, no
    per-chunk count buffers: Warp's CPU atomics are not thread-safe across the thread pool, and a
    gather needs none). Receivers outside the view read a list of every edge (correct, slower).
-   Cost: the receivers times the edges of their cells, not pixels times edges.
+   Cost: the receivers times the edges of their cells, not pixels times edges. A large light over
+   many small casters makes every footprint wide and the lists quadratic in the grid's size: the
+   grid is halved until they hold at most 8M pairs (:data:`~wsoft.accel.dcs_bins.MAX_PAIRS`;
+   ``grid_size`` in the counters). Per receiver, an edge of its cell is skipped unless the plane
+   ``o, a, b`` cuts the light's bound (``o`` inside the edge's wedge), part of the edge lies in
+   front of the receiver's tangent plane, and it is a silhouette from ``o``; only then are the
+   samples walked.
 4. **STSV** (only when the light's casters hold perforated triangles; ``wsoft plan`` shows the
    ``dcs_stsv`` pass then and not otherwise). Per perforated triangle both conservative volumes
    of §6 (:func:`~wsoft.lightspace.stsv.stsv_planes`, one per lit side of its plane), binned like
@@ -67,8 +73,11 @@ depth complexity sampling degenerates to a hard shadow (``hard`` or ``izb``). Us
 flattened: the edges come from the soup's adjacency.
 
 Counters (``stats["counters"]["techniques"]["dcs"][light]``): ``potential_edges``,
-``wedge_tests`` (receiver-edge tests), ``perforated_triangles``, ``stsv_tests``
-(receiver-volume tests), ``grid_bytes`` (cells and lists), ``bin_pairs``.
+``wedge_tests`` (receiver-edge pairs read from the cells' lists), ``wedge_receivers`` (of those,
+receivers inside a silhouette's wedge: the samples walked), ``perforated_triangles``,
+``stsv_tests`` (receiver-volume tests), ``grid_size``, ``grid_bytes`` (cells and lists),
+``edge_bin_pairs``, ``edges_in_every_cell`` (edges reaching into the light's bound), and the
+``stsv_`` grid's own.
 
 Example::
 
@@ -180,11 +189,13 @@ def dcs_visibility(
     # outputs
     vis: wp.array[float],
     wedge_tests: wp.array[wp.int32],
+    wedge_hits: wp.array[wp.int32],
     volume_tests: wp.array[wp.int32],
 ):
     """Per receiver: the depth complexity of each light sample (module docstring) and V."""
     i = wp.tid() + offset
     wedge_tests[i] = 0
+    wedge_hits[i] = 0
     volume_tests[i] = 0
     if not gb_covered(gb, i):
         vis[i] = 1.0
@@ -227,21 +238,35 @@ def dcs_visibility(
         sweep = points_t()
         for s in range(S):
             sweep[s] = wp.cross(xr - o, xs[s] - o)
+        ball = light_ball(light)
+        bc = wp.vec3(ball[0], ball[1], ball[2])
+        distant = int(light.kind == 3)
         cell = receiver_cell(ebins.lv, o)
         e0 = ebins.start[cell]
         e1 = ebins.start[cell + 1]
         wedge_tests[i] = e1 - e0
+        in_wedge = int(0)
         for k in range(e0, e1):
             e = ebins.items[k]
             A = edge_pts[e, 0] - o
             B = edge_pts[e, 1] - o
+            # is any of the edge in front of the receiver (samples behind are blocked anyway)?
+            if wp.dot(nrm, A) <= 0.0 and wp.dot(nrm, B) <= 0.0:
+                continue
             ne = wp.cross(A, B)
+            nn = wp.dot(ne, ne)
+            # is o inside the edge's wedge: does the plane o, a, b cut the light's bound?
+            hb = wp.dot(ne, bc)
+            if distant == 0:
+                hb = wp.dot(ne, bc - o)
+            if nn == 0.0 or hb * hb > ball[3] * ball[3] * nn * 1.0001:
+                continue
             sigma = side(wp.dot(ne, edge_pts[e, 2] - o))
             if edge_faces[e] > 1:
                 sigma += side(wp.dot(ne, edge_pts[e, 3] - o))
             hr = wp.dot(ne, xr - o)
-            nn = wp.dot(ne, ne)
-            if sigma != 0 and nn > 0.0:
+            if sigma != 0:
+                in_wedge += 1
                 for s in range(S):
                     x = xs[s]
                     hs = wp.dot(ne, x - o)
@@ -257,6 +282,7 @@ def dcs_visibility(
                                 if hs > 0.0:
                                     sg = 1
                                 cnt[s] = cnt[s] + sigma * sg
+        wedge_hits[i] = in_wedge
     if has_stsv != 0:
         cell = receiver_cell(tbins.lv, o)
         t0 = tbins.start[cell]
@@ -462,7 +488,7 @@ class DCS(Technique):
                 arrays["tri_pts"] = wp.zeros(3, dtype=wp.vec3, device=dev)
                 arrays["bvh"] = None
             counters = {"potential_edges": int(len(pts)), "edge_bin_pairs": ebins.pairs, "edges_in_every_cell": ebins.whole,
-                        "grid_cells": ebins.cells, "grid_bytes": ebins.bytes}
+                        "grid_size": ebins.view.width, "grid_bytes": ebins.bytes}
             return {edges_key: Prep(view=grid, zr_max=zr_max, counters=counters, data=arrays)}
 
         ctx.add_pass(edges_name, inputs=(gbuf, scene_key), outputs=(edges_key,), run=run_edges, light=light)
@@ -484,7 +510,8 @@ class DCS(Technique):
                 _, r, distant = light_bound(light, scene.diagonal)
                 tan_a = math.tan(math.radians(0.5 * light.angle_deg)) if distant else 0.0
                 tbins = build_bins(prep.view, tp, 0.0 if distant else r, tan_a, prep.zr_max, dev)
-                counters = {"perforated_triangles": int(len(ids)), "stsv_bin_pairs": tbins.pairs, "stsv_grid_bytes": tbins.bytes}
+                counters = {"perforated_triangles": int(len(ids)), "stsv_bin_pairs": tbins.pairs, "stsv_grid_size": tbins.view.width,
+                            "stsv_grid_bytes": tbins.bytes}
                 data = {"tbins": tbins, "stri": wp.array(ids, dtype=wp.int32, device=dev), "planes": planes, "cut_pts": cut_pts}
                 return {stsv_key: Prep(view=prep.view, zr_max=prep.zr_max, counters=counters, data=data)}
 
@@ -505,17 +532,19 @@ class DCS(Technique):
             vis = wp.empty(n, dtype=float, device=dev)
             wt = wp.empty(n, dtype=wp.int32, device=dev)
             vt = wp.empty(n, dtype=wp.int32, device=dev)
+            wh = wp.empty(n, dtype=wp.int32, device=dev)
             bvh_id = a["bvh"].id if a["bvh"] is not None else wp.uint64(0)
             launch_chunked(
                 dcs_visibility, n,
                 inputs=[gb.gpu(), pattern.on(dev, disk), L, ray_epsilon(gb, light), a["has_opaque"], bvh_id, a["tri_pts"],
                         a["ebins"].gpu, a["edge_pts"], a["edge_faces"], int(st is not None), tb, stri, planes, ds.cutouts, cut_pts],
-                outputs=[vis, wt, vt], device=dev, min_chunk=256, per_thread=32)
+                outputs=[vis, wt, wh, vt], device=dev, min_chunk=256, per_thread=32)
             c = ctx.counters(light)
             c.update(prep.counters)
             if st is not None:
                 c.update(st.counters)
             c["wedge_tests"] = int(wt.numpy().astype(np.int64).sum())
+            c["wedge_receivers"] = int(wh.numpy().astype(np.int64).sum())
             c["stsv_tests"] = int(vt.numpy().astype(np.int64).sum())
             c["samples"] = p.samples
             return {out: ctx.visibility(vis)}
