@@ -487,6 +487,8 @@ class DCS(Technique):
             else:
                 arrays["tri_pts"] = wp.zeros(3, dtype=wp.vec3, device=dev)
                 arrays["bvh"] = None
+            if scene.casting_mask(light) is not None:  # collection:shadowLink: edges, BVH and volumes of these alone
+                ctx.ctx.pass_counters(edges_name)["casting_triangles"] = int(opaque.sum() + perforated.sum())
             counters = {"potential_edges": int(len(pts)), "edge_bin_pairs": ebins.pairs, "edges_in_every_cell": ebins.whole,
                         "grid_size": ebins.view.width, "grid_bytes": ebins.bytes}
             return {edges_key: Prep(view=grid, zr_max=zr_max, counters=counters, data=arrays)}
