@@ -93,3 +93,24 @@ def test_one_and_two_threads_agree(monkeypatch):
     monkeypatch.setenv("WSOFT_THREADS", "4")
     four = wsoft.render(scene, "dcs", width=64, height=48, device="cpu").V
     assert np.array_equal(one, four)
+
+
+@pytest.mark.parametrize("params", [
+    {},  # the default: 16 stratified points turned per pixel
+    {"pattern": "poisson", "decorrelate": "interleave", "interleave": 2},
+    {"pattern": "sobol02", "samples": 64},
+    {"pattern": "random", "samples": 9, "decorrelate": "none"},
+])
+def test_equals_the_reference_with_the_same_pattern(monkeypatch, params):
+    """The reference traced with dcs's own pattern (precomputed sets, rotation, interleaving) on
+    every light kind: the same samples, the same V."""
+    from wsoft.techniques import reference as ref_module
+
+    tech = wsoft.techniques.create("dcs", params)
+    monkeypatch.setattr(ref_module, "reference_pattern", lambda samples, seed, jitter: tech.params.sample_pattern())
+    scene = wsoft.load_scene(scene_path("multi_light.usda"))
+    d = wsoft.render(scene, "dcs", width=96, height=72, device="cpu", **params)
+    r = wsoft.render(scene, "reference", width=96, height=72, device="cpu", samples=tech.params.samples)
+    for ch in _v_channels(d):
+        assert (np.abs(d[ch] - r[ch]) < 1e-6).mean() >= 0.995, ch
+        assert ((r[ch] > 0) & (r[ch] < 1)).sum() >= 10, ch

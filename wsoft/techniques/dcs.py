@@ -362,9 +362,10 @@ def potential_edges(scene, opaque: np.ndarray, light) -> tuple[np.ndarray, np.nd
             continue
         n = adj.face_n.astype(np.float64)
         ln = np.linalg.norm(n, axis=1)
-        h = n @ c - (0.0 if distant else adj.face_d.astype(np.float64))
-        front = h > r * ln
-        back = h < -r * ln
+        with np.errstate(invalid="ignore", over="ignore"):  # inf/nan normals (huge coordinates): potential, conservatively
+            h = n @ c - (0.0 if distant else adj.face_d.astype(np.float64))
+            front = h > r * ln
+            back = h < -r * ln
         ef = adj.edge_faces
         has1 = ef[:, 1] >= 0
         f1 = np.maximum(ef[:, 1], 0)
