@@ -39,9 +39,9 @@ inconsistent winding all follow one rule), and ``V`` only asks whether the count
    on both sides (0, not a silhouette from ``o``). ``count(s) = count(c) + sum``: exact for any
    triangle mesh up to float rounding at grazing configurations; geometry that passes through the
    light itself (crossing the segment ``c s``) is not seen.
-   *Potential* silhouette edges per light (:func:`potential_edges`, from the welded adjacency of
-   :mod:`wsoft.scene.adjacency`): open and non-manifold edges, and edges whose two faces' facing
-   can differ for some point of the light's bound (a local light's ball, a distant light's cone).
+   *Potential* silhouette edges per light (:func:`~wsoft.scene.adjacency.silhouette_candidates`,
+   from the welded adjacency): open and non-manifold edges, and edges whose two faces' facing can
+   differ for some point of the light's bound (a local light's ball, a distant light's cone).
    An edge is a silhouette from ``o`` exactly when it is one from the light point on the line
    through ``o`` and the crossing (the plane is the same), so the filter loses nothing.
 3. **Binning** (:mod:`wsoft.accel.dcs_bins`). No hardware rasterizer: a light view fitted to the
@@ -93,7 +93,7 @@ import numpy as np
 import warp as wp
 
 from wsoft.accel.dcs_bins import BinsGPU, build_bins, grid_view, receiver_cell
-from wsoft.lightspace.light import LightGPU, in_front, light_point
+from wsoft.lightspace.light import LightGPU, in_front, light_bound, light_point
 from wsoft.lightspace.samples import DEVICE_KINDS, KINDS, PAPER_MIN_DISTANCE, LightSamples, SamplePattern, sample_coords
 from wsoft.lightspace.stsv import in_volume, light_ball, lit_sides, planes_t, receiver_matrix, s_triangle, sample_blocked, stsv_planes
 from wsoft.lightspace.view import fit_light_view
@@ -101,10 +101,10 @@ from wsoft.params import check_ranges
 from wsoft.parallel import launch_chunked
 from wsoft.raster.gbuffer import GBufferGPU, gb_covered
 from wsoft.reference import ray_epsilon, receiver_begin
-from wsoft.scene.adjacency import build_adjacency, prim_adjacency
+from wsoft.scene.adjacency import silhouette_candidates
 from wsoft.scene.device import Surfaces
 from wsoft.scene.packets import ray_triangle
-from wsoft.scene.types import LIGHT_DISTANT, LIGHT_POINT, LIGHT_RECT
+from wsoft.scene.types import LIGHT_POINT, LIGHT_RECT
 from wsoft.techniques.base import Quality, Technique, Tolerance, check, param
 
 MAX_SAMPLES = 64
@@ -337,61 +337,6 @@ def build_volumes(
 # --------------------------------------------------------------------------- host: edges, volumes
 
 
-def light_bound(light, scene_diagonal: float) -> tuple[np.ndarray, float, bool]:
-    """(centre or direction toward the light, radius or sine of the cone's half angle, distant)."""
-    if light.kind == LIGHT_DISTANT:
-        return np.asarray(light.frame[:, 2], np.float64), math.sin(math.radians(0.5 * light.angle_deg)), True
-    r = float(np.hypot(*light.half_size)) if light.kind == LIGHT_RECT else float(light.radius)
-    return np.asarray(light.position, np.float64), r, False
-
-
-def potential_edges(scene, opaque: np.ndarray, light) -> tuple[np.ndarray, np.ndarray]:
-    """The potential silhouette edges of the opaque casting triangles (``opaque`` [T] bool) for
-    ``light``: corners [E, 4, 3] float32 (a, b, the far corner of face 0, of face 1) and the
-    number of faces [E] int32 (1: open or split non-manifold)."""
-    c, r, distant = light_bound(light, scene.diagonal)
-    out_pts, out_nf = [], []
-    for prim in np.unique(scene.tri_prim[opaque]):
-        sel = np.flatnonzero(scene.tri_prim == prim)
-        keep = opaque[sel]
-        if keep.all():
-            adj = prim_adjacency(scene, int(prim))
-        else:  # a prim with cutout (or left-out) subsets: the adjacency of its opaque triangles alone
-            adj = build_adjacency(scene.points, scene.triangles[sel[keep]], sel[keep].astype(np.int32))
-        if adj.edge_count == 0:
-            continue
-        n = adj.face_n.astype(np.float64)
-        ln = np.linalg.norm(n, axis=1)
-        with np.errstate(invalid="ignore", over="ignore"):  # inf/nan normals (huge coordinates): potential, conservatively
-            h = n @ c - (0.0 if distant else adj.face_d.astype(np.float64))
-            front = h > r * ln
-            back = h < -r * ln
-        ef = adj.edge_faces
-        has1 = ef[:, 1] >= 0
-        f1 = np.maximum(ef[:, 1], 0)
-        same = np.where(adj.consistent, (front[ef[:, 0]] & front[f1]) | (back[ef[:, 0]] & back[f1]),
-                        (front[ef[:, 0]] & back[f1]) | (back[ef[:, 0]] & front[f1]))
-        pot = ~has1 | ~same
-        e = np.flatnonzero(pot)
-        if not len(e):
-            continue
-        a, b = adj.edges[e, 0], adj.edges[e, 1]
-        faces = adj.faces
-
-        def far_corner(f):
-            fc = faces[f]
-            return np.where((fc[:, 0] != a) & (fc[:, 0] != b), fc[:, 0], np.where((fc[:, 1] != a) & (fc[:, 1] != b), fc[:, 1], fc[:, 2]))
-
-        o0 = far_corner(ef[e, 0])
-        o1 = np.where(has1[e], far_corner(f1[e]), o0)
-        P = adj.points
-        out_pts.append(np.stack([P[a], P[b], P[o0], P[o1]], axis=1))
-        out_nf.append(np.where(has1[e], 2, 1).astype(np.int32))
-    if not out_pts:
-        return np.zeros((0, 4, 3), np.float32), np.zeros(0, np.int32)
-    return np.concatenate(out_pts).astype(np.float32), np.concatenate(out_nf)
-
-
 def triangle_masks(scene, light) -> tuple[np.ndarray, np.ndarray]:
     """(opaque, perforated) [T] bool: the triangles that cast ``light``'s shadow, split by whether
     their material is a cutout."""
@@ -470,10 +415,10 @@ class DCS(Technique):
             grid = grid_view(view, p.shadow_map_size)
             zr = grid.to_view(rec)[:, 2] if len(rec) else np.zeros(1)
             zr_max = float(zr.max()) * (1.0 + 1e-5) + 1e-6 * grid.extent
-            _, r, distant = light_bound(light, scene.diagonal)
+            _, r, distant = light_bound(light)
             tan_a = math.tan(math.radians(0.5 * light.angle_deg)) if distant else 0.0
             radius = 0.0 if distant else r
-            pts, nf = potential_edges(scene, opaque, light)
+            pts, nf = silhouette_candidates(scene, opaque, *light_bound(light))
             ebins = build_bins(grid, pts[:, :2] if len(pts) else np.zeros((0, 2, 3), np.float32), radius, tan_a, zr_max, ctx.device)
             dev = ctx.device
             tri_ids = np.flatnonzero(opaque).astype(np.int32)
@@ -510,7 +455,7 @@ class DCS(Technique):
                 cut_pts = wp.array(tp.reshape(-1, 3), dtype=wp.vec3, device=dev)
                 planes = wp.empty((len(ids), 2), dtype=planes_t, device=dev)
                 launch_chunked(build_volumes, len(ids), inputs=[cut_pts, L], outputs=[planes], device=dev, min_chunk=1024)
-                _, r, distant = light_bound(light, scene.diagonal)
+                _, r, distant = light_bound(light)
                 tan_a = math.tan(math.radians(0.5 * light.angle_deg)) if distant else 0.0
                 tbins = build_bins(prep.view, tp, 0.0 if distant else r, tan_a, prep.zr_max, dev)
                 counters = {"perforated_triangles": int(len(ids)), "stsv_bin_pairs": tbins.pairs, "stsv_grid_size": tbins.view.width,
