@@ -183,3 +183,26 @@ def timing(n_seg: int = 1000, n_stacks: int = 500):
 
 if __name__ == "__main__":
     print(timing())
+
+
+def test_potential_silhouettes_hold_every_silhouette_from_the_bound():
+    """Every edge that is a silhouette from some point of a light's ball is a potential one, and a
+    small far light leaves most of a sphere's edges out (the filter does something)."""
+    from wsoft.scene.adjacency import build_adjacency, potential_silhouettes, silhouettes
+
+    rng = np.random.default_rng(3)
+    u, v = np.meshgrid(np.linspace(0, np.pi, 24), np.linspace(0, 2 * np.pi, 48, endpoint=False), indexing="ij")
+    pts = np.stack([np.sin(u) * np.cos(v), np.sin(u) * np.sin(v), np.cos(u)], -1).reshape(-1, 3)
+    tri = []
+    for i in range(23):
+        for j in range(48):
+            a, b, c, d = i * 48 + j, i * 48 + (j + 1) % 48, (i + 1) * 48 + j, (i + 1) * 48 + (j + 1) % 48
+            tri += [[a, c, b], [b, c, d]]
+    adj = build_adjacency(pts.astype(np.float32), np.array(tri))
+    centre, radius = np.array([0.3, -0.2, 6.0]), 0.5
+    pot = potential_silhouettes(adj, centre, radius, False)
+    for _ in range(200):
+        q = rng.normal(size=3)
+        q = centre + radius * rng.random() ** (1 / 3) * q / np.linalg.norm(q)
+        assert not np.any((silhouettes(adj, position=q) != 0) & ~pot)
+    assert pot.mean() < 0.3

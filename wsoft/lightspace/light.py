@@ -88,6 +88,16 @@ def disk_shaped(light: Light) -> bool:
     return light.kind != LIGHT_RECT
 
 
+def light_bound(light: Light) -> tuple[np.ndarray, float, bool]:
+    """The light's bound on the host, as :func:`~wsoft.lightspace.stsv.light_ball` on the device:
+    (a local light's centre, the radius of its enclosing ball, False) or (a distant light's unit
+    direction toward the light, the sine of its cone's half angle, True)."""
+    if light.kind == LIGHT_DISTANT:
+        return np.asarray(light.frame[:, 2], np.float64), math.sin(math.radians(0.5 * light.angle_deg)), True
+    r = float(np.hypot(*light.half_size)) if light.kind == LIGHT_RECT else float(light.radius)
+    return np.asarray(light.position, np.float64), r, False
+
+
 @wp.func
 def light_center_dir(L: LightGPU, p: wp.vec3) -> wp.vec4:
     """Unit direction from ``p`` to the light's centre (distant: toward the sun) and its distance."""

@@ -169,6 +169,62 @@ def scene_adjacency(scene, tri_mask: np.ndarray | None = None) -> list[Adjacency
     return [prim_adjacency(scene, int(p)) for p in np.unique(tp)]
 
 
+def potential_silhouettes(adj: Adjacency, centre, radius: float, distant: bool) -> np.ndarray:
+    """[E] bool: the edges that are silhouettes from some point of a light's bound — a ball
+    (``centre``, ``radius``) or, ``distant``, a cone of directions (unit ``centre`` toward the
+    light, ``radius`` the sine of its half angle): open and split non-manifold edges, and edges
+    whose faces are not both surely facing the same way (consistently wound pairs) or surely
+    facing opposite ways (inconsistent pairs) over the whole bound. A face surely faces the bound
+    when its plane's height over the centre exceeds the radius (``n . d > sin a`` for a cone).
+    Faces with non-finite normals (huge coordinates) count as unsure."""
+    c = np.asarray(centre, np.float64)
+    n = adj.face_n.astype(np.float64)
+    ln = np.linalg.norm(n, axis=1)
+    with np.errstate(invalid="ignore", over="ignore"):
+        h = n @ c - (0.0 if distant else adj.face_d.astype(np.float64))
+        front = h > radius * ln
+        back = h < -radius * ln
+    ef = adj.edge_faces
+    has1 = ef[:, 1] >= 0
+    f0, f1 = ef[:, 0], np.maximum(ef[:, 1], 0)
+    same = np.where(adj.consistent, (front[f0] & front[f1]) | (back[f0] & back[f1]), (front[f0] & back[f1]) | (back[f0] & front[f1]))
+    return ~has1 | ~same
+
+
+def silhouette_candidates(scene, tri_mask: np.ndarray, centre, radius: float, distant: bool) -> tuple[np.ndarray, np.ndarray]:
+    """The potential silhouette edges (:func:`potential_silhouettes`) of the triangles ``tri_mask``
+    ([T] bool) selects, prim by prim: corners [E, 4, 3] float32 (the edge's ``a``, ``b``, the far
+    corner of its face 0, of its face 1 — face 0's again for an open edge) and the number of faces
+    [E] int32 (1: open or split non-manifold, 2). A prim whose triangles are only partly selected
+    (cutout subsets, prims a light's link leaves out) gets the adjacency of the selected ones."""
+    tri_mask = np.asarray(tri_mask, bool)
+    out_pts, out_nf = [], []
+    for prim in np.unique(scene.tri_prim[tri_mask]):
+        sel = np.flatnonzero(scene.tri_prim == prim)
+        keep = tri_mask[sel]
+        adj = prim_adjacency(scene, int(prim)) if keep.all() else build_adjacency(scene.points, scene.triangles[sel[keep]], sel[keep].astype(np.int32))
+        if adj.edge_count == 0:
+            continue
+        e = np.flatnonzero(potential_silhouettes(adj, centre, radius, distant))
+        if not len(e):
+            continue
+        a, b = adj.edges[e, 0], adj.edges[e, 1]
+        has1 = adj.edge_faces[e, 1] >= 0
+
+        def far_corner(f):
+            fc = adj.faces[f]
+            return np.where((fc[:, 0] != a) & (fc[:, 0] != b), fc[:, 0], np.where((fc[:, 1] != a) & (fc[:, 1] != b), fc[:, 1], fc[:, 2]))
+
+        o0 = far_corner(adj.edge_faces[e, 0])
+        o1 = np.where(has1, far_corner(np.maximum(adj.edge_faces[e, 1], 0)), o0)
+        P = adj.points
+        out_pts.append(np.stack([P[a], P[b], P[o0], P[o1]], axis=1))
+        out_nf.append(np.where(has1, 2, 1).astype(np.int32))
+    if not out_pts:
+        return np.zeros((0, 4, 3), np.float32), np.zeros(0, np.int32)
+    return np.concatenate(out_pts).astype(np.float32), np.concatenate(out_nf)
+
+
 def _light4(position=None, direction=None) -> np.ndarray:
     """(x, y, z, w): w = 1 a point, w = 0 a direction toward the light."""
     if (position is None) == (direction is None):

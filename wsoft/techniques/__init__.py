@@ -26,6 +26,7 @@ _REGISTRY = {
     "vssm": ("wsoft.techniques.vssm", "VSSM"),
     "ssm": ("wsoft.techniques.ssm", "SSM"),
     "izb": ("wsoft.techniques.izb", "IZB"),
+    "dcs": ("wsoft.techniques.dcs", "DCS"),
 }
 NAMES: tuple[str, ...] = tuple(_REGISTRY)
 _TECHNIQUES: dict[str, type[Technique]] | None = None

@@ -1,0 +1,500 @@
+"""``dcs``: depth complexity sampling (Forest, Barthe and Paulin 2008) with soft textured shadow
+volumes for perforated triangles (Forest, Barthe, Guennebaud and Paulin 2009, §3).
+
+For each receiver ``p`` (a G-buffer sample) and each light sample ``s`` (the shared generator,
+:class:`~wsoft.lightspace.samples.SamplePattern`: by default 16 stratified points turned per pixel),
+the *depth complexity* ``count(s)``: how many occluding layers the shadow ray ``p -> s`` crosses.
+``V`` (the paper's ``v_coef``) is the fraction of samples with ``count = 0``. The shadow rays are
+the reference's (:mod:`wsoft.reference`): from ``o``, ``p`` moved off its surface by
+:func:`~wsoft.reference.ray_offset`, to each light point (:func:`~wsoft.lightspace.light.light_point`,
+a distant light's at its ``far`` length); samples behind the receiver's tangent plane are blocked
+(the horizon, applied per sample as the reference does).
+
+What is counted. ``count(s)`` is the number of opaque triangles the segment ``o -> s`` crosses
+plus the perforated triangles that block it at their alpha texture: a closed layer counts twice
+(entry and exit), an open one once. The paper counts entries into closed objects; counting every
+crossing needs no notion of closedness (open meshes, mixed meshes, non-manifold edges and
+inconsistent winding all follow one rule), and ``V`` only asks whether the count is zero.
+
+1. **Reference count, one ray per pixel** (:func:`count_crossings`). The opaque triangles that
+   cast the light's shadow (not the cutouts: they go through STSV only; not the prims its
+   ``collection:shadowLink`` leaves out) get a BVH of their own (``wp.Bvh``); one segment per
+   receiver, ``o`` to the light's centre ``c`` (the silhouette disk's centre of a sphere light, the
+   cone's axis of a distant light), counts every triangle it crosses with Warp's watertight
+   ray-triangle test (the one the reference's any-hit uses). Where ``c`` lies behind the
+   receiver's tangent plane the first sample in front of it is the reference instead: the swept
+   triangle ``o, c, s`` must stay in front of the receiver's own surface (else that surface, which
+   extends under the light, would enter it through its far side, which edges cannot see).
+2. **Silhouette edges** (:func:`dcs_visibility`). As the light point ``x`` moves from ``c`` to
+   ``s``, the segment ``o -> x`` sweeps the triangle ``o c s``, and the count changes exactly
+   when an edge of the occluders crosses that triangle (Laine et al. 2005's reading of depth
+   complexity: the edge projected from ``o`` onto the light is a *segment*, and only the light
+   samples whose path from ``c`` crosses it change, not the half-plane of its line). An edge
+   ``a b`` with faces whose far corners lie on sides ``sigma_f`` (+1/-1) of the plane through
+   ``o, a, b`` (normal ``n = (a - o) x (b - o)``) adds ``(sigma_0 + sigma_1) sign(n . (s - o))``
+   when ``c`` and ``s`` lie on opposite sides of that plane and the crossing point ``m`` of
+   ``c s`` with it lies in the wedge ``o, a, b`` beyond the edge (``m - o = alpha (a - o) +
+   beta (b - o)`` with ``alpha, beta >= 0`` and ``alpha + beta >= 1``). So a silhouette *seen from
+   ``o``* (both faces on one side: ±2), an open edge (one face: ±1), and an edge whose faces lie
+   on both sides (0, not a silhouette from ``o``). ``count(s) = count(c) + sum``: exact for any
+   triangle mesh up to float rounding at grazing configurations; geometry that passes through the
+   light itself (crossing the segment ``c s``) is not seen.
+   *Potential* silhouette edges per light (:func:`~wsoft.scene.adjacency.silhouette_candidates`,
+   from the welded adjacency): open and non-manifold edges, and edges whose two faces' facing can
+   differ for some point of the light's bound (a local light's ball, a distant light's cone).
+   An edge is a silhouette from ``o`` exactly when it is one from the light point on the line
+   through ``o`` and the crossing (the plane is the same), so the filter loses nothing.
+3. **Binning** (:mod:`wsoft.accel.dcs_bins`). No hardware rasterizer: a light view fitted to the
+   receivers (``shadow_map_size`` cells per side) and, per potential edge, the conservative
+   rectangle of cells its wedge can reach (the edge's projection widened by the light's extent at
+   the receivers' depths, as :func:`~wsoft.lightspace.view.fit_light_view` widens windows for soft
+   casters); the (cell, edge) pairs are sorted into per-cell lists. Each receiver *gathers*: it
+   tests only the edges listed in its own cell and writes only its own result (no atomics, no
+   per-chunk count buffers: Warp's CPU atomics are not thread-safe across the thread pool, and a
+   gather needs none). Receivers outside the view read a list of every edge (correct, slower).
+   Cost: the receivers times the edges of their cells, not pixels times edges. A large light over
+   many small casters makes every footprint wide and the lists quadratic in the grid's size: the
+   grid is halved until they hold at most 8M pairs (:data:`~wsoft.accel.dcs_bins.MAX_PAIRS`;
+   ``grid_size`` in the counters). Per receiver, an edge of its cell is skipped unless the plane
+   ``o, a, b`` cuts the light's bound (``o`` inside the edge's wedge), part of the edge lies in
+   front of the receiver's tangent plane, and it is a silhouette from ``o``; only then are the
+   samples walked.
+4. **STSV** (only when the light's casters hold perforated triangles; ``wsoft plan`` shows the
+   ``dcs_stsv`` pass then and not otherwise). Per perforated triangle both conservative volumes
+   of §6 (:func:`~wsoft.lightspace.stsv.stsv_planes`, one per lit side of its plane), binned like
+   the edges; a receiver inside either volume looks up every sample
+   (:func:`~wsoft.lightspace.stsv.sample_blocked`: the crossing of eq. 1 and the alpha texture of
+   eq. 5) and adds 1 where it is blocked.
+
+Lights: rect, disk, sphere and distant. A point light has no area: every sample is its centre and
+depth complexity sampling degenerates to a hard shadow (``hard`` or ``izb``). UsdLux's
+``collection:shadowLink`` is honoured (the excluded prims are neither edges, BVH nor volumes);
+``inputs:shadow:distance`` is refused (the counts run to the light). Instanced stages are
+flattened: the edges come from the soup's adjacency.
+
+Counters (``stats["counters"]["techniques"]["dcs"][light]``): ``potential_edges``,
+``wedge_tests`` (receiver-edge pairs read from the cells' lists), ``wedge_receivers`` (of those,
+receivers inside a silhouette's wedge: the samples walked), ``perforated_triangles``,
+``stsv_tests`` (receiver-volume tests), ``grid_size``, ``grid_bytes`` (cells and lists),
+``edge_bin_pairs``, ``edges_in_every_cell`` (edges reaching into the light's bound), and the
+``stsv_`` grid's own.
+
+Example::
+
+    frame = wsoft.render(scene, "dcs", width=640, height=480, samples=16)
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+
+from wsoft.accel.dcs_bins import BinsGPU, build_bins, grid_view, receiver_cell
+from wsoft.lightspace.light import LightGPU, in_front, light_bound, light_point
+from wsoft.lightspace.samples import DEVICE_KINDS, KINDS, PAPER_MIN_DISTANCE, LightSamples, SamplePattern, sample_coords
+from wsoft.lightspace.stsv import in_volume, light_ball, lit_sides, planes_t, receiver_matrix, s_triangle, sample_blocked, stsv_planes
+from wsoft.lightspace.view import fit_light_view
+from wsoft.params import check_ranges
+from wsoft.parallel import launch_chunked
+from wsoft.raster.gbuffer import GBufferGPU, gb_covered
+from wsoft.reference import ray_epsilon, receiver_begin
+from wsoft.scene.adjacency import silhouette_candidates
+from wsoft.scene.device import Surfaces
+from wsoft.scene.packets import ray_triangle
+from wsoft.scene.types import LIGHT_POINT, LIGHT_RECT
+from wsoft.techniques.base import Quality, Technique, Tolerance, check, param
+
+MAX_SAMPLES = 64
+DECORRELATIONS = ("rotate", "interleave", "per_pixel", "none")
+counts_t = wp.types.vector(length=MAX_SAMPLES, dtype=wp.int32)
+points_t = wp.types.matrix(shape=(MAX_SAMPLES, 3), dtype=wp.float32)
+BLOCKED = wp.constant(1 << 20)  # a sample behind the receiver's tangent plane
+
+
+@dataclass(frozen=True)
+class DCSParams:
+    samples: int = param(16, "light samples per receiver (the paper: 16 or 64)", range=(1, MAX_SAMPLES))
+    pattern: str = param("stratified", "sample pattern: " + ", ".join(KINDS) + " (poisson: the paper's minimum distances at 16 and 64)")
+    decorrelate: str = param("rotate", "between pixels: rotate (the set turned per pixel), interleave (n x n sets), per_pixel (a new set "
+                                       "per pixel: with pattern=stratified the reference's own samples), none (one set everywhere)")
+    interleave: int = param(4, "decorrelate=interleave: n of the n x n interleaved sets", range=(1, 16))
+    seed: int = param(0, "random seed of the sample sets", range=(0, 2**31 - 1))
+    shadow_map_size: int = param(128, "cells per side of the light-space grid (a light view fitted to the receivers) that bins "
+                                      "receivers against edge wedges and perforated triangles' volumes", range=(8, 4096))
+
+    def __post_init__(self):
+        check_ranges(self)
+        check(self.pattern in KINDS, f"pattern {self.pattern!r} is not one of {', '.join(KINDS)}")
+        check(self.decorrelate in DECORRELATIONS, f"decorrelate {self.decorrelate!r} is not one of {', '.join(DECORRELATIONS)}")
+        check(self.decorrelate != "per_pixel" or self.pattern in DEVICE_KINDS,
+              f"decorrelate=per_pixel needs a pattern generated on the device ({', '.join(DEVICE_KINDS)}), not {self.pattern}")
+        check(self.pattern != "jittered" or math.isqrt(self.samples) ** 2 == self.samples,
+              f"pattern=jittered needs a square sample count, not {self.samples}")
+
+    def sample_pattern(self) -> SamplePattern:
+        return SamplePattern(self.pattern, self.samples, seed=self.seed,
+                             min_distance=PAPER_MIN_DISTANCE.get(self.samples, 0.0) if self.pattern == "poisson" else 0.0,
+                             per_pixel=self.decorrelate == "per_pixel", rotate=self.decorrelate == "rotate",
+                             interleave=self.interleave if self.decorrelate == "interleave" else 1)
+
+
+# --------------------------------------------------------------------------- kernels
+
+
+@wp.func
+def count_crossings(bvh: wp.uint64, tri_pts: wp.array[wp.vec3], o: wp.vec3, d: wp.vec3, tm: float) -> int:
+    """Opaque triangles (``tri_pts[3k:3k+3]``, item ``k`` of ``bvh``) the segment ``o + t d``,
+    ``t in (0, tm)``, crosses."""
+    n = int(0)
+    q = wp.bvh_query_ray(bvh, o, d)
+    k = int(0)
+    while wp.bvh_query_next(q, k, tm):
+        h = ray_triangle(o, d, tri_pts[3 * k], tri_pts[3 * k + 1], tri_pts[3 * k + 2])
+        if h[0] != 0.0 and h[1] > 0.0 and h[1] < tm:
+            n += 1
+    return n
+
+
+@wp.func
+def side(x: float) -> int:
+    if x > 0.0:
+        return 1
+    if x < 0.0:
+        return -1
+    return 0
+
+
+@wp.kernel
+def dcs_visibility(
+    offset: int,
+    gb: GBufferGPU,
+    ls: LightSamples,
+    light: LightGPU,
+    eps: float,
+    has_opaque: int,
+    bvh: wp.uint64,
+    tri_pts: wp.array[wp.vec3],
+    ebins: BinsGPU,
+    edge_pts: wp.array2d[wp.vec3],
+    edge_faces: wp.array[wp.int32],
+    has_stsv: int,
+    tbins: BinsGPU,
+    stri: wp.array[wp.int32],
+    planes: wp.array2d[planes_t],
+    cut: Surfaces,
+    cut_pts: wp.array[wp.vec3],
+    # outputs
+    vis: wp.array[float],
+    wedge_tests: wp.array[wp.int32],
+    wedge_hits: wp.array[wp.int32],
+    volume_tests: wp.array[wp.int32],
+):
+    """Per receiver: the depth complexity of each light sample (module docstring) and V."""
+    i = wp.tid() + offset
+    wedge_tests[i] = 0
+    wedge_hits[i] = 0
+    volume_tests[i] = 0
+    if not gb_covered(gb, i):
+        vis[i] = 1.0
+        return
+    p = gb.pos[i]
+    nrm = gb.nrm[i]
+    off, o, state, base, rot = receiver_begin(gb, ls, eps, i)
+    S = ls.count
+    cnt = counts_t()
+    xs = points_t()
+    first_front = int(-1)
+    for s in range(S):
+        c2, state = sample_coords(ls, state, base, rot, s)
+        r = light_point(light, p, c2)
+        d = wp.vec3(r[0], r[1], r[2])
+        x = o + d * wp.max(r[3] - off, 0.0)
+        xs[s] = x
+        if in_front(nrm, d):
+            cnt[s] = 0
+            if first_front < 0:
+                first_front = s
+        else:
+            cnt[s] = BLOCKED
+    if first_front < 0:
+        vis[i] = 0.0
+        return
+    # the reference point: the light's centre, or the first sample in front of the tangent plane
+    rc = light_point(light, p, wp.vec2(0.0, 0.0))
+    dc = wp.vec3(rc[0], rc[1], rc[2])
+    xr = o + dc * wp.max(rc[3] - off, 0.0)
+    if not in_front(nrm, dc):
+        xr = xs[first_front]
+    base_count = int(0)
+    if has_opaque != 0:
+        dr = xr - o
+        lr = wp.length(dr)
+        if lr > 0.0:
+            base_count = count_crossings(bvh, tri_pts, o, dr / lr, lr)
+        # silhouette edges of the receiver's cell; sweep[s]: the normal of the swept plane o, r, s
+        sweep = points_t()
+        for s in range(S):
+            sweep[s] = wp.cross(xr - o, xs[s] - o)
+        ball = light_ball(light)
+        bc = wp.vec3(ball[0], ball[1], ball[2])
+        distant = int(light.kind == 3)
+        cell = receiver_cell(ebins.lv, o)
+        e0 = ebins.start[cell]
+        e1 = ebins.start[cell + 1]
+        wedge_tests[i] = e1 - e0
+        in_wedge = int(0)
+        for k in range(e0, e1):
+            e = ebins.items[k]
+            A = edge_pts[e, 0] - o
+            B = edge_pts[e, 1] - o
+            # is any of the edge in front of the receiver (samples behind are blocked anyway)?
+            if wp.dot(nrm, A) <= 0.0 and wp.dot(nrm, B) <= 0.0:
+                continue
+            ne = wp.cross(A, B)
+            nn = wp.dot(ne, ne)
+            # is o inside the edge's wedge: does the plane o, a, b cut the light's bound?
+            hb = wp.dot(ne, bc)
+            if distant == 0:
+                hb = wp.dot(ne, bc - o)
+            if nn == 0.0 or hb * hb > ball[3] * ball[3] * nn * 1.0001:
+                continue
+            sigma = side(wp.dot(ne, edge_pts[e, 2] - o))
+            if edge_faces[e] > 1:
+                sigma += side(wp.dot(ne, edge_pts[e, 3] - o))
+            hr = wp.dot(ne, xr - o)
+            if sigma != 0:
+                in_wedge += 1
+                for s in range(S):
+                    x = xs[s]
+                    hs = wp.dot(ne, x - o)
+                    if (hs > 0.0) != (hr > 0.0):  # r and s on opposite sides of the plane o, a, b
+                        # a and b on opposite sides of the swept plane o, r, s: each corner's side is
+                        # computed alike for every edge it ends, so a sweep past a vertex is counted once
+                        ns = sweep[s]
+                        if (wp.dot(ns, A) > 0.0) != (wp.dot(ns, B) > 0.0):
+                            # the crossing lies before the light: m - o = alpha A + beta B, alpha + beta >= 1
+                            m = xr + (x - xr) * (hr / (hr - hs)) - o
+                            if wp.dot(wp.cross(m, B - A), ne) >= nn:
+                                sg = int(-1)
+                                if hs > 0.0:
+                                    sg = 1
+                                cnt[s] = cnt[s] + sigma * sg
+        wedge_hits[i] = in_wedge
+    if has_stsv != 0:
+        cell = receiver_cell(tbins.lv, o)
+        t0 = tbins.start[cell]
+        t1 = tbins.start[cell + 1]
+        nt = int(0)
+        for k in range(t0, t1):
+            j = tbins.items[k]
+            nt += 1
+            if in_volume(planes[j, 0], o, 0.0) or in_volume(planes[j, 1], o, 0.0):
+                tri = stri[j]
+                st = s_triangle(cut_pts[3 * j], cut_pts[3 * j + 1], cut_pts[3 * j + 2],
+                                cut.tri_uv[3 * tri], cut.tri_uv[3 * tri + 1], cut.tri_uv[3 * tri + 2])
+                J = receiver_matrix(st, o)
+                for s in range(S):
+                    if sample_blocked(cut, tri, st, J, o, xs[s]):
+                        cnt[s] = cnt[s] + 1
+        volume_tests[i] = nt
+    visible = int(0)
+    for s in range(S):
+        if cnt[s] != BLOCKED and base_count + cnt[s] <= 0:
+            visible += 1
+    vis[i] = float(visible) / float(S)
+
+
+@wp.kernel
+def build_volumes(
+    offset: int,
+    pts: wp.array[wp.vec3],
+    light: LightGPU,
+    # outputs
+    planes: wp.array2d[planes_t],
+):
+    """Both soft textured shadow volumes of perforated triangle ``i`` (an empty one where its
+    side's half-space holds no part of the light, §6)."""
+    i = wp.tid() + offset
+    v0 = pts[3 * i]
+    v1 = pts[3 * i + 1]
+    v2 = pts[3 * i + 2]
+    B = light_ball(light)
+    distant = int(light.kind == 3)
+    lit = lit_sides(v0, v1, v2, B, distant)
+    empty = planes_t()
+    empty[0] = wp.vec4(0.0, 0.0, 0.0, 1.0)
+    planes[i, 0] = empty
+    planes[i, 1] = empty
+    if (lit & 1) != 0:
+        planes[i, 0] = stsv_planes(v0, v1, v2, B, distant, 1)
+    if (lit & 2) != 0:
+        planes[i, 1] = stsv_planes(v0, v1, v2, B, distant, -1)
+
+
+# --------------------------------------------------------------------------- host: edges, volumes
+
+
+def triangle_masks(scene, light) -> tuple[np.ndarray, np.ndarray]:
+    """(opaque, perforated) [T] bool: the triangles that cast ``light``'s shadow, split by whether
+    their material is a cutout."""
+    cutout = np.array([m.is_cutout for m in scene.materials], bool)[scene.tri_material] if scene.triangle_count else np.zeros(0, bool)
+    cast = scene.casting_mask(light)
+    cast = np.ones(scene.triangle_count, bool) if cast is None else np.asarray(cast, bool)
+    return cast & ~cutout, cast & cutout
+
+
+@dataclass
+class Prep:
+    """What the visibility pass of one light reads, built by the ``dcs_edges`` and ``dcs_stsv``
+    passes: the grid's view, the receivers' farthest view depth, counters and the device data
+    (arrays, bins, a BVH)."""
+
+    view: object
+    zr_max: float
+    counters: dict
+    data: dict
+
+    def arrays(self) -> dict[str, wp.array]:
+        """The device arrays it holds, by name (the frame graph's memory report)."""
+        out = {}
+        for k, v in self.data.items():
+            if isinstance(v, wp.array):
+                out[k] = v
+            elif hasattr(v, "gpu") and hasattr(v.gpu, "items"):
+                out[k + ".start"] = v.gpu.start
+                out[k + ".items"] = v.gpu.items
+        return out
+
+
+class DCS(Technique):
+    """Depth complexity sampling: per receiver and light sample, the occluder layers crossed (one
+    ray to the light's centre plus silhouette-edge updates), soft textured shadow volumes for
+    perforated triangles; V = the fraction of samples with none."""
+
+    name = "dcs"
+    summary = ("depth complexity sampling: exact per-sample occluder counts from one ray per pixel and silhouette-edge "
+               "updates, soft textured shadow volumes for perforated triangles")
+    Params = DCSParams
+    reads = ("gbuffer", "scene.triangles", "scene.adjacency", "scene.textures")
+    quality = (Quality("samples", (4, 16, 64), "more light samples: noise down as with the reference, time up about linearly"),)
+    tolerance = Tolerance(mae=0.003, mae_penumbra=0.075)  # measured 0.0015, 0.060 (16 rotated stratified samples)
+    horizon = "exact"  # per light sample, as the reference
+    distance_refusal = "the depth complexity counts every occluder between the receiver and the light"
+    instancing_refusal = "its edges come from the flattened soup's adjacency and its reference rays walk the soup's BVH"
+
+    def supports(self, scene, light) -> str | None:
+        why = super().supports(scene, light)
+        if why is not None:
+            return why
+        if light.kind == LIGHT_POINT:
+            return "a point light has no area: depth complexity sampling needs light samples spread over it (use hard or izb)"
+        return None
+
+    def add_passes(self, ctx, light):
+        p = self.params
+        gbuf = ctx.gbuffer()
+        scene_key = ctx.scene_arrays()
+        scene = ctx.scene
+        out = ctx.visibility_key(light)
+        L = ctx.light_gpu(light)
+        pattern = p.sample_pattern()
+        disk = light.kind != LIGHT_RECT
+        opaque, perforated = triangle_masks(scene, light)
+        edges_key = ctx.key("dcs_edges", light)
+        edges_name = ctx.pass_name("dcs_edges", light)
+
+        def run_edges(res):
+            gb = res[gbuf]
+            prim = gb.prim.numpy()
+            rec = gb.pos.numpy()[prim >= 0]
+            lo, hi = scene.bounds
+            view = fit_light_view(light, rec, lo, hi, max(256, p.shadow_map_size))
+            grid = grid_view(view, p.shadow_map_size)
+            zr = grid.to_view(rec)[:, 2] if len(rec) else np.zeros(1)
+            zr_max = float(zr.max()) * (1.0 + 1e-5) + 1e-6 * grid.extent
+            _, r, distant = light_bound(light)
+            tan_a = math.tan(math.radians(0.5 * light.angle_deg)) if distant else 0.0
+            radius = 0.0 if distant else r
+            pts, nf = silhouette_candidates(scene, opaque, *light_bound(light))
+            ebins = build_bins(grid, pts[:, :2] if len(pts) else np.zeros((0, 2, 3), np.float32), radius, tan_a, zr_max, ctx.device)
+            dev = ctx.device
+            tri_ids = np.flatnonzero(opaque).astype(np.int32)
+            arrays = {"ebins": ebins, "edge_pts": wp.array(pts.reshape(-1, 4, 3) if len(pts) else np.zeros((1, 4, 3), np.float32),
+                                                           dtype=wp.vec3, device=dev),
+                      "edge_faces": wp.array(nf if len(nf) else np.zeros(1, np.int32), dtype=wp.int32, device=dev),
+                      "has_opaque": int(len(tri_ids) > 0)}
+            if len(tri_ids):
+                tp = scene.points[scene.triangles[tri_ids]].astype(np.float32)  # [n, 3, 3]
+                arrays["tri_pts"] = wp.array(tp.reshape(-1, 3), dtype=wp.vec3, device=dev)
+                arrays["bvh"] = wp.Bvh(wp.array(tp.min(axis=1), dtype=wp.vec3, device=dev), wp.array(tp.max(axis=1), dtype=wp.vec3, device=dev))
+            else:
+                arrays["tri_pts"] = wp.zeros(3, dtype=wp.vec3, device=dev)
+                arrays["bvh"] = None
+            if scene.casting_mask(light) is not None:  # collection:shadowLink: edges, BVH and volumes of these alone
+                ctx.ctx.pass_counters(edges_name)["casting_triangles"] = int(opaque.sum() + perforated.sum())
+            counters = {"potential_edges": int(len(pts)), "edge_bin_pairs": ebins.pairs, "edges_in_every_cell": ebins.whole,
+                        "grid_size": ebins.view.width, "grid_bytes": ebins.bytes}
+            return {edges_key: Prep(view=grid, zr_max=zr_max, counters=counters, data=arrays)}
+
+        ctx.add_pass(edges_name, inputs=(gbuf, scene_key), outputs=(edges_key,), run=run_edges, light=light)
+        inputs = [gbuf, scene_key, edges_key]
+
+        stsv_key = None
+        if perforated.any():
+            stsv_key = ctx.key("dcs_stsv", light)
+            inputs.append(stsv_key)
+
+            def run_stsv(res):
+                prep = res[edges_key]
+                dev = ctx.device
+                ids = np.flatnonzero(perforated).astype(np.int32)
+                tp = scene.points[scene.triangles[ids]].astype(np.float32)
+                cut_pts = wp.array(tp.reshape(-1, 3), dtype=wp.vec3, device=dev)
+                planes = wp.empty((len(ids), 2), dtype=planes_t, device=dev)
+                launch_chunked(build_volumes, len(ids), inputs=[cut_pts, L], outputs=[planes], device=dev, min_chunk=1024)
+                _, r, distant = light_bound(light)
+                tan_a = math.tan(math.radians(0.5 * light.angle_deg)) if distant else 0.0
+                tbins = build_bins(prep.view, tp, 0.0 if distant else r, tan_a, prep.zr_max, dev)
+                counters = {"perforated_triangles": int(len(ids)), "stsv_bin_pairs": tbins.pairs, "stsv_grid_size": tbins.view.width,
+                            "stsv_grid_bytes": tbins.bytes}
+                data = {"tbins": tbins, "stri": wp.array(ids, dtype=wp.int32, device=dev), "planes": planes, "cut_pts": cut_pts}
+                return {stsv_key: Prep(view=prep.view, zr_max=prep.zr_max, counters=counters, data=data)}
+
+            ctx.add_pass(ctx.pass_name("dcs_stsv", light), inputs=(edges_key, scene_key), outputs=(stsv_key,), run=run_stsv, light=light)
+
+        def run(res):
+            gb = res[gbuf]
+            ds = res[scene_key]
+            prep = res[edges_key]
+            a = prep.data
+            dev = ctx.device
+            n = gb.count
+            st = res[stsv_key] if stsv_key is not None else None
+            if st is None:
+                tb, stri, planes, cut_pts = a["ebins"].gpu, wp.zeros(1, dtype=wp.int32, device=dev), wp.zeros((1, 2), dtype=planes_t, device=dev), a["tri_pts"]
+            else:
+                tb, stri, planes, cut_pts = st.data["tbins"].gpu, st.data["stri"], st.data["planes"], st.data["cut_pts"]
+            vis = wp.empty(n, dtype=float, device=dev)
+            wt = wp.empty(n, dtype=wp.int32, device=dev)
+            vt = wp.empty(n, dtype=wp.int32, device=dev)
+            wh = wp.empty(n, dtype=wp.int32, device=dev)
+            bvh_id = a["bvh"].id if a["bvh"] is not None else wp.uint64(0)
+            launch_chunked(
+                dcs_visibility, n,
+                inputs=[gb.gpu(), pattern.on(dev, disk), L, ray_epsilon(gb, light), a["has_opaque"], bvh_id, a["tri_pts"],
+                        a["ebins"].gpu, a["edge_pts"], a["edge_faces"], int(st is not None), tb, stri, planes, ds.cutouts, cut_pts],
+                outputs=[vis, wt, wh, vt], device=dev, min_chunk=256, per_thread=32)
+            c = ctx.counters(light)
+            c.update(prep.counters)
+            if st is not None:
+                c.update(st.counters)
+            c["wedge_tests"] = int(wt.numpy().astype(np.int64).sum())
+            c["wedge_receivers"] = int(wh.numpy().astype(np.int64).sum())
+            c["stsv_tests"] = int(vt.numpy().astype(np.int64).sum())
+            c["samples"] = p.samples
+            return {out: ctx.visibility(vis)}
+
+        return ctx.add_pass(ctx.pass_name("dcs", light), inputs=tuple(inputs), outputs=(out,), run=run, light=light)
