@@ -59,7 +59,7 @@ class Adjacency:
     face indices, ``-1`` in column 1 for an open (or split non-manifold) edge; ``consistent``:
     [E] bool, the second face winds the edge ``b -> a`` (a consistently wound pair);
     ``nonmanifold``: [E] bool, the record comes from an edge with more than two faces;
-    ``face_n``: [F, 3] float32 unnormalised face normals, ``face_d``: [F] float32 ``n . v0``."""
+    ``face_n``: [F, 3] float32 unit face normals (zero for a degenerate face), ``face_d``: [F] float32 ``n . v0``."""
 
     points: np.ndarray
     faces: np.ndarray
@@ -146,7 +146,12 @@ def build_adjacency(points: np.ndarray, triangles: np.ndarray, tris: np.ndarray 
     if F:
         v0, v1, v2 = p[faces[:, 0]], p[faces[:, 1]], p[faces[:, 2]]
         n = np.cross(v1 - v0, v2 - v0)
-        d = np.einsum("ij,ij->i", n, v0)
+        # unit normals (zero for a degenerate face): the facing tests read only signs, and a huge
+        # triangle's unnormalised normal (coordinates near 1e30 give 1e60) has no float32
+        ln = np.linalg.norm(n, axis=1, keepdims=True)
+        n = np.divide(n, ln, out=np.zeros_like(n), where=ln > 0)
+        f32 = float(np.finfo(np.float32).max)
+        d = np.clip(np.einsum("ij,ij->i", n, v0), -f32, f32)
     else:
         n, d = np.zeros((0, 3)), np.zeros(0)
     return Adjacency(points=wpts, faces=faces, tris=tris, vertex_of_point=vmap, edges=edges, edge_faces=edge_faces,
