@@ -387,6 +387,25 @@ def stsv_lookup(tri: np.ndarray, tri_uv: np.ndarray, p: np.ndarray, s: np.ndarra
     return uv.numpy(), bary.numpy(), hit.numpy().astype(bool)
 
 
+@wp.func
+def triangle_volumes(v0: wp.vec3, v1: wp.vec3, v2: wp.vec3, L: LightGPU):
+    """Both soft textured shadow volumes of a perforated triangle (§6): (lit sides as
+    :func:`lit_sides` gives them, the volume of side +1, the volume of side -1), a volume empty (no
+    point inside) where its side's half-space holds no part of the light."""
+    B = light_ball(L)
+    distant = int(L.kind == 3)
+    lit = lit_sides(v0, v1, v2, B, distant)
+    front = planes_t()
+    front[0] = wp.vec4(0.0, 0.0, 0.0, 1.0)
+    back = planes_t()
+    back[0] = wp.vec4(0.0, 0.0, 0.0, 1.0)
+    if (lit & 1) != 0:
+        front = stsv_planes(v0, v1, v2, B, distant, 1)
+    if (lit & 2) != 0:
+        back = stsv_planes(v0, v1, v2, B, distant, -1)
+    return lit, front, back
+
+
 @wp.kernel
 def build_volumes(
     tri: wp.array[wp.vec3],
@@ -396,21 +415,10 @@ def build_volumes(
     sides: wp.array[wp.int32],
 ):
     i = wp.tid()
-    v0 = tri[3 * i]
-    v1 = tri[3 * i + 1]
-    v2 = tri[3 * i + 2]
-    B = light_ball(L)
-    distant = int(L.kind == 3)
-    lit = lit_sides(v0, v1, v2, B, distant)
+    lit, front, back = triangle_volumes(tri[3 * i], tri[3 * i + 1], tri[3 * i + 2], L)
     sides[i] = lit
-    empty = planes_t()
-    empty[0] = wp.vec4(0.0, 0.0, 0.0, 1.0)
-    planes[i, 0] = empty
-    planes[i, 1] = empty
-    if (lit & 1) != 0:
-        planes[i, 0] = stsv_planes(v0, v1, v2, B, distant, 1)
-    if (lit & 2) != 0:
-        planes[i, 1] = stsv_planes(v0, v1, v2, B, distant, -1)
+    planes[i, 0] = front
+    planes[i, 1] = back
 
 
 @wp.kernel

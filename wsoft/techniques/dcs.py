@@ -95,7 +95,7 @@ import warp as wp
 from wsoft.accel.dcs_bins import BinsGPU, build_bins, grid_view, receiver_cell
 from wsoft.lightspace.light import LightGPU, in_front, light_bound, light_point
 from wsoft.lightspace.samples import DEVICE_KINDS, KINDS, PAPER_MIN_DISTANCE, LightSamples, SamplePattern, sample_coords
-from wsoft.lightspace.stsv import in_volume, light_ball, lit_sides, planes_t, receiver_matrix, s_triangle, sample_blocked, stsv_planes
+from wsoft.lightspace.stsv import in_volume, light_ball, planes_t, receiver_matrix, s_triangle, sample_blocked, triangle_volumes
 from wsoft.lightspace.view import fit_light_view
 from wsoft.params import check_ranges
 from wsoft.parallel import launch_chunked
@@ -318,20 +318,9 @@ def build_volumes(
     """Both soft textured shadow volumes of perforated triangle ``i`` (an empty one where its
     side's half-space holds no part of the light, §6)."""
     i = wp.tid() + offset
-    v0 = pts[3 * i]
-    v1 = pts[3 * i + 1]
-    v2 = pts[3 * i + 2]
-    B = light_ball(light)
-    distant = int(light.kind == 3)
-    lit = lit_sides(v0, v1, v2, B, distant)
-    empty = planes_t()
-    empty[0] = wp.vec4(0.0, 0.0, 0.0, 1.0)
-    planes[i, 0] = empty
-    planes[i, 1] = empty
-    if (lit & 1) != 0:
-        planes[i, 0] = stsv_planes(v0, v1, v2, B, distant, 1)
-    if (lit & 2) != 0:
-        planes[i, 1] = stsv_planes(v0, v1, v2, B, distant, -1)
+    lit, front, back = triangle_volumes(pts[3 * i], pts[3 * i + 1], pts[3 * i + 2], light)
+    planes[i, 0] = front
+    planes[i, 1] = back
 
 
 # --------------------------------------------------------------------------- host: edges, volumes
