@@ -32,7 +32,7 @@ CURVE_SEED = 1  # the reference's curve is independent of the ground truth (seed
 # stages left out of the full sweep: forest (56M instanced triangles: techniques that read the triangle
 # soup cannot flatten it; its own evidence is `wsoft bench instancing`) and issue 13's analogs, added
 # after reports/pareto.md was made and measured by their own sweep once their techniques exist
-NOT_IN_PARETO = ("forest", "fence_perforated", "fence_mesh", "hl2_like", "factory", "greece")
+NOT_IN_PARETO = ("forest", "fence_perforated", "fence_mesh", "hl2_like", "factory", "greece", "wedge_overlap")
 
 
 def scene_lights(name: str) -> list[str]:

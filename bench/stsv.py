@@ -1,18 +1,21 @@
-"""Sweep ``stsv``: issue 13's evidence (Forest et al. 2009, soft textured shadow volumes), for what is
-built: ``dcs`` (depth complexity sampling) with STSV for perforated triangles. ``pwedge`` (penumbra
-wedges) is not built yet; its rows are absent and the report says so.
+"""Sweep ``stsv``: issue 13's evidence (Forest et al. 2009, soft textured shadow volumes): ``dcs``
+(depth complexity sampling) and ``pwedge`` (penumbra wedges), each with STSV for perforated
+triangles.
 
 * **Fig. 11** — ``fence_perforated`` (2 alpha-textured triangles, STSV) against ``fence_mesh`` (the
-  same fence as ~224k opaque triangles, silhouette edges) with ``dcs`` at 16 samples: frame time and
-  error against the reference (paper: 90 vs 3.3 fps, 27x).
+  same fence as ~224k opaque triangles, silhouette edges) with ``dcs`` (and ``pwedge``) at 16
+  samples: frame time and error against the reference (paper: 90 vs 3.3 fps, 27x).
 * **Figs. 8–9** — per scene and light, frame time and per-pass times at 720x576 for 16 and 64
-  samples (and 1024² for 16), with the technique's counters (potential silhouette edges,
-  receiver-edge tests, perforated triangles, STSV tests).
+  samples (and 1024² for 16), for ``pwedge`` + STSV, ``dcs`` + STSV (``v_coef``) and ``dcs`` with
+  the Monte-Carlo direct-lighting estimator, with the techniques' counters and pwedge's LS_buffer
+  memory (exactly samples x pixels bits).
+* **Fig. 4(a)** — ``wedge_overlap``: the penumbra wedges' overlap artifact beside ``dcs`` and the
+  reference (images).
 * **Fig. 5** — error and noise against the reference per sample distribution (stratified, Poisson
   disk at the paper's minimum distances, (0,2)-sequence, uniform random), decorrelated between
   pixels by rotation, 4x4 interleaving or a new set per pixel, on ``fence_perforated``.
 * **§5.2** — against ``ssm`` (MSSM, 1024² map) on ``factory``.
-* **Targets** — ``dcs`` at 64 stratified samples against the *exact* answer
+* **Targets** — ``dcs`` and ``pwedge`` at 64 stratified samples against the *exact* answer
   (:mod:`wsoft.metrics.exact`) on ``box_plane`` and on ``cutout``'s checkerboard fence: penumbra
   MAE <= 0.03.
 
@@ -31,6 +34,7 @@ from wsoft.bench.common import params_text, render_row
 
 SCENES = ("fence_perforated", "fence_mesh", "hl2_like", "factory", "greece")
 PATTERNS = ("stratified", "poisson", "sobol02", "random")
+VARIANTS = (("pwedge", {}), ("dcs", {}), ("dcs", {"estimator": "direct"}))  # Figs. 8-9: the frameworks, and dcs's two estimators
 
 
 def _lights(scene: str) -> list[str]:
@@ -46,35 +50,47 @@ def cases(quick: bool, devices: list[str]) -> list[dict]:
     for dev in devices:
         base = {"device": dev, "width": w, "height": h, "ref_samples": ref}
         for scene in ("fence_perforated", "fence_mesh"):
-            out.append(base | {"kind": "fig11", "scene": scene, "light": None, "technique": "dcs", "params": {"samples": 16}, "image": True})
+            for tech in ("dcs", "pwedge"):
+                out.append(base | {"kind": "fig11", "scene": scene, "light": None, "technique": tech, "params": {"samples": 16}, "image": True})
         for scene in (("fence_perforated", "factory") if quick else SCENES):
             for light in (_lights(scene)[:1] if quick else _lights(scene)):
                 scene_ref = {"ref_samples": 64 if quick else 256}  # per light of every scene: fewer reference samples
-                for n in ((16,) if quick else (16, 64)):
-                    out.append(base | scene_ref | {"kind": "scene", "scene": scene, "light": light, "technique": "dcs", "params": {"samples": n}})
-                if not quick:
-                    out.append(base | scene_ref | {"kind": "scene", "scene": scene, "light": light, "technique": "dcs", "params": {"samples": 16},
-                                                   "width": 1024, "height": 1024})
+                for tech, params in VARIANTS:
+                    for n in ((16,) if quick else (16, 64)):
+                        out.append(base | scene_ref | {"kind": "scene", "scene": scene, "light": light, "technique": tech,
+                                                       "params": params | {"samples": n}})
+                    if not quick and not params:
+                        out.append(base | scene_ref | {"kind": "scene", "scene": scene, "light": light, "technique": tech, "params": {"samples": 16},
+                                                       "width": 1024, "height": 1024})
+        for tech in ("pwedge", "dcs"):
+            out.append(base | {"kind": "overlap", "scene": "wedge_overlap", "light": None, "technique": tech, "params": {"samples": 64}, "image": True})
         for pattern in (("stratified", "poisson") if quick else PATTERNS):
             for dec in ("rotate", "interleave", "per_pixel"):
                 if dec == "per_pixel" and pattern in ("poisson", "sobol02"):
                     continue  # generated on the host only: no per-pixel sets
                 out.append(base | {"kind": "fig5", "scene": "fence_perforated", "light": None, "technique": "dcs",
                                    "params": {"samples": 16, "pattern": pattern, "decorrelate": dec}})
-        for tech, params in (("dcs", {"samples": 16}), ("ssm", {"shadow_map_size": 1024})):
+        for tech, params in (("dcs", {"samples": 16}), ("pwedge", {"samples": 16}), ("ssm", {"shadow_map_size": 1024})):
             out.append(base | {"kind": "mssm", "scene": "factory", "light": None, "technique": tech, "params": params, "image": True})
         for scene in ("box_plane", "cutout"):
-            out.append({"kind": "target", "scene": scene, "device": dev, "technique": "dcs", "params": {"samples": 64, "pattern": "stratified"},
-                        "width": 160 if quick else 320, "height": 120 if quick else 240})
+            for tech in ("dcs", "pwedge"):
+                out.append({"kind": "target", "scene": scene, "device": dev, "technique": tech, "params": {"samples": 64, "pattern": "stratified"},
+                            "width": 160 if quick else 320, "height": 120 if quick else 240})
     return out
 
 
 def run_case(case: dict, ctx: dict) -> dict:
     if case["kind"] == "target":
         return _target(case)
-    row = render_row(case, ctx)
+    row = render_row(case, ctx, extra=_off_by if case["kind"] == "overlap" else None)
     row["kind"] = case["kind"]
     return row
+
+
+def _off_by(frame, ref) -> dict:
+    """Pixels whose V is off the reference's by more than 0.1 (Fig. 4(a)'s artifact)."""
+    covered = ref["A"] > 0
+    return {"off_by_0_1": int((np.abs(frame.V - ref["V"]) > 0.1)[covered].sum())}
 
 
 def _target(case: dict) -> dict:
@@ -117,37 +133,64 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
     from wsoft.bench.common import report_header
 
     L = report_header("stsv", [r for r in rows if r.get("kind") != "target"], md, ctx)
-    L += ["Issue 13 (Forest et al. 2009): `dcs` (depth complexity sampling) with soft textured shadow volumes (STSV) for "
-          "alpha-perforated triangles. **`pwedge` (penumbra wedges) is not built yet**: no rows of it here, and the Figs. 8–9 "
-          "comparison between the two frameworks, pwedge's LS_buffer memory and the Monte-Carlo direct-lighting variant are missing.", ""]
+    L += ["Issue 13 (Forest et al. 2009): `dcs` (depth complexity sampling) and `pwedge` (penumbra wedges), each with soft "
+          "textured shadow volumes (STSV) for alpha-perforated triangles. Both run on this CPU: the paper's figures are a GPU's.", ""]
     by = lambda k: [r for r in rows if r.get("kind") == k]  # noqa: E731
-    f11 = {r["scene"]: r for r in by("fig11")}
+    f11 = {(r["scene"], r["technique"]): r for r in by("fig11")}
     L += ["## Fig. 11: 2 perforated triangles (STSV) against the same fence as opaque geometry", "",
-          "| scene | triangles | frame ms | technique passes ms | MAE | MAE penumbra | image |", "|---|---|---|---|---|---|---|"]
+          "| scene | technique | triangles | frame ms | technique passes ms | MAE | MAE penumbra | image |", "|---|---|---|---|---|---|---|---|"]
     for s in ("fence_perforated", "fence_mesh"):
-        r = f11.get(s)
-        if r:
-            L.append(f"| {s} | {r['counters']['frame']['triangles']:,} | {r['timings_ms']['total']:.1f} | {_own_ms(r):.1f} | "
-                     f"{r['error']['mae']:.4f} | {r['error']['mae_penumbra']:.4f} | ![]({r.get('image', '')}) |")
-    if len(f11) == 2:
-        a, b = f11["fence_perforated"], f11["fence_mesh"]
-        ratio = b["timings_ms"]["total"] / a["timings_ms"]["total"]
-        own = _own_ms(b) / max(_own_ms(a), 1e-9)
-        met = ratio >= 25.0
-        L += ["", f"Frame time ratio fence_mesh / fence_perforated: **{ratio:.1f}x** (technique passes alone {own:.1f}x); "
-              f"target >= 25x at comparable error: **{'met' if met else 'not met'}** (penumbra MAE {a['error']['mae_penumbra']:.4f} vs "
-              f"{b['error']['mae_penumbra']:.4f}). Paper: 90 vs 3.3 fps (27x) on a GPU."]
-    L += ["", "## Figs. 8–9: per scene and light", "",
-          "Reference: 256 samples per pixel here (1024 for Figs. 11 and 5 and §5.2).", "",
-          "| scene | light | res | samples | frame ms | G-buffer ms | dcs passes (ms) | potential edges | receiver-edge tests | perforated | STSV tests | grid MiB | MAE | MAE penumbra |",
-          "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
-    for r in sorted(by("scene"), key=lambda r: (r["scene"], r["light"], r["width"], r["params"]["samples"])):
+        for t in ("dcs", "pwedge"):
+            r = f11.get((s, t))
+            if r:
+                L.append(f"| {s} | {t} | {r['counters']['frame']['triangles']:,} | {r['timings_ms']['total']:.1f} | {_own_ms(r):.1f} | "
+                         f"{r['error']['mae']:.4f} | {r['error']['mae_penumbra']:.4f} | ![]({r.get('image', '')}) |")
+    for t in ("dcs", "pwedge"):
+        a, b = f11.get(("fence_perforated", t)), f11.get(("fence_mesh", "dcs"))
+        if a and b:
+            ratio = b["timings_ms"]["total"] / a["timings_ms"]["total"]
+            own = _own_ms(b) / max(_own_ms(a), 1e-9)
+            met = ratio >= 25.0
+            L += ["", f"Frame time ratio fence_mesh with dcs / fence_perforated with {t} (STSV): **{ratio:.1f}x** (technique passes alone "
+                  f"{own:.1f}x); target >= 25x at comparable error: **{'met' if met else 'not met'}** (penumbra MAE "
+                  f"{a['error']['mae_penumbra']:.4f} vs {b['error']['mae_penumbra']:.4f})."]
+    L += ["", "Paper: 90 vs 3.3 fps (27x) on a GPU.", "", "## Figs. 8–9: per scene and light", "",
+          "Reference: 256 samples per pixel here (1024 for Figs. 11 and 5 and §5.2). `dcs direct` is the Monte-Carlo direct-lighting "
+          "estimator (each sample weighted by its unshadowed irradiance); its V is a different quantity from the reference's plain "
+          "fraction of samples, so part of its error is that difference. LS_buffer: pwedge's per-pixel STSV bitmask, "
+          "`samples x pixels` bits exactly (the 'bits/px' column is its measured size over the frame's pixels).", "",
+          "| scene | light | res | technique | samples | frame ms | G-buffer ms | technique passes (ms) | silhouette / potential edges | "
+          "receiver-edge tests | perforated | STSV tests | LS_buffer KiB (bits/px) | grid MiB | MAE | MAE penumbra |",
+          "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in sorted(by("scene"), key=lambda r: (r["scene"], r["light"], r["width"], r["params"]["samples"], r["technique"], params_text(r["params"]))):
         c = _c(r)
         passes = ", ".join(f"{n.split('[')[0]} {ms:.0f}" for n, ms in r["timings_ms"].items() if r["pass_kinds"].get(n) in ("technique", "light_map"))
-        L.append(f"| {r['scene']} | {r['light'].split('/')[-1]} | {r['width']}x{r['height']} | {r['params']['samples']} | {r['timings_ms']['total']:.0f} | "
-                 f"{sum(ms for n, ms in r['timings_ms'].items() if r['pass_kinds'].get(n) == 'gbuffer'):.0f} | {passes} | {c.get('potential_edges', 0):,} | "
-                 f"{c.get('wedge_tests', 0):,} | {c.get('perforated_triangles', 0):,} | {c.get('stsv_tests', 0):,} | "
+        tech = r["technique"] + (" direct" if r["params"].get("estimator") == "direct" else "")
+        ls = c.get("ls_buffer_bytes")
+        ls_text = f"{ls / 1024:.0f} ({8 * ls / (r['width'] * r['height']):g})" if ls is not None else "–"
+        L.append(f"| {r['scene']} | {r['light'].split('/')[-1]} | {r['width']}x{r['height']} | {tech} | {r['params']['samples']} | "
+                 f"{r['timings_ms']['total']:.0f} | {sum(ms for n, ms in r['timings_ms'].items() if r['pass_kinds'].get(n) == 'gbuffer'):.0f} | "
+                 f"{passes} | {c.get('silhouette_edges', c.get('potential_edges', 0)):,} | {c.get('wedge_tests', 0):,} | "
+                 f"{c.get('perforated_triangles', 0):,} | {c.get('stsv_tests', 0):,} | {ls_text} | "
                  f"{c.get('grid_bytes', 0) / 2**20:.1f} | {r['error']['mae']:.4f} | {r['error']['mae_penumbra']:.4f} |")
+    sc = by("scene")
+    pairs = [(a, b) for a in sc for b in sc if a["technique"] == "pwedge" and b["technique"] == "dcs" and not b["params"].get("estimator")
+             and (a["scene"], a["light"], a["width"], a["params"]["samples"]) == (b["scene"], b["light"], b["width"], b["params"]["samples"])]
+    if pairs:
+        tr = [a["timings_ms"]["total"] / b["timings_ms"]["total"] for a, b in pairs]
+        bits = [8 * _c(a)["ls_buffer_bytes"] == a["params"]["samples"] * a["width"] * a["height"] for a, _ in pairs if "ls_buffer_bytes" in _c(a)]
+        L += ["", f"Over the {len(pairs)} (scene, light, resolution, samples) settings: pwedge's frame time is {min(tr):.2f}–{max(tr):.2f}x dcs's "
+              f"(median {float(np.median(tr)):.2f}x); its penumbra MAE is lower than dcs's in "
+              f"{sum(a['error']['mae_penumbra'] < b['error']['mae_penumbra'] for a, b in pairs)} of them. "
+              f"LS_buffer exactly samples x pixels bits: {sum(bits)} of {len(bits)} rows with perforated triangles."]
+    L += ["", "## Fig. 4(a): overlapping silhouettes (wedge_overlap, 64 samples)", "",
+          "| technique | frame ms | MAE | MAE penumbra | pixels off by > 0.1 | receivers clamped | image |", "|---|---|---|---|---|---|---|"]
+    for r in by("overlap"):
+        L.append(f"| {r['technique']} | {r['timings_ms']['total']:.0f} | {r['error']['mae']:.4f} | {r['error']['mae_penumbra']:.4f} | "
+                 f"{r.get('off_by_0_1', 0):,} | {_c(r).get('clamped', '–')} | ![]({r.get('image', '')}) |")
+    L += ["", "pwedge adds the covered areas of overlapping silhouettes: too dark where the light's centre is visible past both sheets, too "
+          "light where both hide it, and the fence card's LS_buffer bits add to SheetD's wedge coverage (the paper's Fig. 4(a) fence). "
+          "dcs counts per light sample and has none of it. `tests/test_pwedge.py` checks pwedge against the closed form of the artifact."]
     L += ["", "## Fig. 5: sample distributions on fence_perforated (16 samples)", "",
           "| pattern | between pixels | frame ms | MAE | RMSE | MAE penumbra |", "|---|---|---|---|---|---|"]
     for r in by("fig5"):
@@ -166,16 +209,19 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
         L.append(f"| {r['technique']} | {params_text(r['case']['params'])} | {r['timings_ms']['total']:.0f} | {r['error']['mae']:.4f} | "
                  f"{r['error']['mae_penumbra']:.4f} | ![]({r.get('image', '')}) |")
     m = {r["technique"]: r for r in by("mssm")}
-    if len(m) == 2:
-        d, q = m["dcs"], m["ssm"]
-        L += ["", f"dcs takes {d['timings_ms']['total'] / q['timings_ms']['total']:.2f}x ssm's frame time at penumbra MAE "
-              f"{d['error']['mae_penumbra']:.4f} against {q['error']['mae_penumbra']:.4f}. Paper: STSV 5x faster than MSSM and better "
-              "quality, on a GPU; here both run on this CPU."]
+    q = m.get("ssm")
+    for t in ("dcs", "pwedge"):
+        d = m.get(t)
+        if d and q:
+            L += ["", f"{t} takes {d['timings_ms']['total'] / q['timings_ms']['total']:.2f}x ssm's frame time at penumbra MAE "
+                  f"{d['error']['mae_penumbra']:.4f} against {q['error']['mae_penumbra']:.4f}."]
+    if q:
+        L += ["", "Paper: STSV 5x faster than MSSM and better quality, on a GPU; here all run on this CPU."]
     L += [""]
-    L += ["## Targets: dcs at 64 stratified samples against the exact answer", "",
-          "| scene | res | frame ms | ground pixels | penumbra pixels | MAE | MAE penumbra | max | target (penumbra MAE <= 0.03) |", "|---|---|---|---|---|---|---|---|---|"]
+    L += ["## Targets: dcs and pwedge at 64 stratified samples against the exact answer", "",
+          "| scene | technique | res | frame ms | ground pixels | penumbra pixels | MAE | MAE penumbra | max | target (penumbra MAE <= 0.03) |", "|---|---|---|---|---|---|---|---|---|---|"]
     for r in by("target"):
-        L.append(f"| {r['scene']} | {r['width']}x{r['height']} | {r['frame_ms']:.0f} | {r['pixels']:,} | {r['penumbra_pixels']:,} | {r['mae']:.4f} | "
+        L.append(f"| {r['scene']} | {r['technique']} | {r['width']}x{r['height']} | {r['frame_ms']:.0f} | {r['pixels']:,} | {r['penumbra_pixels']:,} | {r['mae']:.4f} | "
                  f"{r['mae_penumbra']:.4f} | {r['max']:.3f} | {'met' if r['mae_penumbra'] <= 0.03 else 'not met'} |")
     L += ["", "Exact answers: `wsoft.metrics.exact` (box_plane: a square occluder parallel to the light; cutout: the fence's 8x8 "
           "checkerboard cells, its ground where x < 1.9, out of the opaque box's reach)."]

@@ -77,7 +77,7 @@ def _bad_mesh(tmp_path):
         ("broken", "cannot open USD stage"),
         ("face", "/Tri: faceVertexIndices[2] = 9 is out of range"),
         ("nolight", "no shadow-casting light"),
-        ("technique", "unknown technique 'nope'; techniques: dcs, esm, essm, hard, izb, pcf, pcss, reference, salzman, ssm, vsm, vssm"),
+        ("technique", "unknown technique 'nope'; techniques: dcs, esm, essm, hard, izb, pcf, pcss, pwedge, reference, salzman, ssm, vsm, vssm"),
         ("param", "technique 'hard' has no parameter samples"),
         ("value", "shadow_map_size='abc' is not a valid int"),
         ("camera", "no camera '/World/Nope'"),

@@ -55,7 +55,7 @@ def test_unknown_parameter_lists_known():
     scene = wsoft.load_scene(scene_path("box_plane.usda"))
     with pytest.raises(wsoft.ParameterError, match="shadow_map_size, bias, slope_bias, conservative"):
         wsoft.render(scene, "hard", width=8, height=8, device="cpu", sample=4)
-    with pytest.raises(wsoft.ParameterError, match="techniques: dcs, esm, essm, hard, izb, pcf, pcss, reference, salzman, ssm, vsm, vssm"):
+    with pytest.raises(wsoft.ParameterError, match="techniques: dcs, esm, essm, hard, izb, pcf, pcss, pwedge, reference, salzman, ssm, vsm, vssm"):
         wsoft.render(scene, "nope", width=8, height=8, device="cpu")
     with pytest.raises(wsoft.ParameterError, match="not a valid int"):
         wsoft.render(scene, "hard", width=8, height=8, device="cpu", shadow_map_size="big")

@@ -402,10 +402,10 @@ def test_plan_lists_the_shadow_controls(tmp_path):
     plan = json.loads(p.stdout)
     sh = plan["lights"][0]["shadow"]
     assert sh["link"]["excluded_prims"] == 1 and sh["link"]["prims"] == 3 and sh["link"]["excluded"] == ["/World/A"]
-    assert sh["distance"] == 2.5 and "refused by dcs, esm, essm, salzman, ssm, vsm, vssm" in sh["distance_applied"]
+    assert sh["distance"] == 2.5 and "refused by dcs, esm, essm, pwedge, salzman, ssm, vsm, vssm" in sh["distance_applied"]
     assert sh["color"] == [0.5, 0.0, 0.0] and sh["color_applied"] == "applied to R G B, not to V"
     assert sh["falloff"] == 0.5 and sh["falloff_applied"].startswith("not applied")
-    assert set(plan["not_applicable"]) == {"dcs", "esm", "essm", "salzman", "ssm", "vsm", "vssm"}
+    assert set(plan["not_applicable"]) == {"dcs", "esm", "essm", "pwedge", "salzman", "ssm", "vsm", "vssm"}
     assert all("inputs:shadow:distance = 2.5" in w["reason"] for ws in plan["not_applicable"].values() for w in ws)
     t = run()
     assert t.returncode == 0, t.stderr

@@ -1539,7 +1539,7 @@ def _stsv(name: str) -> Callable[[str], dict[str, object]]:
     return run
 
 
-for _name in ("fence_perforated", "fence_mesh", "hl2_like", "factory", "greece"):
+for _name in ("fence_perforated", "fence_mesh", "hl2_like", "factory", "greece", "wedge_overlap"):
     SCENES[_name] = _stsv(_name)
 
 

@@ -9,6 +9,9 @@ their STSV part.
 * ``factory`` (Fig. 7b): high-poly opaque machinery, 14 perforated triangles (grates), 4 sphere
   lights close to the geometry.
 * ``greece`` (Fig. 7c): ~26k leaf triangles (two per leaf card), columns and ground, 3 lights.
+* ``wedge_overlap`` (Fig. 4a): penumbra wedges' overlap artifact: two opaque sheets whose
+  silhouettes overlap as seen from the ground, and a perforated fence card over an opaque sheet's
+  penumbra, under one rect light.
 
 Deterministic (fixed seeds, nothing time-dependent). Only called through ``generate.py``.
 """
@@ -409,10 +412,44 @@ def scene_greece(out_dir: str) -> dict[str, object]:
     return {"file": path, "triangles": tris, "perforated": leaves}
 
 
+# --------------------------------------------------------------------------- wedge_overlap
+
+
+def scene_wedge_overlap(out_dir: str) -> dict[str, object]:
+    path = os.path.join(out_dir, "wedge_overlap.usda")
+    write_png(os.path.join(out_dir, "textures", "fence_alpha.png"), fence_tile())
+    stage = new_stage(path, "Z")
+    tris = ground(stage, 4.0)
+    light = UsdLux.RectLight.Define(stage, "/World/Light")
+    light.CreateWidthAttr(1.0)
+    light.CreateHeightAttr(1.0)
+    light.CreateIntensityAttr(10.0)
+    light.AddTranslateOp().Set(Gf.Vec3d(0.0, 0.0, 3.0))
+    grey = make_material(stage, "/World/Looks/SheetMat", (0.55, 0.5, 0.45))
+    sheets = {"/World/SheetA": ((-2.0, -1.0), (0.0, 1.0), 1.0), "/World/SheetB": ((-2.2, -1.0), (-0.2, 1.0), 1.5),
+              "/World/SheetD": ((1.0, 1.5), (3.0, 3.0), 1.0)}
+    for name, ((x0, y0), (x1, y1), z) in sheets.items():
+        make_mesh(stage, name, ([(x0, y0, z), (x1, y0, z), (x1, y1, z), (x0, y1, z)], [4], [0, 1, 2, 3]), True, grey)
+        tris += 2
+    fence = cutout_material(stage, "/World/Looks/FenceMat", (0.5, 0.5, 0.52), "textures/fence_alpha.png")
+    tris += cards(stage, "/World/FenceC", np.array([[(0.0, 1.5, 1.5), (2.0, 1.5, 1.5), (2.0, 3.0, 1.5), (0.0, 3.0, 1.5)]]), (16, 12), fence)
+    make_camera(stage, (0.4, -4.5, 5.0), (0.2, 0.9, 0.0), (0, 0, 1), clip=(0.1, 100.0))
+    set_doc_string(stage.GetPrimAtPath("/World"), "wsoft:doc", (
+        "Forest et al. 2009 Fig. 4(a) analog, the penumbra wedges' overlap artifact: a 1 x 1 rect light at z = 3 over an "
+        "8 x 8 ground. Opaque double-sided sheets SheetA (x -2..0, y -1..1, z = 1) and SheetB (x -2.2..-0.2, y -1..1, "
+        "z = 1.5), whose right edges both cut the light seen from the ground near x = 0 (wedges add the two covered "
+        "areas: over-shadowed where the light's centre is visible, under-shadowed where both hide it); SheetD (x 1..3, "
+        "y 1.5..3, z = 1) under a perforated fence card FenceC (x 0..2, y 1.5..3, z = 1.5; textures/fence_alpha.png "
+        "16 x 12 times): its LS_buffer bits are added to SheetD's wedge coverage. %d triangles." % tris))
+    stage.GetRootLayer().Save()
+    return {"file": path, "triangles": tris}
+
+
 STSV_SCENES = {
     "fence_perforated": scene_fence_perforated,
     "fence_mesh": scene_fence_mesh,
     "hl2_like": scene_hl2_like,
     "factory": scene_factory,
     "greece": scene_greece,
+    "wedge_overlap": scene_wedge_overlap,
 }

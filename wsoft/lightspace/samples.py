@@ -271,6 +271,34 @@ class SamplePattern:
         launch_chunked(map_to_light, table.shape[0], inputs=[table, int(disk)], outputs=[out], device=device)
         return out
 
+DECORRELATIONS = ("rotate", "interleave", "per_pixel", "none")
+
+
+def check_decorrelation(pattern: str, samples: int, decorrelate: str) -> str | None:
+    """Why a (pattern, samples, decorrelate) choice of the object-based techniques' parameters is
+    invalid, or None."""
+    if pattern not in KINDS:
+        return f"pattern {pattern!r} is not one of {', '.join(KINDS)}"
+    if decorrelate not in DECORRELATIONS:
+        return f"decorrelate {decorrelate!r} is not one of {', '.join(DECORRELATIONS)}"
+    if decorrelate == "per_pixel" and pattern not in DEVICE_KINDS:
+        return f"decorrelate=per_pixel needs a pattern generated on the device ({', '.join(DEVICE_KINDS)}), not {pattern}"
+    if pattern == "jittered" and math.isqrt(samples) ** 2 != samples:
+        return f"pattern=jittered needs a square sample count, not {samples}"
+    return None
+
+
+def paper_pattern(pattern: str, samples: int, seed: int, decorrelate: str, interleave: int) -> SamplePattern:
+    """The light samples of Forest et al.'s techniques (``dcs``, ``pwedge``): ``pattern`` with the
+    paper's Poisson-disk minimum distances at 16 and 64 samples, decorrelated between pixels by a
+    per-pixel rotation, ``interleave`` x ``interleave`` interleaved sets, a new set per pixel, or
+    not at all."""
+    return SamplePattern(pattern, samples, seed=seed,
+                         min_distance=PAPER_MIN_DISTANCE.get(samples, 0.0) if pattern == "poisson" else 0.0,
+                         per_pixel=decorrelate == "per_pixel", rotate=decorrelate == "rotate",
+                         interleave=interleave if decorrelate == "interleave" else 1)
+
+
 
 @functools.lru_cache(maxsize=64)
 def _pattern_points(pattern: SamplePattern) -> np.ndarray:

@@ -27,6 +27,7 @@ _REGISTRY = {
     "ssm": ("wsoft.techniques.ssm", "SSM"),
     "izb": ("wsoft.techniques.izb", "IZB"),
     "dcs": ("wsoft.techniques.dcs", "DCS"),
+    "pwedge": ("wsoft.techniques.pwedge", "PWedge"),
 }
 NAMES: tuple[str, ...] = tuple(_REGISTRY)
 _TECHNIQUES: dict[str, type[Technique]] | None = None

@@ -1,0 +1,386 @@
+"""``pwedge``: penumbra wedges (Akenine-Möller and Assarsson 2002; Assarsson and Akenine-Möller
+2003) for opaque casters, with soft textured shadow volumes for perforated triangles (Forest,
+Barthe, Guennebaud and Paulin 2009, §3.1, Algorithm 2 lines 12-15).
+
+Per receiver ``o`` (a G-buffer sample, moved off its surface as the reference's shadow rays are):
+
+1. **Hard shadow from the light's centre** (the shadow volume's stencil test). One segment from
+   ``o`` to the centre ``c`` through a BVH of the light's opaque casters
+   (:func:`~wsoft.accel.occluders.count_crossings`): the covered fraction starts at 1 when it
+   crosses any, else at 0.
+2. **Silhouette edges from the centre** (``pwedge_edges``, per light). The welded adjacency of
+   each prim (:mod:`wsoft.scene.adjacency`: USD meshes split vertices at seams, so edges are
+   matched by position); an edge is a silhouette when its two faces lie on one side of the plane
+   through ``c`` and the edge, and open edges always are. Each keeps the plane of its hard shadow
+   quad, oriented toward its faces (its *inner* side). A distant light's centre is its direction.
+3. **Wedges** (``pwedge``). For each silhouette edge whose wedge holds ``o`` (the plane through
+   ``o`` and the edge cuts the light's bound), the edge projected from ``o`` onto the light and
+   clipped to it changes the covered fraction by the area of the light beyond it as seen from
+   ``c`` (:mod:`wsoft.lightspace.coverage`, exact for rect and disk lights): added when ``o`` is
+   outside the edge's hard shadow quad, subtracted inside. This is the papers' per-wedge pixel
+   shader with the coverage computed analytically instead of read from a 4D texture.
+4. **STSV** (``pwedge_stsv``, only when the light's casters hold perforated triangles not wholly
+   behind a rect or disk light; ``wsoft plan`` shows it). Per perforated triangle both volumes
+   of §6, binned by cell; each receiver inside one looks up every light sample (eq. 1-5,
+   :func:`~wsoft.lightspace.stsv.sample_blocked`) and ORs the blocked ones into its *LS_buffer* mask: ``samples`` bits per pixel, exactly
+   ``samples x pixels`` bits in all (``ls_buffer_bytes`` in the counters), light samples from the
+   shared generator (16 or 64 in the paper; any multiple of 8 up to 64 here).
+5. ``V = 1 - clamp(covered + popcount(LS_buffer) / samples, 0, 1)`` (``add_v_coef``).
+
+**What it gets wrong, on purpose.** The sum assumes silhouette loops do not overlap as seen from
+the receiver. Where two occluders' penumbrae overlap on the light, the overlap is counted twice and
+the point is *over-shadowed* (Forest et al. Fig. 4(a), kept here; ``tests/test_pwedge.py`` measures
+it against the exact answer, and ``wsoft bench stsv`` shows it); where the centre is hidden by two
+occluders, each edge uncovers its own part and the point is under-shadowed. The silhouette is the
+centre's, not the receiver's (the single-silhouette approximation). Perforated triangles' bits are
+added to the wedges' coverage, not merged with it, so a cutout over an opaque caster's penumbra is
+over-shadowed too (Fig. 4(a)'s fence). ``dcs`` counts per light sample and has neither artifact.
+
+No hardware rasterizer: wedges and volumes are binned into a light-space grid fitted to the
+receivers (:mod:`wsoft.accel.dcs_bins`, ``shadow_map_size`` cells per side) and each receiver
+gathers the ones of its cell, writing only its own result (no atomics: Warp's CPU atomics are
+not thread-safe across the thread pool). A scan conversion of wedge polygons into screen tiles
+would do the same tests on more pixels: a wedge's screen footprint bounds its receivers loosely
+where the wedge grazes a surface.
+
+Lights: rect, disk, sphere (its silhouette disk) and distant (its cone as the disk it cuts at unit
+distance). A point light has no penumbra (use ``hard`` or ``izb``). The receiver's own horizon
+caps ``V`` by the part of the light in front of its tangent plane (``horizon = "fraction"``).
+``collection:shadowLink`` is honoured; ``inputs:shadow:distance`` is refused. Instanced stages are
+flattened.
+
+Counters (``stats["counters"]["techniques"]["pwedge"][light]``): ``silhouette_edges``,
+``wedge_tests`` (receiver-edge pairs read from the cells' lists), ``wedge_receivers`` (receivers
+inside at least one wedge), ``wedge_hits`` (receiver-edge pairs whose edge covered part of the
+light), ``clamped`` (receivers whose summed coverage went past 1 or below 0: overlapping
+silhouettes at work), ``perforated_triangles``, ``stsv_tests``, ``ls_buffer_bytes``, ``grid_size`` and the
+bins' sizes.
+
+Example::
+
+    frame = wsoft.render(scene, "pwedge", width=640, height=480)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+
+from wsoft.accel.dcs_bins import BinsGPU, build_bins, receiver_cell
+from wsoft.accel.occluders import count_crossings, opaque_bvh, Prep, perforated_volumes, receiver_grid, triangle_masks, wedge_spread
+from wsoft.lightspace.bitmask import popcount
+from wsoft.lightspace.coverage import edge_coverage, light_frame
+from wsoft.lightspace.light import LightGPU, light_bound, light_point
+from wsoft.lightspace.samples import KINDS, LightSamples, SamplePattern, check_decorrelation, paper_pattern, sample_coords
+from wsoft.lightspace.stsv import in_volume, light_ball, planes_t, receiver_matrix, s_triangle, sample_blocked
+from wsoft.params import check_ranges
+from wsoft.parallel import launch_chunked
+from wsoft.raster.gbuffer import GBufferGPU, gb_covered
+from wsoft.reference import ray_epsilon, ray_offset, ray_origin, receiver_begin
+from wsoft.scene.adjacency import silhouette_candidates
+from wsoft.scene.device import Surfaces
+from wsoft.scene.types import LIGHT_POINT, LIGHT_RECT
+from wsoft.techniques.base import Quality, Technique, Tolerance, check, param
+
+MAX_SAMPLES = 64
+points_t = wp.types.matrix(shape=(MAX_SAMPLES, 3), dtype=wp.float32)
+
+
+@dataclass(frozen=True)
+class PWedgeParams:
+    samples: int = param(16, "light samples of the perforated triangles' LS_buffer (bits per pixel; the paper: 16 or 64; a "
+                             "multiple of 8)", range=(8, MAX_SAMPLES))
+    pattern: str = param("stratified", "LS_buffer sample pattern: " + ", ".join(KINDS) + " (poisson: the paper's minimum distances)")
+    decorrelate: str = param("rotate", "between pixels: rotate (the set turned per pixel), interleave (n x n sets), per_pixel "
+                                       "(a new set per pixel), none (one set everywhere)")
+    interleave: int = param(4, "decorrelate=interleave: n of the n x n interleaved sets", range=(1, 16))
+    seed: int = param(0, "random seed of the sample sets", range=(0, 2**31 - 1))
+    shadow_map_size: int = param(128, "cells per side of the light-space grid (a light view fitted to the receivers) that bins "
+                                      "receivers against wedges and perforated triangles' volumes", range=(8, 4096))
+
+    def __post_init__(self):
+        check_ranges(self)
+        check(self.samples % 8 == 0, f"samples must be a multiple of 8 (the LS_buffer holds whole bytes), not {self.samples}")
+        why = check_decorrelation(self.pattern, self.samples, self.decorrelate)
+        check(why is None, why)
+
+    def sample_pattern(self) -> SamplePattern:
+        return paper_pattern(self.pattern, self.samples, self.seed, self.decorrelate, self.interleave)
+
+
+# --------------------------------------------------------------------------- kernels
+
+
+@wp.kernel
+def ls_buffer_pass(
+    offset: int,
+    gb: GBufferGPU,
+    ls: LightSamples,
+    light: LightGPU,
+    eps: float,
+    tbins: BinsGPU,
+    stri: wp.array[wp.int32],
+    planes: wp.array2d[planes_t],
+    cut: Surfaces,
+    cut_pts: wp.array[wp.vec3],
+    nbytes: int,
+    # outputs
+    ls_buffer: wp.array[wp.uint8],
+    volume_tests: wp.array[wp.int32],
+):
+    """Receiver ``i``'s LS_buffer: bit ``s`` set when a perforated triangle whose volume holds the
+    receiver blocks light sample ``s`` at its alpha texture (the OR over S-triangles)."""
+    i = wp.tid() + offset
+    volume_tests[i] = 0
+    lo = wp.uint32(0)
+    hi = wp.uint32(0)
+    if gb_covered(gb, i):
+        p = gb.pos[i]
+        off, o, state, base, rot = receiver_begin(gb, ls, eps, i)
+        S = ls.count
+        xs = points_t()
+        for s in range(S):
+            c2, state = sample_coords(ls, state, base, rot, s)
+            r = light_point(light, p, c2)
+            xs[s] = o + wp.vec3(r[0], r[1], r[2]) * wp.max(r[3] - off, 0.0)
+        cell = receiver_cell(tbins.lv, o)
+        t0 = tbins.start[cell]
+        t1 = tbins.start[cell + 1]
+        volume_tests[i] = t1 - t0
+        for k in range(t0, t1):
+            j = tbins.items[k]
+            if in_volume(planes[j, 0], o, 0.0) or in_volume(planes[j, 1], o, 0.0):
+                tri = stri[j]
+                st = s_triangle(cut_pts[3 * j], cut_pts[3 * j + 1], cut_pts[3 * j + 2],
+                                cut.tri_uv[3 * tri], cut.tri_uv[3 * tri + 1], cut.tri_uv[3 * tri + 2])
+                J = receiver_matrix(st, o)
+                for s in range(S):
+                    if sample_blocked(cut, tri, st, J, o, xs[s]):
+                        if s < 32:
+                            lo = lo | (wp.uint32(1) << wp.uint32(s))
+                        else:
+                            hi = hi | (wp.uint32(1) << wp.uint32(s - 32))
+    for b in range(nbytes):
+        w = lo
+        if b >= 4:
+            w = hi
+        ls_buffer[i * nbytes + b] = wp.uint8((w >> wp.uint32(8 * (b % 4))) & wp.uint32(255))
+
+
+@wp.kernel
+def pwedge_visibility(
+    offset: int,
+    gb: GBufferGPU,
+    light: LightGPU,
+    eps: float,
+    has_opaque: int,
+    bvh: wp.uint64,
+    tri_pts: wp.array[wp.vec3],
+    ebins: BinsGPU,
+    edge_pts: wp.array2d[wp.vec3],
+    edge_quad: wp.array[wp.vec3],
+    has_stsv: int,
+    ls_buffer: wp.array[wp.uint8],
+    nbytes: int,
+    samples: int,
+    # outputs
+    vis: wp.array[float],
+    wedge_tests: wp.array[wp.int32],
+    wedge_hits: wp.array[wp.int32],
+    clamped: wp.array[wp.int32],
+):
+    """Per receiver: the hard shadow from the centre, the wedges' signed coverages, the LS_buffer's
+    bits (module docstring) and V."""
+    i = wp.tid() + offset
+    wedge_tests[i] = 0
+    wedge_hits[i] = 0
+    clamped[i] = 0
+    if not gb_covered(gb, i):
+        vis[i] = 1.0
+        return
+    p = gb.pos[i]
+    off = ray_offset(p, eps)
+    o = ray_origin(p, gb.nrm[i], off)
+    cov = float(0.0)
+    if has_opaque != 0:
+        c, u, v, ext, disk, smax = light_frame(light, o)
+        rc = light_point(light, p, wp.vec2(0.0, 0.0))
+        dc = wp.vec3(rc[0], rc[1], rc[2])
+        tm = wp.max(rc[3] - off, 0.0)
+        if tm > 0.0 and count_crossings(bvh, tri_pts, o, dc, tm) > 0:
+            cov = 1.0
+        ball = light_ball(light)
+        bc = wp.vec3(ball[0], ball[1], ball[2])
+        distant = int(light.kind == 3)
+        cell = receiver_cell(ebins.lv, o)
+        e0 = ebins.start[cell]
+        e1 = ebins.start[cell + 1]
+        wedge_tests[i] = e1 - e0
+        hits = int(0)
+        for k in range(e0, e1):
+            e = ebins.items[k]
+            a = edge_pts[e, 0]
+            b = edge_pts[e, 1]
+            ne = wp.cross(a - o, b - o)
+            nn = wp.dot(ne, ne)
+            hb = wp.dot(ne, bc)
+            if distant == 0:
+                hb = wp.dot(ne, bc - o)
+            if nn == 0.0 or hb * hb > ball[3] * ball[3] * nn * 1.0001:
+                continue  # o is outside the edge's wedge
+            f = edge_coverage(c, u, v, ext, disk, smax, o, a, b)
+            if f > 0.0:
+                hits += 1
+                if wp.dot(edge_quad[e], o - a) > 0.0:
+                    cov -= f  # inside the edge's hard shadow quad: the part beyond the edge is uncovered
+                else:
+                    cov += f
+        wedge_hits[i] = hits
+    if has_stsv != 0:
+        bits = int(0)
+        for kb in range(nbytes):
+            bits += popcount(wp.uint32(ls_buffer[i * nbytes + kb]))
+        cov += float(bits) / float(samples)
+    if cov > 1.0 or cov < 0.0:
+        clamped[i] = 1
+    vis[i] = 1.0 - wp.clamp(cov, 0.0, 1.0)
+
+
+# --------------------------------------------------------------------------- host
+
+
+def centre_silhouettes(scene, opaque: np.ndarray, light) -> tuple[np.ndarray, np.ndarray]:
+    """The silhouette edges of the opaque casters seen from ``light``'s centre (its direction for a
+    distant light): corners [E, 2, 3] float32 and the normal of each edge's hard shadow quad [E, 3]
+    float32 (the plane through the centre and the edge), pointing to the side its faces lie on."""
+    c, _, distant = light_bound(light)
+    pts, nf = silhouette_candidates(scene, opaque, c, 0.0, distant)
+    if not len(pts):
+        return np.zeros((0, 2, 3), np.float32), np.zeros((0, 3), np.float32)
+    P = pts.astype(np.float64)
+    a, b = P[:, 0], P[:, 1]
+    apex = -np.broadcast_to(c, a.shape) if distant else a - c  # a - (a + K d) ~ -d for a distant light
+    n = np.cross(apex, b - a)
+    s0 = np.sign(np.einsum("ij,ij->i", n, P[:, 2] - a))
+    s1 = np.where(nf > 1, np.sign(np.einsum("ij,ij->i", n, P[:, 3] - a)), 0.0)
+    w = np.sign(s0 + s1)
+    ln = np.linalg.norm(n, axis=1)
+    keep = (w != 0) & (ln > 0) & np.isfinite(ln)
+    quad = (n[keep] * (w[keep] / ln[keep])[:, None]).astype(np.float32)
+    return pts[keep, :2].astype(np.float32), quad
+
+
+class PWedge(Technique):
+    """Penumbra wedges: the hard shadow from the light's centre corrected, per silhouette edge whose
+    wedge holds the receiver, by the light area the edge covers; perforated triangles through
+    soft textured shadow volumes into an LS_buffer bitmask whose bits are added."""
+
+    name = "pwedge"
+    summary = ("penumbra wedges: hard shadow from the light's centre plus each silhouette edge's covered light area "
+               "(over-shadows where silhouettes overlap); soft textured shadow volumes into an LS_buffer for perforated triangles")
+    Params = PWedgeParams
+    reads = ("gbuffer", "scene.triangles", "scene.adjacency", "scene.textures")
+    quality = (Quality("samples", (8, 16, 64), "more LS_buffer samples: noise of perforated triangles' shadows down, time up"),)
+    tolerance = Tolerance(mae=0.0003, mae_penumbra=0.01)  # measured 1.3e-5, 0.0005: exact for one convex occluder, up to float
+    distance_refusal = "its hard shadow and wedges run from the receiver to the light"
+    instancing_refusal = "its edges come from the flattened soup's adjacency and its centre rays walk the soup's BVH"
+
+    def supports(self, scene, light) -> str | None:
+        why = super().supports(scene, light)
+        if why is not None:
+            return why
+        if light.kind == LIGHT_POINT:
+            return "a point light has no penumbra: penumbra wedges need an area (use hard or izb)"
+        return None
+
+    def add_passes(self, ctx, light):
+        p = self.params
+        gbuf = ctx.gbuffer()
+        scene_key = ctx.scene_arrays()
+        scene = ctx.scene
+        out = ctx.visibility_key(light)
+        L = ctx.light_gpu(light)
+        opaque, perforated = triangle_masks(scene, light)
+        edges_key = ctx.key("pwedge_edges", light)
+        edges_name = ctx.pass_name("pwedge_edges", light)
+
+        def run_edges(res):
+            dev = ctx.device
+            grid, zr_max = receiver_grid(light, res[gbuf], scene, p.shadow_map_size)
+            radius, tan_a = wedge_spread(light)
+            pts, quad = centre_silhouettes(scene, opaque, light)
+            ebins = build_bins(grid, pts, radius, tan_a, zr_max, dev)
+            arrays = {"ebins": ebins,
+                      "edge_pts": wp.array(pts if len(pts) else np.zeros((1, 2, 3), np.float32), dtype=wp.vec3, device=dev),
+                      "edge_quad": wp.array(quad if len(quad) else np.zeros((1, 3), np.float32), dtype=wp.vec3, device=dev)}
+            arrays.update(opaque_bvh(scene, opaque, dev))
+            if scene.casting_mask(light) is not None:  # collection:shadowLink: edges, BVH and volumes of these alone
+                ctx.ctx.pass_counters(edges_name)["casting_triangles"] = int(opaque.sum() + perforated.sum())
+            counters = {"silhouette_edges": int(len(pts)), "edge_bin_pairs": ebins.pairs, "edges_in_every_cell": ebins.whole,
+                        "grid_size": ebins.view.width, "grid_bytes": ebins.bytes}
+            return {edges_key: Prep(view=grid, zr_max=zr_max, counters=counters, data=arrays)}
+
+        ctx.add_pass(edges_name, inputs=(gbuf, scene_key), outputs=(edges_key,), run=run_edges, light=light)
+        inputs = [gbuf, scene_key, edges_key]
+
+        ls_key = None
+        nbytes = p.samples // 8
+        if perforated.any():
+            ls_key = ctx.key("pwedge_stsv", light)
+            inputs.append(ls_key)
+            pattern = p.sample_pattern()
+
+            def run_stsv(res):
+                gb = res[gbuf]
+                ds = res[scene_key]
+                prep = res[edges_key]
+                dev = ctx.device
+                counters, data = perforated_volumes(scene, perforated, L, light, prep.view, prep.zr_max, dev)
+                n = gb.count
+                buf = wp.empty(n * nbytes, dtype=wp.uint8, device=dev)
+                vt = wp.empty(n, dtype=wp.int32, device=dev)
+                launch_chunked(
+                    ls_buffer_pass, n,
+                    inputs=[gb.gpu(), pattern.on(dev, light.kind != LIGHT_RECT), L, ray_epsilon(gb, light), data["tbins"].gpu,
+                            data["stri"], data["planes"], ds.cutouts, data["cut_pts"], nbytes],
+                    outputs=[buf, vt], device=dev, min_chunk=256, per_thread=32)
+                counters["stsv_tests"] = int(vt.numpy().astype(np.int64).sum())
+                counters["ls_buffer_bytes"] = int(buf.size)
+                return {ls_key: Prep(view=prep.view, zr_max=prep.zr_max, counters=counters, data={"ls_buffer": buf})}
+
+            ctx.add_pass(ctx.pass_name("pwedge_stsv", light), inputs=(gbuf, scene_key, edges_key), outputs=(ls_key,), run=run_stsv,
+                         light=light)
+
+        def run(res):
+            gb = res[gbuf]
+            prep = res[edges_key]
+            a = prep.data
+            dev = ctx.device
+            n = gb.count
+            st = res[ls_key] if ls_key is not None else None
+            buf = st.data["ls_buffer"] if st is not None else wp.zeros(1, dtype=wp.uint8, device=dev)
+            vis = wp.empty(n, dtype=float, device=dev)
+            wt = wp.empty(n, dtype=wp.int32, device=dev)
+            wh = wp.empty(n, dtype=wp.int32, device=dev)
+            cl = wp.empty(n, dtype=wp.int32, device=dev)
+            bvh_id = a["bvh"].id if a["bvh"] is not None else wp.uint64(0)
+            launch_chunked(
+                pwedge_visibility, n,
+                inputs=[gb.gpu(), L, ray_epsilon(gb, light), a["has_opaque"], bvh_id, a["tri_pts"], a["ebins"].gpu, a["edge_pts"],
+                        a["edge_quad"], int(st is not None), buf, nbytes, p.samples],
+                outputs=[vis, wt, wh, cl], device=dev, min_chunk=256, per_thread=32)
+            c = ctx.counters(light)
+            c.update(prep.counters)
+            if st is not None:
+                c.update(st.counters)
+            whn = wh.numpy()
+            c["wedge_tests"] = int(wt.numpy().astype(np.int64).sum())
+            c["wedge_receivers"] = int((whn > 0).sum())
+            c["wedge_hits"] = int(whn.astype(np.int64).sum())
+            c["clamped"] = int(cl.numpy().sum())
+            c["samples"] = p.samples
+            return {out: ctx.visibility(vis)}
+
+        return ctx.add_pass(ctx.pass_name("pwedge", light), inputs=tuple(inputs), outputs=(out,), run=run, light=light)
