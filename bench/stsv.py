@@ -56,7 +56,7 @@ def cases(quick: bool, devices: list[str]) -> list[dict]:
             for light in (_lights(scene)[:1] if quick else _lights(scene)):
                 scene_ref = {"ref_samples": 64 if quick else 256}  # per light of every scene: fewer reference samples
                 for tech, params in VARIANTS:
-                    for n in ((16,) if quick else (16, 64)):
+                    for n in ((16,) if quick or params else (16, 64)):
                         out.append(base | scene_ref | {"kind": "scene", "scene": scene, "light": light, "technique": tech,
                                                        "params": params | {"samples": n}})
                     if not quick and not params:
@@ -174,7 +174,7 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
                  f"{c.get('perforated_triangles', 0):,} | {c.get('stsv_tests', 0):,} | {ls_text} | "
                  f"{c.get('grid_bytes', 0) / 2**20:.1f} | {r['error']['mae']:.4f} | {r['error']['mae_penumbra']:.4f} |")
     sc = by("scene")
-    pairs = [(a, b) for a in sc for b in sc if a["technique"] == "pwedge" and b["technique"] == "dcs" and not b["params"].get("estimator")
+    pairs = [(a, b) for a in sc for b in sc if a["technique"] == "pwedge" and b["technique"] == "dcs" and b["params"].get("estimator", "v_coef") == "v_coef"
              and (a["scene"], a["light"], a["width"], a["params"]["samples"]) == (b["scene"], b["light"], b["width"], b["params"]["samples"])]
     if pairs:
         tr = [a["timings_ms"]["total"] / b["timings_ms"]["total"] for a, b in pairs]
