@@ -9,6 +9,8 @@ import dataclasses
 
 import numpy as np
 import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
 from conftest import box_plane_ground_error, scene_path
 
 import wsoft
@@ -56,6 +58,26 @@ def test_edge_coverage_against_monte_carlo(kind):
     mc = np.array([_beyond_edge_mc(light, oi, ai, bi, rng) for oi, ai, bi in zip(o, a, b)])
     assert ((got > 0.02) & (got < 0.98)).sum() >= 10  # the edges really cut the light
     assert np.abs(got - mc).max() < 0.004, np.abs(got - mc).max()  # Monte Carlo's noise: 0.0008
+
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(st.lists(st.floats(-2.0, 2.0), min_size=6, max_size=6), st.floats(-0.5, 1.2), st.floats(-0.5, 1.2),
+       st.sampled_from([LIGHT_RECT, LIGHT_DISK]))
+def test_edge_coverage_is_a_fraction_and_ignores_the_edges_direction(c, ta, tb, kind):
+    """Any edge, its ends anywhere from behind the receiver to beyond the light: a fraction of the
+    light, the same either way round, and 0 for the parts outside the slab between them."""
+    light = Light(path="/L", kind=kind, position=np.array([0.0, 0.0, 4.0]), frame=np.eye(3), half_size=(1.0, 0.5), radius=0.8)
+    o = np.array([c[0], c[1], 0.0])
+    a = o + (np.array([c[2], c[3], 4.0]) - o) * ta
+    b = o + (np.array([c[4], c[5], 4.0]) - o) * tb
+    # an end projecting onto the light's centre makes R depend on the way the end approaches it
+    # (the neighbouring edge of a loop takes the rest): a measure-zero case, left out
+    assume(all(np.hypot(*c[2 * k + 2: 2 * k + 4]) > 1e-3 for k in range(2)))
+    f = edge_coverages(light, np.array([o, o]), np.array([a, b]), np.array([b, a]))
+    assert np.all((f >= 0.0) & (f <= 1.0))
+    assert abs(f[0] - f[1]) <= 1e-5
+    if max(ta, tb) <= 0.0 or min(ta, tb) > 1.0:
+        assert f[0] == 0.0
 
 
 def test_edge_behind_the_receiver_or_beyond_the_light_covers_nothing():

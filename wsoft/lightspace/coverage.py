@@ -200,11 +200,20 @@ def edge_coverage(c: wp.vec3, u: wp.vec3, v: wp.vec3, ext: wp.vec2, disk: int, s
     den = wp.dot(nrm, c - o)
     if den == 0.0 or ext[0] <= 0.0 or ext[1] <= 0.0:
         return 0.0
+    # an edge (nearly) through the receiver spans no plane with it: it covers nothing
+    pa = a - o
+    pb = b - o
+    ne = wp.cross(pa, pb)
+    if wp.dot(ne, ne) <= 1.0e-12 * wp.dot(pa, pa) * wp.dot(pb, pb):
+        return 0.0
     sa = wp.dot(nrm, a - o) / den
     sb = wp.dot(nrm, b - o) / den
-    # clip the edge to the slab 0 <= s <= smax (in front of the receiver, before the light)
+    # clip the edge to the slab 0 <= s <= smax (in front of the receiver, before the light); an end
+    # left in place keeps its own s (recomputing it from the clip parameter loses a tiny s)
     t0 = float(0.0)
     t1 = float(1.0)
+    s0 = sa
+    s1 = sb
     ds = sb - sa
     if ds == 0.0:
         if sa < 0.0 or sa > smax:
@@ -212,16 +221,32 @@ def edge_coverage(c: wp.vec3, u: wp.vec3, v: wp.vec3, ext: wp.vec2, disk: int, s
     else:
         ta = (0.0 - sa) / ds
         tb = (smax - sa) / ds
-        t0 = wp.max(t0, wp.min(ta, tb))
-        t1 = wp.min(t1, wp.max(ta, tb))
+        lo_t = wp.min(ta, tb)
+        hi_t = wp.max(ta, tb)
+        lo_s = smax
+        hi_s = float(0.0)
+        if ta < tb:
+            lo_s = 0.0
+            hi_s = smax
+        if lo_t > t0:
+            t0 = lo_t
+            s0 = lo_s
+        if hi_t < t1:
+            t1 = hi_t
+            s1 = hi_s
         if t0 >= t1:
             return 0.0
-    s0 = wp.max(sa + ds * t0, 0.0)
-    s1 = wp.max(sa + ds * t1, 0.0)
+    s0 = wp.max(s0, 0.0)
+    s1 = wp.max(s1, 0.0)
     if s0 == 0.0 and s1 == 0.0:
         return 0.0
-    qa = a + (b - a) * t0 - o
-    qb = a + (b - a) * t1 - o
+    # an end left in place is used as it is (a + (b - a) * 1 can round b's small coordinates away)
+    qa = a - o
+    if t0 > 0.0:
+        qa = a + (b - a) * t0 - o
+    qb = b - o
+    if t1 < 1.0:
+        qb = b + (a - b) * (1.0 - t1) - o
     co = c - o
     cu = wp.dot(co, u)
     cv = wp.dot(co, v)

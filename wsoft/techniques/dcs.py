@@ -102,7 +102,7 @@ import numpy as np
 import warp as wp
 
 from wsoft.accel.dcs_bins import BinsGPU, build_bins, receiver_cell
-from wsoft.accel.occluders import count_crossings, opaque_bvh, Prep, perforated_volumes, receiver_grid, side, triangle_masks, wedge_spread
+from wsoft.accel.occluders import Prep, count_crossings, opaque_bvh, perforated_volumes, receiver_grid, side, triangle_masks, wedge_spread
 from wsoft.lightspace.light import LightGPU, in_front, light_bound, light_point
 from wsoft.lightspace.samples import KINDS, LightSamples, SamplePattern, check_decorrelation, paper_pattern, sample_coords
 from wsoft.lightspace.stsv import in_volume, light_ball, planes_t, receiver_matrix, s_triangle, sample_blocked

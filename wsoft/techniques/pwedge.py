@@ -69,7 +69,7 @@ import numpy as np
 import warp as wp
 
 from wsoft.accel.dcs_bins import BinsGPU, build_bins, receiver_cell
-from wsoft.accel.occluders import count_crossings, opaque_bvh, Prep, perforated_volumes, receiver_grid, triangle_masks, wedge_spread
+from wsoft.accel.occluders import Prep, count_crossings, opaque_bvh, perforated_volumes, receiver_grid, triangle_masks, wedge_spread
 from wsoft.lightspace.bitmask import popcount
 from wsoft.lightspace.coverage import edge_coverage, light_frame
 from wsoft.lightspace.light import LightGPU, light_bound, light_point
