@@ -154,7 +154,9 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
             L += ["", f"Frame time ratio fence_mesh with dcs / fence_perforated with {t} (STSV): **{ratio:.1f}x** (technique passes alone "
                   f"{own:.1f}x); target >= 25x at comparable error: **{'met' if met else 'not met'}** (penumbra MAE "
                   f"{a['error']['mae_penumbra']:.4f} vs {b['error']['mae_penumbra']:.4f})."]
-    L += ["", "Paper: 90 vs 3.3 fps (27x) on a GPU.", "", "## Figs. 8–9: per scene and light", "",
+    L += ["", "Paper: 90 vs 3.3 fps (27x) on a GPU. Fig. 4's panels (a) pwedge + STSV and (b) dcs + STSV beside the reference are "
+          "the fence_perforated images above (only perforated triangles cast there, so the two agree bit for bit); the wedges' "
+          "overlap artifact of panel (a) is shown on wedge_overlap below.", "", "## Figs. 8–9: per scene and light", "",
           "Reference: 256 samples per pixel here (1024 for Figs. 11 and 5 and §5.2). `dcs direct` is the Monte-Carlo direct-lighting "
           "estimator (each sample weighted by its unshadowed irradiance); its V is a different quantity from the reference's plain "
           "fraction of samples, so part of its error is that difference. LS_buffer: pwedge's per-pixel STSV bitmask, "
