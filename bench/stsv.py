@@ -6,7 +6,7 @@ triangles.
   same fence as ~224k opaque triangles, silhouette edges) with ``dcs`` (and ``pwedge``) at 16
   samples: frame time and error against the reference (paper: 90 vs 3.3 fps, 27x).
 * **Figs. 8–9** — per scene (the paper's three: ``hl2_like``, ``factory``, ``greece``) and light,
-  frame time and per-pass times at 720x576 for 16 and 64 samples (and 1024² for 16), for ``pwedge`` + STSV, ``dcs`` + STSV (``v_coef``) and ``dcs`` with
+  frame time and per-pass times at 720x576 and 1024² for 16 and 64 samples, for ``pwedge`` + STSV, ``dcs`` + STSV (``v_coef``) and ``dcs`` with
   the Monte-Carlo direct-lighting estimator, with the techniques' counters and pwedge's LS_buffer
   memory (exactly samples x pixels bits).
 * **Fig. 4(a)** — ``wedge_overlap``: the penumbra wedges' overlap artifact beside ``dcs`` and the
@@ -56,12 +56,11 @@ def cases(quick: bool, devices: list[str]) -> list[dict]:
             for light in (_lights(scene)[:1] if quick else _lights(scene)):
                 scene_ref = {"ref_samples": 64 if quick else 256}  # per light of every scene: fewer reference samples
                 for tech, params in VARIANTS:
-                    for n in ((16,) if quick or params else (16, 64)):
-                        out.append(base | scene_ref | {"kind": "scene", "scene": scene, "light": light, "technique": tech,
-                                                       "params": params | {"samples": n}})
-                    if not quick and not params:
-                        out.append(base | scene_ref | {"kind": "scene", "scene": scene, "light": light, "technique": tech, "params": {"samples": 16},
-                                                       "width": 1024, "height": 1024})
+                    for n in ((16,) if quick else (16, 64)):
+                        row = base | scene_ref | {"kind": "scene", "scene": scene, "light": light, "technique": tech, "params": params | {"samples": n}}
+                        out.append(row)
+                        if not quick:
+                            out.append(row | {"width": 1024, "height": 1024})
         for tech in ("pwedge", "dcs"):
             out.append(base | {"kind": "overlap", "scene": "wedge_overlap", "light": None, "technique": tech, "params": {"samples": 64}, "image": True})
         for pattern in (("stratified", "poisson") if quick else PATTERNS):
