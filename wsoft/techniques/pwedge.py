@@ -141,10 +141,7 @@ def ls_buffer_pass(
         off, o, state, base, rot = receiver_begin(gb, ls, eps, i)
         S = ls.count
         xs = points_t()
-        for s in range(S):
-            c2, state = sample_coords(ls, state, base, rot, s)
-            r = light_point(light, p, c2)
-            xs[s] = o + wp.vec3(r[0], r[1], r[2]) * wp.max(r[3] - off, 0.0)
+        have_points = int(0)
         cell = receiver_cell(tbins.lv, o)
         t0 = tbins.start[cell]
         t1 = tbins.start[cell + 1]
@@ -152,6 +149,12 @@ def ls_buffer_pass(
         for k in range(t0, t1):
             j = tbins.items[k]
             if in_volume(planes[j, 0], o, 0.0) or in_volume(planes[j, 1], o, 0.0):
+                if have_points == 0:  # the light points, once, for receivers inside some volume only
+                    for s in range(S):
+                        c2, state = sample_coords(ls, state, base, rot, s)
+                        r = light_point(light, p, c2)
+                        xs[s] = o + wp.vec3(r[0], r[1], r[2]) * wp.max(r[3] - off, 0.0)
+                    have_points = 1
                 tri = stri[j]
                 st = s_triangle(cut_pts[3 * j], cut_pts[3 * j + 1], cut_pts[3 * j + 2],
                                 cut.tri_uv[3 * tri], cut.tri_uv[3 * tri + 1], cut.tri_uv[3 * tri + 2])
