@@ -146,3 +146,20 @@ class Prep:
                 out[k + ".start"] = v.gpu.start
                 out[k + ".items"] = v.gpu.items
         return out
+
+
+def edge_pass(ctx, light, gb, scene, opaque: np.ndarray, perforated: np.ndarray, size: int, corners: np.ndarray, pass_name: str,
+              arrays: dict, counters: dict) -> Prep:
+    """What an edge pass of ``dcs`` or ``pwedge`` builds for one light: the receivers' grid
+    (:func:`receiver_grid`), the edges (``corners`` [E, 2, 3]) binned in it, the opaque casters'
+    BVH (:func:`opaque_bvh`) beside the technique's own ``arrays``, its ``counters`` with the bins'
+    sizes, and (under ``collection:shadowLink``) the casting triangles in ``pass_name``'s counters."""
+    grid, zr_max = receiver_grid(light, gb, scene, size)
+    radius, tan_a = wedge_spread(light)
+    ebins = build_bins(grid, corners, radius, tan_a, zr_max, ctx.device)
+    data = {"ebins": ebins} | arrays | opaque_bvh(scene, opaque, ctx.device)
+    if scene.casting_mask(light) is not None:  # collection:shadowLink: edges, BVH and volumes of these alone
+        ctx.ctx.pass_counters(pass_name)["casting_triangles"] = int(opaque.sum() + perforated.sum())
+    counters = counters | {"edge_bin_pairs": ebins.pairs, "edges_in_every_cell": ebins.whole, "grid_size": ebins.view.width,
+                           "grid_bytes": ebins.bytes}
+    return Prep(view=grid, zr_max=zr_max, counters=counters, data=data)

@@ -37,7 +37,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from wsoft.lightspace.light import LightGPU, light_gpu
+from wsoft.lightspace.light import LightGPU, light_gpu, silhouette_disk
 
 poly_t = wp.types.matrix(shape=(8, 2), dtype=wp.float32)  # a convex polygon: a rectangle clipped by at most 3 lines
 INFINITE = wp.constant(1.0e30)
@@ -62,22 +62,10 @@ def light_frame(L: LightGPU, p: wp.vec3):
         t = wp.sqrt(wp.max(1.0 - L.cos_max * L.cos_max, 0.0)) / wp.max(L.cos_max, 1.0e-6)
         return p + L.az, L.ax, L.ay, wp.vec2(t, t), int(1), INFINITE
     # sphere: its silhouette disk seen from p (as light_point); a point light: a disk of radius 0
-    to_c = L.position - p
-    dist = wp.length(to_c)
-    n = L.az
-    if dist > 0.0:
-        n = to_c / dist
-    helper = wp.vec3(1.0, 0.0, 0.0)
-    if wp.abs(n[0]) > 0.9:
-        helper = wp.vec3(0.0, 1.0, 0.0)
-    tx = wp.normalize(wp.cross(helper, n))
-    ty = wp.cross(n, tx)
-    rad = float(0.0)
-    c = L.position
-    if L.kind == 2 and dist > L.radius * 1.0001:
-        rr = L.radius * L.radius / dist
-        rad = L.radius * wp.sqrt(wp.max(1.0 - rr / dist, 0.0))
-        c = L.position - n * rr
+    c, tx, ty, rad = silhouette_disk(L, p)
+    if L.kind != 2:
+        c = L.position
+        rad = 0.0
     return c, tx, ty, wp.vec2(rad, rad), int(1), 1.0
 
 

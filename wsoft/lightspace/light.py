@@ -40,6 +40,30 @@ def light_gpu(light: Light, scene_diagonal: float) -> LightGPU:
 
 
 @wp.func
+def silhouette_disk(L: LightGPU, p: wp.vec3):
+    """A ball light (radius ``L.radius`` about ``L.position``) seen from ``p``: the disk its
+    silhouette spans, facing ``p`` (centre, unit axes ``tx``, ``ty``, radius). From inside the
+    ball (or on it), the light's centre with radius 0."""
+    to_c = L.position - p
+    dist = wp.length(to_c)
+    n = L.az
+    if dist > 0.0:
+        n = to_c / dist
+    helper = wp.vec3(1.0, 0.0, 0.0)
+    if wp.abs(n[0]) > 0.9:
+        helper = wp.vec3(0.0, 1.0, 0.0)
+    tx = wp.normalize(wp.cross(helper, n))
+    ty = wp.cross(n, tx)
+    centre = L.position
+    rad = float(0.0)
+    if dist > L.radius * 1.0001:
+        rr = L.radius * L.radius / dist
+        rad = L.radius * wp.sqrt(wp.max(1.0 - rr / dist, 0.0))
+        centre = L.position - n * rr
+    return centre, tx, ty, rad
+
+
+@wp.func
 def light_point(L: LightGPU, p: wp.vec3, c: wp.vec2) -> wp.vec4:
     """A shadow ray from ``p`` toward the point of light coordinates ``c`` (``[-1, 1]^2`` on a rect
     light, the unit disk on the others, :mod:`wsoft.lightspace.samples`): unit direction (xyz)
@@ -51,18 +75,8 @@ def light_point(L: LightGPU, p: wp.vec3, c: wp.vec2) -> wp.vec4:
     elif L.kind == 1:  # disk
         target = L.position + (L.ax * c[0] + L.ay * c[1]) * L.radius
     elif L.kind == 2:  # sphere: the silhouette disk seen from p
-        to_c = L.position - p
-        dist = wp.length(to_c)
-        if dist > L.radius * 1.0001:
-            n = to_c / dist
-            helper = wp.vec3(1.0, 0.0, 0.0)
-            if wp.abs(n[0]) > 0.9:
-                helper = wp.vec3(0.0, 1.0, 0.0)
-            tx = wp.normalize(wp.cross(helper, n))
-            ty = wp.cross(n, tx)
-            rr = L.radius * L.radius / dist
-            rad = L.radius * wp.sqrt(wp.max(1.0 - rr / dist, 0.0))
-            target = L.position - n * rr + (tx * c[0] + ty * c[1]) * rad
+        centre, tx, ty, rad = silhouette_disk(L, p)
+        target = centre + (tx * c[0] + ty * c[1]) * rad
     elif L.kind == 3:  # distant: uniform in the cone's solid angle
         rho2 = c[0] * c[0] + c[1] * c[1]
         cos_t = 1.0 - rho2 * (1.0 - L.cos_max)

@@ -101,8 +101,8 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from wsoft.accel.dcs_bins import BinsGPU, build_bins, receiver_cell
-from wsoft.accel.occluders import Prep, count_crossings, opaque_bvh, perforated_volumes, receiver_grid, side, triangle_masks, wedge_spread
+from wsoft.accel.dcs_bins import BinsGPU, receiver_cell
+from wsoft.accel.occluders import Prep, count_crossings, edge_pass, perforated_volumes, side, triangle_masks
 from wsoft.lightspace.light import LightGPU, in_front, light_bound, light_point
 from wsoft.lightspace.samples import KINDS, LightSamples, SamplePattern, check_decorrelation, paper_pattern, sample_coords
 from wsoft.lightspace.stsv import in_volume, light_ball, planes_t, receiver_matrix, s_triangle, sample_blocked
@@ -357,20 +357,15 @@ class DCS(Technique):
         edges_name = ctx.pass_name("dcs_edges", light)
 
         def run_edges(res):
-            grid, zr_max = receiver_grid(light, res[gbuf], scene, p.shadow_map_size)
-            radius, tan_a = wedge_spread(light)
-            pts, nf = silhouette_candidates(scene, opaque, *light_bound(light))
-            ebins = build_bins(grid, pts[:, :2] if len(pts) else np.zeros((0, 2, 3), np.float32), radius, tan_a, zr_max, ctx.device)
             dev = ctx.device
-            arrays = {"ebins": ebins, "edge_pts": wp.array(pts.reshape(-1, 4, 3) if len(pts) else np.zeros((1, 4, 3), np.float32),
-                                                           dtype=wp.vec3, device=dev),
+            pts, nf = silhouette_candidates(scene, opaque, *light_bound(light))
+            arrays = {"edge_pts": wp.array(pts.reshape(-1, 4, 3) if len(pts) else np.zeros((1, 4, 3), np.float32), dtype=wp.vec3,
+                                           device=dev),
                       "edge_faces": wp.array(nf if len(nf) else np.zeros(1, np.int32), dtype=wp.int32, device=dev)}
-            arrays.update(opaque_bvh(scene, opaque, dev))
-            if scene.casting_mask(light) is not None:  # collection:shadowLink: edges, BVH and volumes of these alone
-                ctx.ctx.pass_counters(edges_name)["casting_triangles"] = int(opaque.sum() + perforated.sum())
-            counters = {"potential_edges": int(len(pts)), "edge_bin_pairs": ebins.pairs, "edges_in_every_cell": ebins.whole,
-                        "grid_size": ebins.view.width, "grid_bytes": ebins.bytes}
-            return {edges_key: Prep(view=grid, zr_max=zr_max, counters=counters, data=arrays)}
+            corners = pts[:, :2] if len(pts) else np.zeros((0, 2, 3), np.float32)
+            prep = edge_pass(ctx, light, res[gbuf], scene, opaque, perforated, p.shadow_map_size, corners, edges_name, arrays,
+                             {"potential_edges": int(len(pts))})
+            return {edges_key: prep}
 
         ctx.add_pass(edges_name, inputs=(gbuf, scene_key), outputs=(edges_key,), run=run_edges, light=light)
         inputs = [gbuf, scene_key, edges_key]

@@ -68,8 +68,8 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from wsoft.accel.dcs_bins import BinsGPU, build_bins, receiver_cell
-from wsoft.accel.occluders import Prep, count_crossings, opaque_bvh, perforated_volumes, receiver_grid, triangle_masks, wedge_spread
+from wsoft.accel.dcs_bins import BinsGPU, receiver_cell
+from wsoft.accel.occluders import Prep, count_crossings, edge_pass, perforated_volumes, triangle_masks
 from wsoft.lightspace.bitmask import popcount
 from wsoft.lightspace.coverage import edge_coverage, light_frame
 from wsoft.lightspace.light import LightGPU, light_bound, light_point
@@ -311,19 +311,12 @@ class PWedge(Technique):
 
         def run_edges(res):
             dev = ctx.device
-            grid, zr_max = receiver_grid(light, res[gbuf], scene, p.shadow_map_size)
-            radius, tan_a = wedge_spread(light)
             pts, quad = centre_silhouettes(scene, opaque, light)
-            ebins = build_bins(grid, pts, radius, tan_a, zr_max, dev)
-            arrays = {"ebins": ebins,
-                      "edge_pts": wp.array(pts if len(pts) else np.zeros((1, 2, 3), np.float32), dtype=wp.vec3, device=dev),
+            arrays = {"edge_pts": wp.array(pts if len(pts) else np.zeros((1, 2, 3), np.float32), dtype=wp.vec3, device=dev),
                       "edge_quad": wp.array(quad if len(quad) else np.zeros((1, 3), np.float32), dtype=wp.vec3, device=dev)}
-            arrays.update(opaque_bvh(scene, opaque, dev))
-            if scene.casting_mask(light) is not None:  # collection:shadowLink: edges, BVH and volumes of these alone
-                ctx.ctx.pass_counters(edges_name)["casting_triangles"] = int(opaque.sum() + perforated.sum())
-            counters = {"silhouette_edges": int(len(pts)), "edge_bin_pairs": ebins.pairs, "edges_in_every_cell": ebins.whole,
-                        "grid_size": ebins.view.width, "grid_bytes": ebins.bytes}
-            return {edges_key: Prep(view=grid, zr_max=zr_max, counters=counters, data=arrays)}
+            prep = edge_pass(ctx, light, res[gbuf], scene, opaque, perforated, p.shadow_map_size, pts, edges_name, arrays,
+                             {"silhouette_edges": int(len(pts))})
+            return {edges_key: prep}
 
         ctx.add_pass(edges_name, inputs=(gbuf, scene_key), outputs=(edges_key,), run=run_edges, light=light)
         inputs = [gbuf, scene_key, edges_key]
