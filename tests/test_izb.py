@@ -321,7 +321,8 @@ def test_bench_targets_are_ratios_per_interleaved_round():
     assert "| 1.45 (1.40–1.60) met, 2/3 |" in text
     assert "| 2.50 (2.41–3.00) met, 2/3 |" in text
     assert "0.1000 / 0.1000 (within 10%)" in text
-    assert "0.1000 / 0.2000 (not within 10%)" in text  # the brute-force table checks its own error
+    assert "0.1000 / 0.2000 (not within 10%)" in text  # the brute-force table checks its own error ...
+    assert "| 5.00 (5.00–5.00) not met, 0/3 |" in text  # ... and a ratio at unequal error is no pass
     row["params"] = {"subsamples": "plane"}
     del row["cost"]["supersample_recast"]
     assert "other reading" not in "\n".join(_targets([row]))
