@@ -96,6 +96,8 @@ def test_supports_agrees_with_plan_and_render():
         declined = {l.path: tech.supports(scene, l) for l in scene.lights if tech.supports(scene, l) is not None}
         listed = {w["light"]: w["reason"] for w in plan["not_applicable"].get(name, [])}
         assert listed == declined, name
+        if tech.point_refusal:  # a technique's own reason for point lights is the one given
+            assert declined.get("/World/Point") == tech.point_refusal, name
         f = wsoft.render(scene, name, width=24, height=18, device="cpu", **({"samples": 4} if name == "reference" else {}))
         assert f.stats["lights"] == [l.path for l in scene.lights if l.path not in declined]
         assert all(any(p in w for w in f.stats["warnings"]) for p in declined)
@@ -103,6 +105,7 @@ def test_supports_agrees_with_plan_and_render():
             with pytest.raises(wsoft.ParameterError, match=re.escape(next(iter(declined.values()))[:30])):
                 wsoft.render(scene, name, width=8, height=8, device="cpu", light="/World/Point")
     assert "ssm" in plan["not_applicable"]  # the interesting case happened: ssm declines the point light
+    assert {n for n in NAMES if create(n).point_refusal} >= {"dcs", "pwedge"}
 
 
 def test_plan_lists_a_point_light_instead_of_failing(tmp_path):

@@ -10,7 +10,7 @@ import pytest
 from conftest import box_plane_ground_error, scene_path
 
 import wsoft
-from wsoft.bench.stages import add_camera, add_point_light, add_quad, add_rect_light, make_stage
+from wsoft.bench.stages import add_camera, add_quad, add_rect_light, make_stage
 
 W, H = 128, 96
 
@@ -71,19 +71,6 @@ def test_bad_parameters_are_one_line_errors(params, match):
     with pytest.raises(wsoft.ParameterError, match=match) as e:
         wsoft.techniques.create("dcs", params)
     assert "\n" not in str(e.value)
-
-
-def test_point_light_is_refused_with_a_reason():
-    st = make_stage()
-    add_quad(st, "/World/G", (0, 0, 0), 5)
-    add_quad(st, "/World/O", (0, 0, 1), 0.5)
-    add_point_light(st, "/World/P", (0, 0, 3))
-    add_camera(st, "/World/Cam", (0, -4, 4), (0, 0, 0))
-    scene = wsoft.load_scene(st)
-    why = wsoft.techniques.create("dcs").supports(scene, scene.lights[0])
-    assert why and "no area" in why
-    with pytest.raises(wsoft.ParameterError, match="no area"):
-        wsoft.render(scene, "dcs", width=16, height=12, device="cpu")
 
 
 def test_one_and_two_threads_agree(monkeypatch):

@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from conftest import box_plane_ground_error, scene_path
 
 import wsoft
-from wsoft.bench.stages import add_camera, add_point_light, add_quad, add_rect_light, make_stage
+from wsoft.bench.stages import add_camera, add_quad, add_rect_light, make_stage
 from wsoft.lightspace.coverage import edge_coverages
 from wsoft.metrics.exact import CUTOUT, cutout_exact
 from wsoft.scene.types import LIGHT_DISK, LIGHT_RECT, Light
@@ -251,17 +251,6 @@ def test_bad_parameters_are_one_line_errors(params, match):
     with pytest.raises(wsoft.ParameterError, match=match) as e:
         wsoft.techniques.create("pwedge", params)
     assert "\n" not in str(e.value)
-
-
-def test_point_light_is_refused_with_a_reason():
-    st = make_stage()
-    add_quad(st, "/World/G", (0, 0, 0), 5)
-    add_quad(st, "/World/O", (0, 0, 1), 0.5)
-    add_point_light(st, "/World/P", (0, 0, 3))
-    add_camera(st, "/World/Cam", (0, -4, 4), (0, 0, 0))
-    scene = wsoft.load_scene(st)
-    with pytest.raises(wsoft.ParameterError, match="no penumbra"):
-        wsoft.render(scene, "pwedge", width=16, height=12, device="cpu")
 
 
 def test_one_and_four_threads_agree(monkeypatch):

@@ -8,7 +8,8 @@ answer), and implement :meth:`Technique.add_passes`, which registers passes thro
 :class:`~wsoft.render.TechniqueContext` it is given (scene arrays, G-buffer, light depth maps)
 and returns the key of the visibility it writes. Override :meth:`Technique.supports` when some
 lights or scenes are out of the technique's reach: ``wsoft plan`` lists the reason, ``render``
-skips the light (or stops with the reason when nothing is left). Override
+skips the light (or stops with the reason when nothing is left); a technique that cannot render a
+point light only sets ``point_refusal``. Override
 :meth:`Technique.bake_support` when the technique needs a camera image (``wsoft bake`` refuses it
 with the reason).
 
@@ -103,6 +104,9 @@ class Technique:
     # trace instances as they are (prototypes once, wsoft.scene.instancing), else why it needs the
     # triangle soup; the frame graph then flattens the stage for it (wsoft.render.instancing_plan)
     instancing_refusal: ClassVar[str] = "its passes read the flattened triangle soup"
+    # point lights: "" when the technique renders them, else why it cannot (one line, naming what
+    # to use instead); supports() then refuses them with it
+    point_refusal: ClassVar[str] = ""
 
     def __init__(self, params):
         self.params = params
@@ -139,7 +143,12 @@ class Technique:
     def supports(self, scene, light) -> str | None:
         """``None`` when the technique can render ``light`` of ``scene``, else the reason it cannot.
         Subclasses that override it start with ``super().supports(scene, light)``."""
-        return self.shadow_controls_refusal(light)
+        from wsoft.scene.types import LIGHT_POINT  # here: parsing the command line imports no Warp (wsoft.scene does)
+
+        why = self.shadow_controls_refusal(light)
+        if why is None and light.kind == LIGHT_POINT and self.point_refusal:
+            return self.point_refusal
+        return why
 
     def shadow_controls_refusal(self, light) -> str | None:
         """Why the technique cannot honour ``light``'s UsdLux shadow controls (a finite

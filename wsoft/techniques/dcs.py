@@ -112,7 +112,7 @@ from wsoft.raster.gbuffer import GBufferGPU, gb_covered
 from wsoft.reference import ray_epsilon, receiver_begin
 from wsoft.scene.adjacency import silhouette_candidates
 from wsoft.scene.device import Surfaces
-from wsoft.scene.types import LIGHT_POINT, LIGHT_RECT
+from wsoft.scene.types import LIGHT_RECT
 from wsoft.techniques.base import Quality, Technique, Tolerance, check, param
 
 MAX_SAMPLES = 64
@@ -334,14 +334,7 @@ class DCS(Technique):
     horizon = "exact"  # per light sample, as the reference
     distance_refusal = "the depth complexity counts every occluder between the receiver and the light"
     instancing_refusal = "its edges come from the flattened soup's adjacency and its reference rays walk the soup's BVH"
-
-    def supports(self, scene, light) -> str | None:
-        why = super().supports(scene, light)
-        if why is not None:
-            return why
-        if light.kind == LIGHT_POINT:
-            return "a point light has no area: depth complexity sampling needs light samples spread over it (use hard or izb)"
-        return None
+    point_refusal = "a point light has no area: depth complexity sampling needs light samples spread over it (use hard or izb)"
 
     def add_passes(self, ctx, light):
         p = self.params

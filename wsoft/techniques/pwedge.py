@@ -81,7 +81,7 @@ from wsoft.raster.gbuffer import GBufferGPU, gb_covered
 from wsoft.reference import ray_epsilon, ray_offset, ray_origin, receiver_begin
 from wsoft.scene.adjacency import silhouette_candidates
 from wsoft.scene.device import Surfaces
-from wsoft.scene.types import LIGHT_POINT, LIGHT_RECT
+from wsoft.scene.types import LIGHT_RECT
 from wsoft.techniques.base import Quality, Technique, Tolerance, check, param
 
 MAX_SAMPLES = 64
@@ -289,14 +289,7 @@ class PWedge(Technique):
     tolerance = Tolerance(mae=0.0003, mae_penumbra=0.01)  # measured 1.3e-5, 0.0005: exact for one convex occluder, up to float
     distance_refusal = "its hard shadow and wedges run from the receiver to the light"
     instancing_refusal = "its edges come from the flattened soup's adjacency and its centre rays walk the soup's BVH"
-
-    def supports(self, scene, light) -> str | None:
-        why = super().supports(scene, light)
-        if why is not None:
-            return why
-        if light.kind == LIGHT_POINT:
-            return "a point light has no penumbra: penumbra wedges need an area (use hard or izb)"
-        return None
+    point_refusal = "a point light has no penumbra: penumbra wedges need an area (use hard or izb)"
 
     def add_passes(self, ctx, light):
         p = self.params
