@@ -80,11 +80,14 @@ _SCENES: dict[str, object] = {}
 
 
 def load(name: str):
-    import wsoft
+    """A stage by name (:func:`scene_file`), loaded once, as the CLI loads it
+    (:func:`~wsoft.render.load_stage`, ``instancing=auto``): one triangle soup, unless its instances
+    place more triangles than would fit flattened (``forest``: 56 million), which stay instances."""
+    from wsoft.render import load_stage
 
     f = scene_file(name)
     if f not in _SCENES:
-        _SCENES[f] = wsoft.load_scene(f)
+        _SCENES[f] = load_stage(f)
     return _SCENES[f]
 
 

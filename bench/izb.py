@@ -96,18 +96,22 @@ def _targets_case(case: dict) -> dict:
     for name, kw in settings.items():
         frames[name] = wsoft.render(scene, "izb", width=w, height=h, device=dev, **kw)  # warm-up (compilation)
     names = list(settings)
-    cost = {n: {"izb": [], "stencil": []} for n in names}
+    cost = {n: {"izb": [], "stencil": [], "passes": {p: [] for p in IZB_PASSES}} for n in names}
     for k in range(case["rounds"]):
         for name in names[k % len(names):] + names[: k % len(names)]:
             fr = wsoft.render(scene, "izb", width=w, height=h, device=dev, **settings[name])
             cost[name]["izb"].append(_sum(fr.stats["cpu_ms"], IZB_PASSES))
             cost[name]["stencil"].append(_sum(fr.stats["cpu_ms"], STENCIL_PASSES))
+            for p in IZB_PASSES:
+                cost[name]["passes"][p].append(_sum(fr.stats["cpu_ms"], (p,)))
             frames[name] = fr
     ref, covered = _area_reference(case["scene"], w, h, dev)
     edge = covered & (ref > 0.0) & (ref < 1.0)
     mae_edge = {n: float(np.abs(frames[n].V.astype(np.float64) - ref)[edge].mean()) if edge.any() else 0.0 for n in names}
+    counts = {n: {k: frames[n].counters().get(k, 0) for k in ("samples_inserted", "subsamples_recast", "subsamples_from_stencil")}
+              for n in names}
     return {"scene": case["scene"], "technique": "izb_targets", "params": case["params"], "device": dev, "width": w, "height": h,
-            "rounds": case["rounds"], "cost": cost, "mae_edge": mae_edge,
+            "rounds": case["rounds"], "cost": cost, "mae_edge": mae_edge, "counts": counts,
             "edge_fraction": frames["adaptive"].counters().get("edge_fraction")}
 
 
@@ -237,7 +241,34 @@ def _targets(rows: list[dict]) -> list[str]:
             brute.append(f"| {t['scene']} | {t['width']}x{t['height']} | {_ratio_text(list(sr / a), lambda v: v >= 2.5 and eq)} | "
                          f"{float(np.median(sr / a_st)):.2f} | {e['adaptive']:.4f} / {e['supersample_recast']:.4f} "
                          f"{'(within 10%)' if eq else '(not within 10%)'} |")
-    return L + (brute_head + brute if brute else [])
+    return L + (brute_head + brute if brute else []) + _extra_cost(rows)
+
+
+def _extra_cost(rows: list[dict]) -> list[str]:
+    """Where ``adaptive``'s cost over ``none`` goes, per IZB pass, from the ``izb_targets`` rounds
+    (the median over rounds of each pass's CPU ms, and of adaptive's over none's in the same round)."""
+    rows = [r for r in rows if r["technique"] == "izb_targets" and "passes" in r["cost"]["none"]]
+    if not rows:
+        return []
+    L = ["", "Where `adaptive`'s extra cost goes: per IZB pass, the median over the same rounds of its CPU ms with `none` and "
+             "with `adaptive`, and of their per-round ratio. The paper's estimate (extra cost ≈ edge fraction × N) models the "
+             "grid and the light pass, which grow with the samples inserted; the samples pass also places the sub-samples (on the "
+             "centre's plane, or re-cast through the scene: `re-cast`).", "",
+         "| scene | res | sub-samples | samples inserted none / adaptive | re-cast (from stencil) | "
+         + " | ".join(f"{p[4:]} ms none / adaptive (×)" for p in IZB_PASSES) + " |",
+         "|---|---|---|---|---|" + "---|" * len(IZB_PASSES)]
+    for t in sorted(rows, key=lambda r: (r["scene"], r["width"], ("auto", "recast", "plane").index(r["params"]["subsamples"]))):
+        c, k = t["cost"], t.get("counts", {})
+        cells = []
+        for p in IZB_PASSES:
+            n, a = np.array(c["none"]["passes"][p]), np.array(c["adaptive"]["passes"][p])
+            ratio = f"{float(np.median(a / n)):.2f}" if (n > 0).all() else "—"
+            cells.append(f"{np.median(n):.1f} / {np.median(a):.1f} ({ratio})")
+        ka, kn = k.get("adaptive", {}), k.get("none", {})
+        L.append(f"| {t['scene']} | {t['width']}x{t['height']} | {t['params']['subsamples']} | "
+                 f"{kn.get('samples_inserted', '?')} / {ka.get('samples_inserted', '?')} | "
+                 f"{ka.get('subsamples_recast', '?')} ({ka.get('subsamples_from_stencil', '?')}) | " + " | ".join(cells) + " |")
+    return L
 
 
 def report(rows: list[dict], md: Path, ctx: dict) -> None:

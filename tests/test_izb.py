@@ -323,6 +323,14 @@ def test_bench_targets_are_ratios_per_interleaved_round():
     assert "0.1000 / 0.1000 (within 10%)" in text
     assert "0.1000 / 0.2000 (not within 10%)" in text  # the brute-force table checks its own error ...
     assert "| 5.00 (5.00–5.00) not met, 0/3 |" in text  # ... and a ratio at unequal error is no pass
+    assert "extra cost goes" not in text  # rows without per-pass times (an older layout): no breakdown
     row["params"] = {"subsamples": "plane"}
     del row["cost"]["supersample_recast"]
     assert "other reading" not in "\n".join(_targets([row]))
+    # the per-pass breakdown: medians over rounds of each pass and of its per-round ratio
+    for name, per in (("none", [10.0, 5.0, 20.0]), ("adaptive", [40.0, 15.0, 50.0]), ("supersample", [1.0, 1.0, 1.0])):
+        row["cost"][name]["passes"] = {p: list(per) for p in ("izb_samples", "izb_grid", "izb_light", "izb_resolve")}
+    row["counts"] = {"none": {"samples_inserted": 100}, "adaptive": {"samples_inserted": 140, "subsamples_recast": 12,
+                                                                      "subsamples_from_stencil": 8}}
+    text = "\n".join(_targets([row]))
+    assert "| s | 8x6 | plane | 100 / 140 | 12 (8) | 10.0 / 40.0 (3.00) |" in text  # ratios 4, 3, 2.5: median 3

@@ -1,6 +1,7 @@
 """Packet traversal of shadow rays (``wsoft.scene.packets``) against Warp's per-ray any-hit, bit for
 bit, on every light kind, with cutouts, and for sample counts that leave a packet partly filled;
-the one known difference against the brute force; packets that give up on fine geometry."""
+the two known differences (where the packet agrees with the brute force and Warp's per-ray walk
+does not); packets that give up on fine geometry."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ from conftest import scene_path
 
 import wsoft
 from wsoft.bench.stages import add_box, add_camera, add_point_light, add_quad, make_stage
+from wsoft.scene.device import Surfaces
 from wsoft.scene.packets import PACKET, pack_bvh
 
 CASES = [
@@ -172,6 +174,61 @@ def test_a_ray_grazing_a_shared_edge_that_warps_per_ray_walk_drops():
         wp.launch(hits, scene.triangle_count, inputs=[wp.vec3(o.numpy()[r]), wp.vec3(d.numpy()[r]), float(t.numpy()[r]), ds.points, ds.indices],
                   outputs=[out])
         assert packet[r] == int(out.numpy().any())
+
+
+def test_a_ray_through_a_cutout_cards_shared_edge_that_the_per_ray_step_skips():
+    """The other difference ``wsoft bench foundation`` found (hl2_like, Sky light, 640 x 480, 64
+    samples, seed 1: 4 pixels, one ray each): a shadow ray through the shared edge of two triangles
+    of one alpha-tested card, hit by both within 1e-5 of each other, a hole in the first and present
+    in the second. The per-ray walk finds the hole, steps 1e-5 (1 + t) past it (so as not to hit it
+    again) and so skips the second: unblocked. The packet tests every triangle it reaches at its own
+    hit and agrees with the brute force over every triangle with the alpha test: blocked."""
+    from wsoft.lightspace.light import disk_shaped
+    from wsoft.raster.camera import camera_gpu
+    from wsoft.raster.gbuffer import render_gbuffer
+    from wsoft.reference import generate_shadow_rays, ray_epsilon, reference_pattern, trace_ray_packets, trace_rays
+    from wsoft.render import RenderContext, _pick_camera
+    from wsoft.scene.device import surface_present, upload_scene
+    from wsoft.scene.packets import ray_triangle
+
+    scene = wsoft.load_scene(scene_path("hl2_like.usdc"))
+    light = scene.find_light("/World/Sky")
+    ds, _ = scene.device_copy("cpu", upload_scene)
+    ctx = RenderContext(scene, _pick_camera(scene, None, 640, 480), 640, 480, "cpu")
+    gb = render_gbuffer(ds, camera_gpu(ctx.camera), 640, 480, 1, scene.has_cutouts)
+    pattern = reference_pattern(64, 1, True)
+    pix = wp.array([313 * 640 + 411], dtype=wp.int32)
+    o, d, t = (wp.empty(64, dtype=wp.vec3), wp.empty(64, dtype=wp.vec3), wp.empty(64, dtype=float))
+    wp.launch(generate_shadow_rays, 1, inputs=[0, ctx.light_gpu(light), pattern.on("cpu", disk_shaped(light)), gb.gpu(), pix,
+                                                ray_epsilon(gb, light)], outputs=[o, d, t])
+    per_ray, packet = trace_rays(ds, o, d, t).numpy(), trace_ray_packets(ds, o, d, t, 64).numpy()
+
+    @wp.kernel
+    def hits(orig: wp.vec3, dirn: wp.vec3, tmax: float, pts: wp.array[wp.vec3], ind: wp.array[wp.int32], cut: Surfaces,
+             at: wp.array[float], present: wp.array[wp.int32]):
+        i = wp.tid()
+        h = ray_triangle(orig, dirn, pts[ind[3 * i]], pts[ind[3 * i + 1]], pts[ind[3 * i + 2]])
+        at[i] = -1.0
+        present[i] = 0
+        if h[0] != 0.0 and h[1] < tmax and h[1] >= 0.0:
+            at[i] = h[1]
+            present[i] = wp.where(surface_present(cut, i, h[2], h[3], 1.0 - h[2] - h[3]), 1, 0)
+
+    differ = np.nonzero(per_ray != packet)[0]
+    assert list(differ) == [2] and packet[2] == 1
+    found = {}
+    for r in (2, 0, 1, 3):  # the differing ray, and a few others as a control
+        at, present = wp.empty(scene.triangle_count, dtype=float), wp.empty(scene.triangle_count, dtype=wp.int32)
+        wp.launch(hits, scene.triangle_count, inputs=[wp.vec3(o.numpy()[r]), wp.vec3(d.numpy()[r]), float(t.numpy()[r]), ds.points,
+                                                      ds.indices, ds.cutouts], outputs=[at, present])
+        assert packet[r] == int(present.numpy().any())
+        found[r] = (at.numpy(), present.numpy())
+    at, present = found[2]
+    hit = np.nonzero(at >= 0)[0]
+    first, behind = hit[np.argsort(at[hit])][:2]
+    assert present[first] == 0 and present[behind] == 1  # a hole, then the card itself
+    assert 0 < at[behind] - at[first] < 1.0e-5 * (1.0 + at[first])  # within the per-ray walk's step past a hole
+    assert scene.tri_prim[first] == scene.tri_prim[behind]  # one card
 
 
 def test_packets_give_up_on_fine_geometry_and_stay_exact(device):

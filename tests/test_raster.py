@@ -208,6 +208,31 @@ def test_margin_widens_the_view_for_soft_techniques(light):
     assert wl < tl and wr > tr and wb < tb and wt > tt
 
 
+def test_view_fit_reductions_by_row_blocks_equal_the_whole_array(monkeypatch):
+    """The fit's caster and receiver reductions run in row blocks over the thread pool without
+    keeping the transformed points: the same values as transforming every point and reducing (float32
+    points, several blocks on several threads, and a window only some blocks' casters reach)."""
+    from wsoft.lightspace import view as V
+
+    monkeypatch.setenv("WSOFT_THREADS", "3")
+    rng = np.random.default_rng(7)
+    p = (rng.normal(size=(300_001, 3)) * [4.0, 3.0, 2.0] + [0.0, 0.0, 9.0]).astype(np.float32)
+    origin, axes = np.array([0.1, -0.2, 0.3]), np.linalg.qr(rng.normal(size=(3, 3)))[0]
+    v = (p.astype(np.float64) - origin) @ axes
+    lo, hi = V._frame_bounds(p, origin, axes)
+    assert np.allclose(lo, v.min(axis=0), rtol=0, atol=1e-12) and np.allclose(hi, v.max(axis=0), rtol=0, atol=1e-12)
+    assert np.array_equal(lo, V._frame_bounds(p, origin, axes)[0])  # the same however the blocks finish
+    window, w, zmin, zmax = (-0.05, 0.02, -0.01, 0.03), 0.4, 1e-3, 8.5
+    vc = V.to_frame(p, origin, axes)
+    vc = vc[(vc[:, 2] > zmin) & (vc[:, 2] < zmax)]
+    grow = w * (1.0 / vc[:, 2] - 1.0 / zmax)
+    cx, cy = vc[:, 0] / vc[:, 2], vc[:, 1] / vc[:, 2]
+    near = (cx >= window[0] - grow) & (cx <= window[1] + grow) & (cy >= window[2] - grow) & (cy <= window[3] + grow)
+    assert 0 < near.sum() < len(vc)
+    assert V._caster_growth(p, origin, axes, window, w, zmin, zmax) == float(grow[near].max())
+    assert V._caster_growth(p, origin, axes, window, w, zmin, 1e-2) is None  # no caster in front of the receivers
+
+
 def test_light_inside_a_closed_mesh_keeps_its_faces(device):
     """Skipping the far faces of closed surfaces is exact only when the light is outside them: with
     a rect light inside a closed box, every face is turned away from it and the box cast no shadow

@@ -192,6 +192,47 @@ def frame_extent_of_bounds(lo: np.ndarray | None, hi: np.ndarray | None, light: 
     return ext if math.isfinite(ext) and ext > 0.0 else max(float(np.abs(box).max(initial=0.0)), 1e-6)
 
 
+def _frame_bounds(p: np.ndarray, origin: np.ndarray, axes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(min, max) per axis of :func:`to_frame` of the points ``p`` (N >= 1), by row blocks over
+    the thread pool without keeping the transformed points: the same values as transforming
+    them all and reducing."""
+    from wsoft.parallel import run_row_blocks
+
+    parts = []
+
+    def block(a: int, e: int) -> None:
+        v = to_frame(p[a:e], origin, axes, threads=False)
+        parts.append((v.min(axis=0), v.max(axis=0)))
+
+    run_row_blocks(len(p), block)
+    return np.min([q[0] for q in parts], axis=0), np.max([q[1] for q in parts], axis=0)
+
+
+def _caster_growth(casters: np.ndarray, origin: np.ndarray, axes: np.ndarray, window, half_extent: float, zmin: float,
+                   zr_max: float) -> float | None:
+    """How far a local light's window (tangents l, r, b, t) must grow for soft shadows: the largest
+    ``half_extent * (1/z - 1/zr_max)`` over the casters at view depth ``zmin < z < zr_max`` whose
+    tangents lie within that distance of the window (None: no such caster). Row blocks over the
+    thread pool, as :func:`to_frame`."""
+    from wsoft.parallel import run_row_blocks
+
+    l, r, b, t = window
+    found = []
+
+    def block(a: int, e: int) -> None:
+        vc = to_frame(casters[a:e], origin, axes, threads=False)
+        vc = vc[(vc[:, 2] > zmin) & (vc[:, 2] < zr_max)]
+        if len(vc):
+            grow = half_extent * (1.0 / vc[:, 2] - 1.0 / zr_max)
+            cx, cy = vc[:, 0] / vc[:, 2], vc[:, 1] / vc[:, 2]
+            near_window = (cx >= l - grow) & (cx <= r + grow) & (cy >= b - grow) & (cy <= t + grow)
+            if near_window.any():
+                found.append(float(grow[near_window].max()))
+
+    run_row_blocks(len(casters), block)
+    return max(found) if found else None
+
+
 def _prism_depth_min(v: np.ndarray, window, default: float) -> float:
     """Smallest view depth of the view-space points ``v`` inside an orthographic window's prism
     (``default`` if none)."""
@@ -392,15 +433,14 @@ def fit_light_view(
     if light.kind == LIGHT_DISTANT:
         axes = np.stack([light.frame[:, 0], light.frame[:, 1], -light.frame[:, 2]], axis=1)  # view along emission
         center = 0.5 * (rlo + rhi)
-        vr = to_frame(rec, center, axes)
-        vlo, vhi = vr.min(axis=0), vr.max(axis=0)
+        vlo, vhi = _frame_bounds(rec, center, axes)
         corners = np.array([[x, y, z] for x in (scene_lo[0], scene_hi[0]) for y in (scene_lo[1], scene_hi[1]) for z in (scene_lo[2], scene_hi[2])])
         pts = casters if casters is not None else corners
         pad = margin + 1e-4 * ext
         l, r = vlo[0] - pad, vhi[0] + pad
         b, t = vlo[1] - pad, vhi[1] + pad
         zr_min, zr_max = float(vlo[2]), float(vhi[2])
-        vp = to_frame(np.asarray(pts, np.float64).reshape(-1, 3), center, axes) if pts is not None and len(pts) else None
+        vp = to_frame(np.asarray(pts).reshape(-1, 3), center, axes) if pts is not None and len(pts) else None
         zc = _prism_depth_min(vp, (l, r, b, t), zr_min)
         if casters is not None and light.angle_deg > 0:
             tan_a = math.tan(math.radians(0.5 * light.angle_deg))
@@ -435,16 +475,9 @@ def fit_light_view(
             l, r, b, t = -1.0, 1.0, -1.0, 1.0
         w = light.extent()
         if casters is not None and w > 0 and s["n"]:
-            zr_max = s["zmax"]
-            vc = to_frame(np.asarray(casters, np.float64).reshape(-1, 3), origin, axes)
-            vc = vc[(vc[:, 2] > 1e-3 * ext) & (vc[:, 2] < zr_max)]
-            if len(vc):
-                grow = w * (1.0 / vc[:, 2] - 1.0 / zr_max)
-                cx, cy = vc[:, 0] / vc[:, 2], vc[:, 1] / vc[:, 2]
-                near_window = (cx >= l - grow) & (cx <= r + grow) & (cy >= b - grow) & (cy <= t + grow)
-                if near_window.any():
-                    g = float(grow[near_window].max())
-                    l, r, b, t = l - g, r + g, b - g, t + g
+            g = _caster_growth(np.asarray(casters).reshape(-1, 3), origin, axes, (l, r, b, t), w, 1e-3 * ext, s["zmax"])
+            if g is not None:
+                l, r, b, t = l - g, r + g, b - g, t + g
         l, r = max(l, -MAX_TAN), min(r, MAX_TAN)
         b, t = max(b, -MAX_TAN), min(t, MAX_TAN)
         outside = s["outside"]

@@ -13,10 +13,13 @@ its nodes, so a few ``wp.func_native`` one-liners read them (:func:`bvh_root`, :
 ..., the layout of ``warp/native/bvh.h``: packed node halves, leaves flagged in the lower half,
 primitive ranges in ``primitive_indices``), and the ray-triangle test is Warp's own
 (``intersect_ray_tri_woop``, the one ``mesh_query_ray_anyhit`` calls), so a packet's answer is
-the per-ray answer bit for bit: the same triangles hit at the same ``t``. The one exception found
-(``tests/test_packets.py``, one ray in 19.7 million): a ray through the shared edge of two
-axis-aligned triangles, whose zero-thickness boxes Warp's per-ray walk drops; the packet's
-conservative bounds reach them and it agrees with the brute force over every triangle.
+the per-ray answer bit for bit: the same triangles hit at the same ``t``. Two exceptions found
+(``tests/test_packets.py``), in both of which the packet agrees with the brute force over every
+triangle and the per-ray walk does not: a ray through the shared edge of two axis-aligned
+triangles, whose zero-thickness boxes Warp's per-ray walk drops (city: one ray in 19.7 million);
+and, with cutouts, a ray through the shared edge of two triangles of one alpha-tested card, a
+hole in the first it meets and present in the second less than 1e-5 further, which the per-ray
+walk skips when it steps past the hole (hl2_like, Sky light, 64 samples at 640 x 480: one ray in each of 4 pixels).
 
 Warp's per-ray any-hit gives up (reports *unblocked*) when its traversal stack of 32 pending
 nodes is full. :func:`pack_bvh` walks the whole tree once with the packets' own stack of
