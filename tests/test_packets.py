@@ -12,8 +12,8 @@ from conftest import scene_path
 
 import wsoft
 from wsoft.bench.stages import add_box, add_camera, add_point_light, add_quad, make_stage
-from wsoft.scene.device import Surfaces
-from wsoft.scene.packets import PACKET, pack_bvh
+from wsoft.scene.device import Surfaces, surface_present
+from wsoft.scene.packets import PACKET, pack_bvh, ray_triangle
 
 CASES = [
     ("contact.usda", None),  # rect light, contact shadows
@@ -135,45 +135,64 @@ def test_packed_bvh_keeps_warps_tree():
     wp.synchronize()
 
 
-def test_a_ray_grazing_a_shared_edge_that_warps_per_ray_walk_drops():
-    """The one difference found in ``wsoft bench foundation`` (city, Rect light, 640 x 480, 64
-    samples, seed 1: one ray of 19.7 million): a shadow ray through the shared edge of two
-    axis-aligned triangles (each with a zero-thickness box). Warp's own triangle test hits both
-    at t = 50.8; its per-ray walk drops their box and reports the ray unblocked, the packet's
-    conservative bounds reach it. The packet agrees with the brute force over every triangle."""
+@wp.kernel
+def brute_force_hits(orig: wp.vec3, dirn: wp.vec3, tmax: float, pts: wp.array[wp.vec3], ind: wp.array[wp.int32], cut: Surfaces,
+                     at: wp.array[float], present: wp.array[wp.int32]):
+    """Every triangle against one ray with Warp's own test: where it hits (``at``, -1 if not) and
+    whether the surface is there (the alpha test of a cutout; 1 on an opaque triangle)."""
+    i = wp.tid()
+    h = ray_triangle(orig, dirn, pts[ind[3 * i]], pts[ind[3 * i + 1]], pts[ind[3 * i + 2]])
+    at[i] = -1.0
+    present[i] = 0
+    if h[0] != 0.0 and h[1] < tmax and h[1] >= 0.0:
+        at[i] = h[1]
+        present[i] = wp.where(surface_present(cut, i, h[2], h[3], 1.0 - h[2] - h[3]), 1, 0)
+
+
+def _pixel_rays(file: str, light_path: str, x: int, y: int):
+    """The 64 reference rays (seed 1) of pixel (x, y) of a 640 x 480 view, traced per ray and in a
+    packet, and a brute force over every triangle for any one of them."""
     from wsoft.lightspace.light import disk_shaped
     from wsoft.raster.camera import camera_gpu
-    from wsoft.raster.gbuffer import gb_index, render_gbuffer  # noqa: F401
+    from wsoft.raster.gbuffer import render_gbuffer
     from wsoft.reference import generate_shadow_rays, ray_epsilon, reference_pattern, trace_ray_packets, trace_rays
     from wsoft.render import RenderContext, _pick_camera
     from wsoft.scene.device import upload_scene
-    from wsoft.scene.packets import ray_triangle
 
-    scene = wsoft.load_scene(scene_path("city.usdc"))
-    light = scene.find_light("/World/Lights/Rect")
+    scene = wsoft.load_scene(scene_path(file))
+    light = scene.find_light(light_path)
     ds, _ = scene.device_copy("cpu", upload_scene)
     ctx = RenderContext(scene, _pick_camera(scene, None, 640, 480), 640, 480, "cpu")
     gb = render_gbuffer(ds, camera_gpu(ctx.camera), 640, 480, 1, scene.has_cutouts)
     pattern = reference_pattern(64, 1, True)
-    pix = wp.array([247 * 640 + 79], dtype=wp.int32)
+    pix = wp.array([y * 640 + x], dtype=wp.int32)
     o, d, t = (wp.empty(64, dtype=wp.vec3), wp.empty(64, dtype=wp.vec3), wp.empty(64, dtype=float))
     wp.launch(generate_shadow_rays, 1, inputs=[0, ctx.light_gpu(light), pattern.on("cpu", disk_shaped(light)), gb.gpu(), pix,
                                                 ray_epsilon(gb, light)], outputs=[o, d, t])
     per_ray, packet = trace_rays(ds, o, d, t).numpy(), trace_ray_packets(ds, o, d, t, 64).numpy()
 
-    @wp.kernel
-    def hits(orig: wp.vec3, dirn: wp.vec3, tmax: float, pts: wp.array[wp.vec3], ind: wp.array[wp.int32], out: wp.array[wp.int32]):
-        i = wp.tid()
-        h = ray_triangle(orig, dirn, pts[ind[3 * i]], pts[ind[3 * i + 1]], pts[ind[3 * i + 2]])
-        out[i] = wp.where(h[0] != 0.0 and h[1] < tmax and h[1] >= 0.0, 1, 0)
+    def brute(r: int):
+        at, present = wp.empty(scene.triangle_count, dtype=float), wp.empty(scene.triangle_count, dtype=wp.int32)
+        wp.launch(brute_force_hits, scene.triangle_count, inputs=[wp.vec3(o.numpy()[r]), wp.vec3(d.numpy()[r]), float(t.numpy()[r]),
+                                                                  ds.points, ds.indices, ds.cutouts], outputs=[at, present])
+        return at.numpy(), present.numpy()
 
+    return scene, per_ray, packet, brute
+
+
+def test_a_ray_grazing_a_shared_edge_that_warps_per_ray_walk_drops():
+    """One of the two differences found in ``wsoft bench foundation`` (city, Rect light, 640 x 480,
+    64 samples, seed 1: one ray of 19.7 million): a shadow ray through the shared edge of two
+    axis-aligned triangles (each with a zero-thickness box). Warp's own triangle test hits both
+    at t = 50.8; its per-ray walk drops their box and reports the ray unblocked, the packet's
+    conservative bounds reach it. The packet agrees with the brute force over every triangle."""
+    scene, per_ray, packet, brute = _pixel_rays("city.usdc", "/World/Lights/Rect", 79, 247)
+    assert not scene.has_cutouts  # every triangle hit is present
     differ = np.nonzero(per_ray != packet)[0]
     assert len(differ) <= 1
     for r in list(differ) + [0, 1, 2]:  # the differing ray, and a few others as a control
-        out = wp.empty(scene.triangle_count, dtype=wp.int32)
-        wp.launch(hits, scene.triangle_count, inputs=[wp.vec3(o.numpy()[r]), wp.vec3(d.numpy()[r]), float(t.numpy()[r]), ds.points, ds.indices],
-                  outputs=[out])
-        assert packet[r] == int(out.numpy().any())
+        at, _ = brute(r)
+        assert packet[r] == int((at >= 0).any())
 
 
 def test_a_ray_through_a_cutout_cards_shared_edge_that_the_per_ray_step_skips():
@@ -183,47 +202,13 @@ def test_a_ray_through_a_cutout_cards_shared_edge_that_the_per_ray_step_skips():
     in the second. The per-ray walk finds the hole, steps 1e-5 (1 + t) past it (so as not to hit it
     again) and so skips the second: unblocked. The packet tests every triangle it reaches at its own
     hit and agrees with the brute force over every triangle with the alpha test: blocked."""
-    from wsoft.lightspace.light import disk_shaped
-    from wsoft.raster.camera import camera_gpu
-    from wsoft.raster.gbuffer import render_gbuffer
-    from wsoft.reference import generate_shadow_rays, ray_epsilon, reference_pattern, trace_ray_packets, trace_rays
-    from wsoft.render import RenderContext, _pick_camera
-    from wsoft.scene.device import surface_present, upload_scene
-    from wsoft.scene.packets import ray_triangle
-
-    scene = wsoft.load_scene(scene_path("hl2_like.usdc"))
-    light = scene.find_light("/World/Sky")
-    ds, _ = scene.device_copy("cpu", upload_scene)
-    ctx = RenderContext(scene, _pick_camera(scene, None, 640, 480), 640, 480, "cpu")
-    gb = render_gbuffer(ds, camera_gpu(ctx.camera), 640, 480, 1, scene.has_cutouts)
-    pattern = reference_pattern(64, 1, True)
-    pix = wp.array([313 * 640 + 411], dtype=wp.int32)
-    o, d, t = (wp.empty(64, dtype=wp.vec3), wp.empty(64, dtype=wp.vec3), wp.empty(64, dtype=float))
-    wp.launch(generate_shadow_rays, 1, inputs=[0, ctx.light_gpu(light), pattern.on("cpu", disk_shaped(light)), gb.gpu(), pix,
-                                                ray_epsilon(gb, light)], outputs=[o, d, t])
-    per_ray, packet = trace_rays(ds, o, d, t).numpy(), trace_ray_packets(ds, o, d, t, 64).numpy()
-
-    @wp.kernel
-    def hits(orig: wp.vec3, dirn: wp.vec3, tmax: float, pts: wp.array[wp.vec3], ind: wp.array[wp.int32], cut: Surfaces,
-             at: wp.array[float], present: wp.array[wp.int32]):
-        i = wp.tid()
-        h = ray_triangle(orig, dirn, pts[ind[3 * i]], pts[ind[3 * i + 1]], pts[ind[3 * i + 2]])
-        at[i] = -1.0
-        present[i] = 0
-        if h[0] != 0.0 and h[1] < tmax and h[1] >= 0.0:
-            at[i] = h[1]
-            present[i] = wp.where(surface_present(cut, i, h[2], h[3], 1.0 - h[2] - h[3]), 1, 0)
-
+    scene, per_ray, packet, brute = _pixel_rays("hl2_like.usdc", "/World/Sky", 411, 313)
     differ = np.nonzero(per_ray != packet)[0]
     assert list(differ) == [2] and packet[2] == 1
-    found = {}
-    for r in (2, 0, 1, 3):  # the differing ray, and a few others as a control
-        at, present = wp.empty(scene.triangle_count, dtype=float), wp.empty(scene.triangle_count, dtype=wp.int32)
-        wp.launch(hits, scene.triangle_count, inputs=[wp.vec3(o.numpy()[r]), wp.vec3(d.numpy()[r]), float(t.numpy()[r]), ds.points,
-                                                      ds.indices, ds.cutouts], outputs=[at, present])
-        assert packet[r] == int(present.numpy().any())
-        found[r] = (at.numpy(), present.numpy())
-    at, present = found[2]
+    for r in (0, 1, 3):  # a few others as a control
+        assert packet[r] == int(brute(r)[1].any())
+    at, present = brute(2)
+    assert present.any()  # the brute force with the alpha test: blocked, as the packet has it
     hit = np.nonzero(at >= 0)[0]
     first, behind = hit[np.argsort(at[hit])][:2]
     assert present[first] == 0 and present[behind] == 1  # a hole, then the card itself
