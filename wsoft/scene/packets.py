@@ -4,8 +4,9 @@ All the light samples of one receiver start at the same point and fan out over t
 narrow frustum. :func:`trace_packet` walks the BVH once for up to :data:`PACKET` such rays,
 testing each node against the packet's interval bounds (the range of the rays' direction
 components per axis, conservative: a node no ray can reach is skipped; one some ray might
-reach is visited) and each reached triangle against every ray of the packet still unblocked,
-stopping when all are blocked. Alpha-tested cutouts decide at the exact hit, as
+reach is visited) and each reached leaf's triangles against the packet's rays still unblocked
+whose own segment meets the leaf's box (a per-ray slab test on a slightly padded box: the
+packet's bounds reach many leaves that most of its rays miss), stopping when all are blocked. Alpha-tested cutouts decide at the exact hit, as
 :func:`~wsoft.scene.device.occluded` does.
 
 The BVH is Warp's own (``wp.Mesh``'s, built once per scene): Warp has no kernel-level access to
@@ -13,13 +14,16 @@ its nodes, so a few ``wp.func_native`` one-liners read them (:func:`bvh_root`, :
 ..., the layout of ``warp/native/bvh.h``: packed node halves, leaves flagged in the lower half,
 primitive ranges in ``primitive_indices``), and the ray-triangle test is Warp's own
 (``intersect_ray_tri_woop``, the one ``mesh_query_ray_anyhit`` calls), so a packet's answer is
-the per-ray answer bit for bit: the same triangles hit at the same ``t``. Two exceptions found
-(``tests/test_packets.py``), in both of which the packet agrees with the brute force over every
-triangle and the per-ray walk does not: a ray through the shared edge of two axis-aligned
-triangles, whose zero-thickness boxes Warp's per-ray walk drops (city: one ray in 19.7 million);
-and, with cutouts, a ray through the shared edge of two triangles of one alpha-tested card, a
+the per-ray answer bit for bit: the same triangles hit at the same ``t``. Three kinds of
+exception found (``tests/test_packets.py``), in all of which the packet agrees with the brute
+force over every triangle and the per-ray walk does not: a ray through the shared edge of two
+triangles hit at the same ``t``, whose boxes Warp's per-ray walk drops (city, fence_mesh: one ray
+each); with cutouts, a ray through the shared edge of two triangles of one alpha-tested card, a
 hole in the first it meets and present in the second less than 1e-5 further, which the per-ray
-walk skips when it steps past the hole (hl2_like, Sky light, 64 samples at 640 x 480: one ray in each of 4 pixels).
+walk skips when it steps past the hole (hl2_like, Sky light, 64 samples at 640 x 480: one ray in
+each of 5 pixels); and a ray past a hole that meets the next cutout on the edge of its hole,
+where the per-ray walk's query from just past the first hole lands on the present side (greece:
+one ray).
 
 Warp's per-ray any-hit gives up (reports *unblocked*) when its traversal stack of 32 pending
 nodes is full. :func:`pack_bvh` walks the whole tree once with the packets' own stack of
@@ -39,7 +43,7 @@ from wsoft.scene.device import Surfaces, occluded, surface_present
 
 PACKET = 32  # rays a packet holds (one 32-bit word of a mask)
 STACK = 64  # BVH nodes a packet's traversal keeps pending
-WORK_PER_RAY = 8  # a packet gives up past this many node visits and ray-triangle tests per ray
+WORK_PER_RAY = 12  # a packet gives up past this many node visits and ray-triangle tests per ray (ray-box tests count half)
 
 packet_f = wp.types.vector(length=PACKET, dtype=float)
 stack_i = wp.types.vector(length=STACK, dtype=int)
@@ -415,12 +419,52 @@ def leaf_hits(
 
 
 @wp.func
+def ray_reaches_box(o: wp.vec3, d: wp.vec3, tmax: float, lo: wp.vec3, hi: wp.vec3) -> bool:
+    """Does the segment o + t*d, t in [0, tmax], meet the box ``lo..hi``? (slab test; callers
+    pad the box so that rounding never drops a ray that meets a triangle inside it)."""
+    tn = float(0.0)
+    tf = tmax
+    for a in range(3):
+        da = d[a]
+        if da == 0.0:
+            da = 1.0e-20
+        inv = 1.0 / da
+        t1 = (lo[a] - o[a]) * inv
+        t2 = (hi[a] - o[a]) * inv
+        tn = wp.max(tn, wp.min(t1, t2))
+        tf = wp.min(tf, wp.max(t1, t2))
+    return tn <= tf
+
+
+@wp.func
+def rays_reaching_leaf(o: wp.vec3, dx: packet_f, dy: packet_f, dz: packet_f, tm: packet_f, live: wp.uint32, lo: wp.vec3,
+                       hi: wp.vec3) -> wp.uint32:
+    """The rays of ``live`` whose segment meets the leaf's box, padded by 1e-5 of the coordinates'
+    magnitude (box and origin) per axis: conservative, a ray that meets a triangle of the leaf is
+    kept (the padded box also has thickness where the leaf's triangles lie in one axis plane)."""
+    pad = (wp.vec3(wp.max(wp.abs(lo[0]), wp.abs(hi[0])) + wp.abs(o[0]), wp.max(wp.abs(lo[1]), wp.abs(hi[1])) + wp.abs(o[1]),
+                   wp.max(wp.abs(lo[2]), wp.abs(hi[2])) + wp.abs(o[2])) + wp.vec3(1.0)) * 1.0e-5
+    blo = lo - pad
+    bhi = hi + pad
+    sub = wp.uint32(0)
+    m = live
+    while m != wp.uint32(0):
+        k = lowest_bit(m)
+        m = m & (m - wp.uint32(1))
+        if ray_reaches_box(o, wp.vec3(dx[k], dy[k], dz[k]), tm[k], blo, bhi):
+            sub = sub | (wp.uint32(1) << wp.uint32(k))
+    return sub
+
+
+@wp.func
 def visit_child(
     pb: PackedBVH,
     cut: Surfaces,
     has_cutouts: int,
     child: wp.vec2i,
     t: float,
+    lo: wp.vec3,
+    hi: wp.vec3,
     o: wp.vec3,
     dx: packet_f,
     dy: packet_f,
@@ -429,14 +473,22 @@ def visit_child(
     live: wp.uint32,
     work: int,
 ):
-    """One child of a record whose box the packet enters at ``t`` (1e30: never): a leaf's
-    triangles are tested on the spot, an inner child is returned to descend into (else -1);
-    returns (live, inner record or -1, work done so far)."""
+    """One child (box ``lo..hi``) of a record whose box the packet enters at ``t`` (1e30: never):
+    an inner child is returned to descend into (else -1); a leaf's triangles are tested on the
+    spot, each against the rays whose own segment meets the leaf's box (:func:`rays_reaching_leaf`:
+    the packet's bounds reach boxes that most of its rays miss). Returns (live, inner record or
+    -1, work done so far: a ray-box test counts half a ray-triangle test)."""
     if t >= 1.0e30:
         return live, -1, work
     if child[1] >= 0:
-        work += (child[1] - child[0]) * wp.bit_count(live)
-        return leaf_hits(pb, cut, has_cutouts, child[0], child[1], o, dx, dy, dz, tm, live), -1, work
+        sub = live
+        if wp.bit_count(live) > 1:
+            sub = rays_reaching_leaf(o, dx, dy, dz, tm, live, lo, hi)
+            work += wp.bit_count(live) / 2
+        if sub == wp.uint32(0):
+            return live, -1, work
+        work += (child[1] - child[0]) * wp.bit_count(sub)
+        return (live & ~sub) | leaf_hits(pb, cut, has_cutouts, child[0], child[1], o, dx, dy, dz, tm, sub), -1, work
     return live, child[0], work
 
 
@@ -487,11 +539,19 @@ def trace_packet(
         far = wp.vec2i(q.kids[2], q.kids[3])
         t_near = packet_entry(pk, q.lo_l, q.hi_l)
         t_far = packet_entry(pk, q.lo_r, q.hi_r)
+        lo_n = q.lo_l
+        hi_n = q.hi_l
+        lo_f = q.lo_r
+        hi_f = q.hi_r
         if t_far < t_near:
             near, far = far, near
             t_near, t_far = t_far, t_near
-        live, n0, work = visit_child(pb, cut, has_cutouts, near, t_near, o, dx, dy, dz, tm, live, work)
-        live, n1, work = visit_child(pb, cut, has_cutouts, far, t_far, o, dx, dy, dz, tm, live, work)
+            lo_n = q.lo_r
+            hi_n = q.hi_r
+            lo_f = q.lo_l
+            hi_f = q.hi_l
+        live, n0, work = visit_child(pb, cut, has_cutouts, near, t_near, lo_n, hi_n, o, dx, dy, dz, tm, live, work)
+        live, n1, work = visit_child(pb, cut, has_cutouts, far, t_far, lo_f, hi_f, o, dx, dy, dz, tm, live, work)
         if live == wp.uint32(0):
             return live, 0
         if n0 >= 0 and n1 >= 0:
