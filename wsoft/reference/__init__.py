@@ -9,12 +9,10 @@ through the concentric map onto the disk (the sphere seen as its silhouette disk
 lights uniformly in the sun's cone. Rays are any-hit against the scene's BVH and alpha-tested
 through cutout triangles. Randomness is seeded by the pattern's seed and the sample index.
 
-Two traversals give the same answer bit for bit (``tests/test_packets.py``; two exceptions found,
-where the packet agrees with the brute force and Warp's per-ray walk does not: a ray grazing the
-shared edge of two zero-thickness boxes, which the per-ray walk drops, and a ray through the shared
-edge of two triangles of one cutout card, a hole then present less than 1e-5 further, which the
-per-ray walk steps past, :mod:`wsoft.scene.packets`): ``packet`` (the
-default on CPU) traces a receiver's samples in packets of 32 rays through the BVH together
+Two traversals give the same answer bit for bit (``tests/test_packets.py``; three kinds of
+exception found, all at float precision on a shared edge or a cutout's hole, where the packet
+agrees with the brute force and Warp's per-ray walk does not, :mod:`wsoft.scene.packets`):
+``packet`` (the default on CPU) traces a receiver's samples in packets of 32 rays through the BVH together
 (:mod:`wsoft.scene.packets`: all start at the receiver and fan out over the light), ``ray``
 traces each with Warp's ``mesh_query_ray_anyhit`` (the default on CUDA, where a thread holding
 32 rays would spill its registers, and below 8 samples, where a packet's set-up costs more than
