@@ -6,8 +6,8 @@ testing each node against the packet's interval bounds (the range of the rays' d
 components per axis, conservative: a node no ray can reach is skipped; one some ray might
 reach is visited) and each reached leaf's triangles against the packet's rays still unblocked
 whose own segment meets the leaf's box (a per-ray slab test on a slightly padded box: the
-packet's bounds reach many leaves that most of its rays miss), stopping when all are blocked. Alpha-tested cutouts decide at the exact hit, as
-:func:`~wsoft.scene.device.occluded` does.
+packet's bounds reach many leaves that most of its rays miss), stopping when all are blocked.
+Alpha-tested cutouts decide at the exact hit, as :func:`~wsoft.scene.device.occluded` does.
 
 The BVH is Warp's own (``wp.Mesh``'s, built once per scene): Warp has no kernel-level access to
 its nodes, so a few ``wp.func_native`` one-liners read them (:func:`bvh_root`, :func:`bvh_lower`
