@@ -181,7 +181,7 @@ def _pixel_rays(file: str, light_path: str, x: int, y: int):
 
 
 def test_a_ray_grazing_a_shared_edge_that_warps_per_ray_walk_drops():
-    """One of the two differences found in ``wsoft bench foundation`` (city, Rect light, 640 x 480,
+    """One of the differences found in ``wsoft bench foundation`` (city, Rect light, 640 x 480,
     64 samples, seed 1: one ray of 19.7 million): a shadow ray through the shared edge of two
     axis-aligned triangles (each with a zero-thickness box). Warp's own triangle test hits both
     at t = 50.8; its per-ray walk drops their box and reports the ray unblocked, the packet's
@@ -216,7 +216,6 @@ def test_a_ray_through_a_cutout_cards_shared_edge_that_the_per_ray_step_skips():
     assert scene.tri_prim[first] == scene.tri_prim[behind]  # one card
 
 
-
 @pytest.mark.parametrize("file,light,x,y,ray,blocked", [
     ("fence_mesh.usdc", "/World/Light", 372, 426, 24, 1),  # two triangles at the same t (a shared edge), as on city
     ("greece.usdc", "/World/Light1", 391, 197, 7, 0),  # a hole, then a second cutout hit on the edge of its hole
@@ -236,6 +235,7 @@ def test_the_other_per_ray_differences_the_sweep_found(file, light, x, y, ray, b
     assert packet[ray] == blocked == int(present[hit].any())
     for r in (0, 1, 2):  # a few others as a control
         assert packet[r] == int(brute(r)[1].any())
+
 
 def test_packets_give_up_on_fine_geometry_and_stay_exact(device):
     """Light through foliage: a receiver's rays fan out over leaves smaller than their spread, so
