@@ -20,8 +20,19 @@ FULL_VIEWS = [
     ("city", "Sun"), ("city", "Rect"),
 ]
 QUICK_VIEWS = [("box_plane", None), ("cutout", None), ("multi_light", "Disk")]
-BASELINE_REV = "da242d3"  # the last commit with the single depth rasterizer (runtime mode flags)
-BASELINE_PATH = "wsoft/raster/lightview.py"
+# earlier rasterizers timed against the current one: commit -> (its file, what it was)
+BASELINES = {
+    "da242d3": ("wsoft/raster/lightview.py",
+                "the single depth rasterizer with runtime mode flags, before the fragment factory (issue 9). Texels differ where a large "
+                "triangle's depth was stepped from a band's first row before (now from its line's start, whichever band: the result no "
+                "longer depends on the thread count), and where the only surfaces lie behind every receiver (deeper than the view's far "
+                "depth: the new rasterizer leaves them empty)"),
+    "19e2496": ("wsoft/raster/rasterizer.py",
+                "the factory before each point was projected once first (`project_points`) and before an orthographic view's small "
+                "triangles (boxes up to 16 texels, was 8) looped without a branch per texel (issue 11 item 3). Texels differ (Sun) "
+                "where a triangle with a 9-16 texel box now takes the flat loop, whose depth is evaluated from the box's first "
+                "texel centre rather than from its line's"),
+}
 
 
 def cases(quick: bool, devices: list[str]) -> list[dict]:
@@ -47,7 +58,8 @@ def cases(quick: bool, devices: list[str]) -> list[dict]:
         else:
             for light in ("Sun", "Rect"):
                 out.append({"kind": "raster_vs_raycast", "scene": "city", "light": light, "size": 2048, "device": dev})
-                out.append({"kind": "raster_baseline", "scene": "city", "light": light, "size": 2048, "device": dev, "baseline": BASELINE_REV})
+                for rev in BASELINES:
+                    out.append({"kind": "raster_baseline", "scene": "city", "light": light, "size": 2048, "device": dev, "baseline": rev})
             for samples in (16, 64):
                 out.append({"kind": "ray_throughput", "scene": "city", "light": "Sun", "width": 320, "height": 240, "samples": samples, "device": dev})
                 out.append({"kind": "ray_throughput", "scene": "contact", "light": None, "width": 320, "height": 240, "samples": samples, "device": dev})
@@ -126,7 +138,7 @@ def _baseline_module(rev: str):
 
     root = Path(wsoft.__file__).resolve().parents[1]
     try:
-        src = subprocess.run(["git", "show", f"{rev}:{BASELINE_PATH}"], cwd=root, capture_output=True, text=True, check=True, timeout=60).stdout
+        src = subprocess.run(["git", "show", f"{rev}:{BASELINES[rev][0]}"], cwd=root, capture_output=True, text=True, check=True, timeout=60).stdout
     except (OSError, subprocess.SubprocessError):
         return None
     name = f"wsoft_baseline_{rev}"
@@ -135,7 +147,7 @@ def _baseline_module(rev: str):
     mod = types.ModuleType(name)
     mod.__file__ = str(path)
     sys.modules[name] = mod
-    exec(compile(src, str(path), "exec"), mod.__dict__)
+    exec(compile(src, str(path), "exec", dont_inherit=True), mod.__dict__)  # not this file's __future__ annotations
     return mod
 
 
@@ -163,7 +175,7 @@ def _raster_baseline(case: dict, ctx: dict) -> dict:
     row = {"scene": case["scene"], "light": light.path, "device": case["device"], "size": case["size"], "baseline": case["baseline"]}
     old = _baseline_module(case["baseline"])
     if old is None:
-        return row | {"skipped": f"no git history with {case['baseline']}:{BASELINE_PATH} (run from a checkout)"}
+        return row | {"skipped": f"no git history with {case['baseline']}:{BASELINES[case['baseline']][0]} (run from a checkout)"}
     dev = case["device"]
     ds, _ = scene.device_copy(dev, upload_scene)
     lo, hi = scene.bounds
@@ -442,20 +454,20 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
                   "(`WORK_PER_RAY`) moves them."]
     base = [r for r in rows if r["case"]["kind"] == "raster_baseline"]
     if base:
-        L += ["", "## Rasterizer before and after the fragment factory (issue 9; same view, alternating runs in one process)", ""]
-        L.append("`before`: the single depth rasterizer with runtime mode flags at commit " + base[0]["baseline"] + ", loaded from the git")
-        L.append("history; `after`: `make_rasterizer` specialised at code generation with the `depth_min` fragment. Median of 11")
-        L.append("alternating runs each, on the same view. Texels differ where a large triangle's depth was stepped from a band's first")
-        L.append("row before (now from its line's start, whichever band: the result no longer depends on the thread count), and where")
-        L.append("the only surfaces lie behind every receiver (deeper than the view's far depth: the new rasterizer leaves them empty).")
+        L += ["", "## The rasterizer against earlier versions of itself (same view, alternating runs in one process)", ""]
+        L.append("`before`: the rasterizer module of an earlier commit, loaded from the git history; `now`: this checkout's. Median of 11")
+        L.append("alternating runs each, on the same view, with the sweep's thread count. The earlier versions:")
         L.append("")
-        L.append("| scene | light | device | size | before ms | after ms | after / before | identical texels | max rel. difference |")
-        L.append("|---|---|---|---|---|---|---|---|---|")
+        for rev in dict.fromkeys(r["baseline"] for r in base):
+            L.append(f"- `{rev}`: {BASELINES[rev][1] if rev in BASELINES else 'no longer listed in BASELINES'}.")
+        L.append("")
+        L.append("| scene | light | device | size | before | before ms | now ms | now / before | identical texels | max rel. difference |")
+        L.append("|---|---|---|---|---|---|---|---|---|---|")
         for r in base:
             if "skipped" in r:
-                L.append(f"| {r['scene']} | {r['light'].split('/')[-1]} | {r['device']} | {r['size']} | {r['skipped']} | | | | |")
+                L.append(f"| {r['scene']} | {r['light'].split('/')[-1]} | {r['device']} | {r['size']} | {r['baseline']} | {r['skipped']} | | | | |")
                 continue
-            L.append(f"| {r['scene']} | {r['light'].split('/')[-1]} | {r['device']} | {r['size']} | {r['baseline_ms']:.1f} | {r['new_ms']:.1f} | "
+            L.append(f"| {r['scene']} | {r['light'].split('/')[-1]} | {r['device']} | {r['size']} | {r['baseline']} | {r['baseline_ms']:.1f} | {r['new_ms']:.1f} | "
                      f"{r['new_over_baseline']:.3f} | {r['identical_texels']:.5f} | {r['max_rel_diff']:.1e} |")
     # CPU utilisation of the heavy passes inside renders
     util = []

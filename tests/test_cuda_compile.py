@@ -23,18 +23,27 @@ ARCHS = (70, 75, 80, 90)
 SKIP_PREFIXES = ("wsoft.__main__", "wsoft.bench", "wsoft.usd_scenes", "wsoft.gpu_check")
 
 
-def rasterizer_kernels() -> list:
-    """Every specialised rasterizer kernel: fragment x projection x conservative x alpha x listed x deferring."""
+def rasterizer_kernels(sources=((False, True),), fragments=None) -> list:
+    """Every specialised rasterizer kernel: fragment x projection x conservative x alpha x listed x deferring
+    x where the corners come from (``sources``: (instanced, projected first) pairs; default: the points,
+    projected first, as a whole mesh is drawn). ``fragments``: names (default: every registered fragment)."""
     from wsoft.raster.rasterizer import FRAGMENTS, ORTHOGRAPHIC, PERSPECTIVE, make_rasterizer
 
     out = []
-    for spec in FRAGMENTS.values():
+    for name, spec in FRAGMENTS.items():
+        if fragments is not None and name not in fragments:
+            continue
         for view in (PERSPECTIVE, ORTHOGRAPHIC):
             for conservative in (False, True):
                 for alpha in (False, True):
                     r = make_rasterizer(view, spec.func, conservative=conservative, alpha=alpha)
-                    out += [r.kernel(listed, defer) for listed in (False, True) for defer in (False, True)]
+                    out += [r.kernel(listed, defer, instanced, preproj) for listed in (False, True) for defer in (False, True)
+                            for instanced, preproj in sources]
     return out
+
+
+# the corner sources whose code is the same for every fragment: compiled for one fragment, on one arch
+OTHER_SOURCES = ((True, False), (False, False))
 
 
 def kernel_modules() -> dict[str, object]:
@@ -95,6 +104,10 @@ def test_every_module_compiles_for_cuda(modules, arch, tmp_path):
     if supported is not None and arch not in supported:
         version = ".".join(map(str, context.runtime.get_nvrtc_version()))
         pytest.skip(f"this NVRTC (CUDA {version}) cannot target sm_{arch}; it targets sm_{min(supported)} and newer")
+    _compile_all(modules, arch, tmp_path)
+
+
+def _compile_all(modules: dict, arch: int, tmp_path) -> None:
     def build(item):
         name, module = item
         try:
@@ -107,3 +120,14 @@ def test_every_module_compiles_for_cuda(modules, arch, tmp_path):
     with ThreadPoolExecutor(max_workers=max(1, min(4, os.cpu_count() or 1))) as pool:
         errors = [e for e in pool.map(build, sorted(modules.items())) if e]
     assert not errors, "\n".join(errors)
+
+
+def test_the_rasterizers_other_corner_sources_compile_for_cuda(modules, tmp_path):
+    """Instanced work items and corners projected per triangle (short triangle lists) are the same code
+    for every fragment and architecture: those specialisations for one fragment, on one arch."""
+    from warp._src import context
+
+    supported = getattr(context.runtime, "nvrtc_supported_archs", None) or [max(ARCHS)]
+    extra = {k.module.name: k.module for k in rasterizer_kernels(OTHER_SOURCES, fragments=("depth_min",))}
+    assert len(extra) == 64 and not set(extra) & set(modules)
+    _compile_all(extra, max(supported), tmp_path)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import warp as wp
 from conftest import scene_path
 
 import wsoft
@@ -252,3 +253,37 @@ def test_light_inside_a_closed_mesh_keeps_its_faces(device):
     cov = hard["A"] > 0
     assert (ref.V[cov] == 0).mean() > 0.5  # the outside of the box is dark
     assert np.mean(hard.V[cov] == ref.V[cov]) > 0.99
+
+
+@pytest.mark.parametrize("file,light", [("multi_light.usda", "Rect"), ("multi_light.usda", "Sun"), ("cutout.usda", "Light"), ("contact.usda", "Light")])
+def test_points_projected_first_and_the_branch_free_loop_change_no_texel(device, file, light):
+    """Projecting every point once first (:func:`project_points`) gives the map that projecting each
+    triangle's corners gives, and a masked fragment's branch-free flat loop the map of the branching
+    one (the same fragment, unmasked), bit for bit; near-plane clipping included (a light in the scene)."""
+    from dataclasses import replace
+
+    from wsoft.raster.rasterizer import DepthTarget, Rasterizer, depth_min, make_rasterizer
+    from wsoft.scene.device import view_surfaces
+
+    scene = wsoft.load_scene(scene_path(file))
+    ds = upload_scene(scene, device)
+    view = _view(scene, light, 512)
+    if file == "contact.usda":  # a perspective view from inside the scene: triangles cross its near plane
+        view = replace(view, near=max(view.near, 0.5 * (view.near + view.far) * 0.3))
+    surfaces = view_surfaces(ds, view.origin if view.persp else None)
+    alpha = bool(scene.has_cutouts)
+    masked = make_rasterizer(view, depth_min, alpha=alpha)
+    branching = Rasterizer(masked.persp, replace(masked.spec, masked=False), False, alpha)
+    differs = masked.kernel(False, True, False, True).module.name != branching.kernel(False, True, False, True).module.name
+    assert masked.spec.masked and differs == (not view.persp)  # a perspective view's loop branches either way
+
+    def draw(r, preproject):
+        t = DepthTarget()
+        t.depth = wp.empty((view.height, view.width), dtype=float, device=device)
+        r.run(ds.points, ds.indices, surfaces, view, t, device, initialized=False, preproject=preproject)
+        return t.depth.numpy()
+
+    first = draw(masked, True)
+    assert (first < DEPTH_CLEAR).mean() > 0.2
+    assert np.array_equal(first, draw(masked, False))
+    assert np.array_equal(first, draw(branching, True))

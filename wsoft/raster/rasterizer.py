@@ -23,10 +23,11 @@ warp.fem builds its kernels): nothing unused is compiled in.
 * **alpha** — triangles with a cutout material are alpha-tested per texel (perspective-correct
   uv at the texel centre).
 
-Every kernel projects, culls the far faces of closed surfaces (exact, from
+Every kernel projects (a whole mesh's points once each first, :func:`project_points`: a mesh has
+about half as many points as triangles), culls the far faces of closed surfaces (exact, from
 :class:`~wsoft.scene.device.Surfaces`), clips at a perspective view's near plane (one or two
-triangles) and scan-converts (small boxes in one flat loop, wide triangles along exact spans of
-covered texel centres). Fragments deeper than the view's far depth (behind every receiver: they
+triangles) and scan-converts (small boxes in one flat loop, branch-free for a *masked* fragment in
+an orthographic view; wide triangles along exact spans of covered texel centres). Fragments deeper than the view's far depth (behind every receiver: they
 can shadow nothing) are not emitted, so a huge or far triangle cannot flood a map with depths
 that wreck its depth range. Scheduling (:meth:`Rasterizer.run`):
 
@@ -52,7 +53,8 @@ from wsoft.parallel import cpu_threads, ensure_loaded, launch_chunked, run_tasks
 from wsoft.scene.device import CULL_SKIP, DeviceScene, Surfaces, face_surfaces, surface_present, view_surfaces, without_culling
 
 GPU_BAND_ROWS = 64  # CUDA: rows per band (one thread per triangle and band)
-SMALL_BOX_TEXELS = wp.constant(8)  # triangles whose texel box is this small take the flat loop
+SMALL_BOX_TEXELS = 16  # triangles whose texel box is this small take the flat loop (orthographic views)
+SMALL_BOX_TEXELS_PERSP = 8  # the same for perspective views, whose loop divides per covered texel
 CPU_CHUNK = 32768  # CPU: triangles per launch; a worker's chunks are interleaved with the others'
 CONSERVATIVE_MARGIN = wp.constant(1.0e-3)  # texels: conservative coverage reaches this far past a texel, against rounding
 BIG_TRIANGLE_TEXELS = 4096  # CPU: triangles with a larger texel bounding box go to the banded pass
@@ -72,7 +74,9 @@ class FragmentSpec:
     cleared) and ``clear(private, device)`` clears it to the combine's identity; ``merge(privates,
     target, device)`` folds private targets into ``target`` by disjoint ranges. Without them
     (``None``) the fragment runs in disjoint bands of rows only. ``bary``: the fragment reads the
-    corner weights (computed only then)."""
+    corner weights (computed only then). ``masked``: a call with depth ``DEPTH_CLEAR`` changes
+    nothing (a depth minimum), so a small triangle's flat loop calls it at every texel of its box,
+    at ``DEPTH_CLEAR`` where the triangle does not cover the texel, without a branch per texel."""
 
     func: object
     target: type
@@ -80,6 +84,7 @@ class FragmentSpec:
     clear: Callable | None = None
     merge: Callable | None = None
     bary: bool = False
+    masked: bool = False
 
     @property
     def name(self) -> str:
@@ -89,13 +94,13 @@ class FragmentSpec:
 FRAGMENTS: dict[str, FragmentSpec] = {}
 
 
-def fragment(target: type, *, private=None, clear=None, merge=None, bary: bool = False):
+def fragment(target: type, *, private=None, clear=None, merge=None, bary: bool = False, masked: bool = False):
     """Decorator: a ``@wp.func`` fragment ``f(target, x, y, z, bary, tri)`` registered with its
     :class:`FragmentSpec` (see :data:`FRAGMENTS`)."""
 
     def deco(f):
         func = wp.func(f)
-        FRAGMENTS[func.key] = FragmentSpec(func, target, private, clear, merge, bary)
+        FRAGMENTS[func.key] = FragmentSpec(func, target, private, clear, merge, bary, masked)
         return func
 
     return deco
@@ -159,13 +164,13 @@ def _merge_depth(privates, t, device):
         launch_chunked(merge_min, flat.shape[0], inputs=[p.depth.reshape(-1)], outputs=[flat], device=device, min_chunk=1 << 16)
 
 
-@fragment(DepthTarget, private=_private_depth, clear=_clear_depth, merge=_merge_depth)
+@fragment(DepthTarget, private=_private_depth, clear=_clear_depth, merge=_merge_depth, masked=True)
 def depth_min(t: DepthTarget, x: int, y: int, z: float, bary: wp.vec3, tri: int):
     """Keep the nearest depth of the texel."""
     wp.atomic_min(t.depth, y, x, z)
 
 
-@fragment(GatedDepthTarget, private=_private_depth, clear=_clear_depth, merge=_merge_depth)
+@fragment(GatedDepthTarget, private=_private_depth, clear=_clear_depth, merge=_merge_depth, masked=True)
 def gated_depth_min(t: GatedDepthTarget, x: int, y: int, z: float, bary: wp.vec3, tri: int):
     """Keep the nearest depth behind the gate (the inverted depth test; nothing where the gate is empty)."""
     if z > t.gate[y, x] * 1.0001:
@@ -227,6 +232,10 @@ def _make_raster_triangle(persp: bool, spec: FragmentSpec, conservative: bool, a
     Target = spec.target
     frag = spec.func
     bary = spec.bary
+    # masked calls of an orthographic view's small triangles; a perspective view's would divide at every
+    # texel of the box (measured slower than branching on city's Rect light)
+    masked = spec.masked and not bary and not persp
+    small_box = SMALL_BOX_TEXELS_PERSP if persp else SMALL_BOX_TEXELS
 
     def raster_triangle(
         lv: ViewGPU,
@@ -313,7 +322,7 @@ def _make_raster_triangle(persp: bool, spec: FragmentSpec, conservative: bool, a
             hx2 = (0.5 + CONSERVATIVE_MARGIN) * (wp.abs(g2x) + wp.abs(g2y))
         nx = x1 - x0 + 1
         if wp.static(not conservative):
-            if alpha_on == 0 and nx * (yb1 - yb0 + 1) <= SMALL_BOX_TEXELS:
+            if alpha_on == 0 and nx * (yb1 - yb0 + 1) <= wp.static(small_box):
                 # a small triangle: test every texel centre of its box in one flat loop (fewer branches
                 # than lines and spans); barycentrics and q from the box's first centre (no drift this small)
                 pxb = float(x0) + 0.5
@@ -328,7 +337,14 @@ def _make_raster_triangle(persp: bool, spec: FragmentSpec, conservative: bool, a
                     fy = float(dy)
                     l0 = b0 + g0x * fx + g0y * fy
                     l1 = b1 + g1x * fx + g1y * fy
-                    if l0 >= 0.0 and l1 >= 0.0 and 1.0 - l0 - l1 >= 0.0:
+                    if wp.static(masked):
+                        # selects, not branches: whether a texel of a tiny triangle's box is covered is a coin toss
+                        zm = qb0 + qx * fx + qy * fy
+                        if wp.static(persp):
+                            zm = 1.0 / wp.max(zm, 1.0e-30)
+                        zm = wp.where(wp.min(wp.min(l0, l1), 1.0 - l0 - l1) >= 0.0, zm, DEPTH_CLEAR)
+                        wp.static(frag)(target, x0 + dx, yb0 + dy, wp.where(zm <= lv.far, zm, DEPTH_CLEAR), wp.vec3(0.0), tri)
+                    elif l0 >= 0.0 and l1 >= 0.0 and 1.0 - l0 - l1 >= 0.0:
                         z = qb0 + qx * fx + qy * fy
                         if wp.static(persp):
                             z = 1.0 / wp.max(z, 1.0e-30)
@@ -465,10 +481,30 @@ class InstanceBatch:
     tri0: int  # its first triangle's combined index (cutouts, cull flags, the fragment's ``tri``)
 
 
+@wp.kernel
+def project_points(
+    offset: int,
+    points: wp.array[wp.vec3],
+    lv: ViewGPU,
+    # outputs
+    proj: wp.array[wp.vec3],
+):
+    """Each point's texel coordinates (x, y; zeros for a perspective view's points before its near
+    plane, which only clipped triangles have) and view depth (z), as the triangle kernel computes them."""
+    i = wp.tid() + offset
+    v = view_of(lv, points[i])
+    t = wp.vec2(0.0)
+    if lv.persp == 0 or v[2] >= lv.near:
+        t = texel_of(lv, v)
+    proj[i] = wp.vec3(t[0], t[1], v[2])
+
+
 def _make_kernel(persp: bool, spec: FragmentSpec, conservative: bool, alpha: bool, listed: bool, defer_big: bool, inner: bool = False,
-                 instanced: bool = False):
+                 instanced: bool = False, preproj: bool = False):
     """One thread per (band of rows, triangle): project, cull, clip at the near plane, scan-convert.
-    ``instanced``: work items are (instance, prototype triangle) pairs of an :class:`InstanceBatch`."""
+    ``instanced``: work items are (instance, prototype triangle) pairs of an :class:`InstanceBatch`.
+    ``preproj``: the points' texel coordinates and depths come from ``proj`` (:func:`project_points`,
+    once per point rather than once per corner; a mesh has about half as many points as triangles)."""
     Target = spec.target
     raster_triangle = _make_raster_triangle(persp, spec, conservative, alpha, inner)
 
@@ -483,6 +519,7 @@ def _make_kernel(persp: bool, spec: FragmentSpec, conservative: bool, alpha: boo
         lv: ViewGPU,
         cut: Surfaces,
         batch: InstanceBatch,
+        proj: wp.array[wp.vec3],
         # outputs
         target: Target,
         big: wp.array[wp.int32],
@@ -501,6 +538,9 @@ def _make_kernel(persp: bool, spec: FragmentSpec, conservative: bool, alpha: boo
         pa = wp.vec3(0.0)
         pb = wp.vec3(0.0)
         pc = wp.vec3(0.0)
+        ia = int(0)
+        ib = int(0)
+        ic = int(0)
         if wp.static(instanced):
             i = item // batch.ntri
             k = item - i * batch.ntri
@@ -516,10 +556,14 @@ def _make_kernel(persp: bool, spec: FragmentSpec, conservative: bool, alpha: boo
             elif batch.mirrored[i] != 0:
                 cull = -cull  # the transform turns the outward side inward
         else:
-            pa = points[indices[3 * tri]]
-            pb = points[indices[3 * tri + 1]]
-            pc = points[indices[3 * tri + 2]]
+            ia = indices[3 * tri]
+            ib = indices[3 * tri + 1]
+            ic = indices[3 * tri + 2]
             cull = cut.cull[tri]
+            if not wp.static(preproj) or cull != 0:  # preproj: the points only for the facing test
+                pa = points[ia]
+                pb = points[ib]
+                pc = points[ic]
         if cull == CULL_SKIP:
             return
         if cull != 0:
@@ -530,9 +574,17 @@ def _make_kernel(persp: bool, spec: FragmentSpec, conservative: bool, alpha: boo
                 toward = wp.dot(n, pa - lv.origin) < 0.0
             if toward != (cull > 0):
                 return
-        a = view_of(lv, pa)
-        b = view_of(lv, pb)
-        c = view_of(lv, pc)
+        a = wp.vec3(0.0)
+        b = wp.vec3(0.0)
+        c = wp.vec3(0.0)
+        if wp.static(preproj):
+            a = proj[ia]  # texel x, y and view depth
+            b = proj[ib]
+            c = proj[ic]
+        else:
+            a = view_of(lv, pa)
+            b = view_of(lv, pb)
+            c = view_of(lv, pc)
         zmax = wp.max(a[2], wp.max(b[2], c[2]))
         zmin = wp.min(a[2], wp.min(b[2], c[2]))
         clipped = False
@@ -544,9 +596,14 @@ def _make_kernel(persp: bool, spec: FragmentSpec, conservative: bool, alpha: boo
         tb = wp.vec2(0.0)
         tc = wp.vec2(0.0)
         if not clipped:
-            ta = texel_of(lv, a)
-            tb = texel_of(lv, b)
-            tc = texel_of(lv, c)
+            if wp.static(preproj):
+                ta = wp.vec2(a[0], a[1])
+                tb = wp.vec2(b[0], b[1])
+                tc = wp.vec2(c[0], c[1])
+            else:
+                ta = texel_of(lv, a)
+                tb = texel_of(lv, b)
+                tc = texel_of(lv, c)
         if wp.static(defer_big):
             if clipped:
                 big[item] = 1
@@ -568,6 +625,10 @@ def _make_kernel(persp: bool, spec: FragmentSpec, conservative: bool, alpha: boo
         if not clipped:
             raster_triangle(lv, tri, ta, tb, tc, a[2], b[2], c[2], ea, eb, ec, row0, row1, cut, alpha_on, target)
             return
+        if wp.static(preproj):  # clipping needs the corners' view-space x, y
+            a = view_of(lv, points[ia])
+            b = view_of(lv, points[ib])
+            c = view_of(lv, points[ic])
         # Sutherland-Hodgman against z >= near: 1 or 2 triangles
         n_in = int(0)
         if a[2] >= lv.near:
@@ -648,6 +709,7 @@ class _Segment:
     listed: bool
     instanced: bool
     tri_list: wp.array
+    proj: wp.array = None  # the points' texel coordinates and depths (:func:`project_points`), or None
 
 
 @dataclass(eq=False)
@@ -662,15 +724,16 @@ class Rasterizer:
     inner: bool = False
     _kernels: dict = field(default_factory=dict)
 
-    def kernel(self, listed: bool, defer_big: bool, instanced: bool = False):
-        key = (listed, defer_big, instanced)
+    def kernel(self, listed: bool, defer_big: bool, instanced: bool = False, preproj: bool = False):
+        key = (listed, defer_big, instanced, preproj and not instanced)
         if key not in self._kernels:
-            self._kernels[key] = _make_kernel(self.persp, self.spec, self.conservative, self.alpha, listed, defer_big, self.inner, instanced)
+            self._kernels[key] = _make_kernel(self.persp, self.spec, self.conservative, self.alpha, listed, defer_big, self.inner, instanced,
+                                              preproj and not instanced)
         return self._kernels[key]
 
     def run(self, points: wp.array, indices: wp.array, cut: Surfaces, view, target, device: str, *,
             triangles: wp.array | None = None, initialized: bool = True, strategy: str = "auto",
-            batches: "list[InstanceRun] | None" = None) -> RasterStats:
+            batches: "list[InstanceRun] | None" = None, preproject: bool | None = None) -> RasterStats:
         """Rasterize the triangles (all of ``indices``, or the index list ``triangles``) into ``target``.
 
         ``initialized = False``: ``target`` holds no data yet; the CPU's first worker clears it as
@@ -678,7 +741,9 @@ class Rasterizer:
         when the fragment can merge, else bands), ``private`` or ``bands``. ``batches``: instances
         drawn in the same run (:class:`InstanceRun`: one per prototype, its work items (instance,
         prototype triangle)), sharing the CPU's private targets and their one merge with the
-        triangles of ``indices``."""
+        triangles of ``indices``. ``preproject``: project every point once first (:func:`project_points`)
+        rather than each triangle's corners; default: yes, unless a triangle list is shorter than a third
+        of the point count. The map is the same bit for bit either way."""
         lv = view.gpu() if isinstance(view, LightView) else view
         if bool(lv.persp) != self.persp:
             raise ValueError("the view's projection does not match the rasterizer's")
@@ -686,6 +751,7 @@ class Rasterizer:
         listed = triangles is not None
         no_list = triangles if listed else wp.zeros(1, dtype=wp.int32, device=device)
         no_big = wp.zeros(1, dtype=wp.int32, device=device)
+        no_proj = wp.zeros(1, dtype=wp.vec3, device=device)
         # segments: the soup's triangles, then each prototype's instances
         segs = [_Segment(points, indices, _no_batch(device), indices.shape[0] // 3 if triangles is None else triangles.shape[0],
                          indices.shape[0] // 3, listed, False, no_list)]
@@ -693,6 +759,13 @@ class Rasterizer:
             n = int(br.count) * int(br.batch.ntri)
             segs.append(_Segment(br.points, br.indices, br.batch, n, n, False, True, no_list))
         segs = [g for g in segs if g.ntri > 0]
+        if preproject is None:
+            preproject = bool(segs) and not segs[0].instanced and 3 * segs[0].ntri >= points.shape[0]
+        if preproject and segs and not segs[0].instanced:
+            # project each point once rather than each triangle's corners: worth it unless a short
+            # triangle list uses few of the points
+            segs[0].proj = wp.empty(points.shape[0], dtype=wp.vec3, device=device)
+            launch_chunked(project_points, points.shape[0], inputs=[points, lv], outputs=[segs[0].proj], device=device, min_chunk=1 << 15)
         ntri = sum(g.ntri for g in segs)
         stats = RasterStats()
         if strategy == "auto":
@@ -703,7 +776,7 @@ class Rasterizer:
         def launcher(g: "_Segment"):
             def launch(kernel, tgt, start, count, nbands, band_rows, band_start=0, tri_list=g.tri_list, big_texels=0.0, big=no_big):
                 wp.launch(kernel, dim=(nbands, count), inputs=[start, band_start, band_rows, tri_list, float(big_texels), g.points, g.indices, lv, cut,
-                                                               g.batch], outputs=[tgt, big], device=device)
+                                                               g.batch, no_proj if g.proj is None else g.proj], outputs=[tgt, big], device=device)
 
             return launch
 
@@ -716,17 +789,17 @@ class Rasterizer:
                 self.spec.clear(target, device)
             nb = (h + GPU_BAND_ROWS - 1) // GPU_BAND_ROWS
             for g in segs:
-                launcher(g)(self.kernel(g.listed, False, g.instanced), target, 0, g.ntri, nb, GPU_BAND_ROWS)
+                launcher(g)(self.kernel(g.listed, False, g.instanced, g.proj is not None), target, 0, g.ntri, nb, GPU_BAND_ROWS)
             stats.bands = nb
             return stats
         if strategy == "bands":
             if not initialized and self.spec.clear is not None:
                 self.spec.clear(target, device)
             for g in segs:
-                self._bands(launcher(g), self.kernel(g.listed, False, g.instanced), target, g.ntri, h, g.tri_list, stats, device)
+                self._bands(launcher(g), self.kernel(g.listed, False, g.instanced, g.proj is not None), target, g.ntri, h, g.tri_list, stats, device)
             return stats
         # CPU phase 1: each worker rasterizes interleaved chunks of small triangles into its own target
-        kernels1 = [self.kernel(g.listed, True, g.instanced) for g in segs]
+        kernels1 = [self.kernel(g.listed, True, g.instanced, g.proj is not None) for g in segs]
         for k in kernels1:
             ensure_loaded(k, device)
         target_bytes = 4 * w * h
@@ -755,7 +828,7 @@ class Rasterizer:
             stats.big_triangles += int(len(big_list))
             if len(big_list):
                 blist = wp.array(big_list, dtype=wp.int32, device=device)
-                self._bands(launches[j], self.kernel(True, False, g.instanced), target, len(big_list), h, blist, stats, device)
+                self._bands(launches[j], self.kernel(True, False, g.instanced, g.proj is not None), target, len(big_list), h, blist, stats, device)
         return stats
 
     @staticmethod
