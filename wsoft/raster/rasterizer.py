@@ -338,10 +338,9 @@ def _make_raster_triangle(persp: bool, spec: FragmentSpec, conservative: bool, a
                     l0 = b0 + g0x * fx + g0y * fy
                     l1 = b1 + g1x * fx + g1y * fy
                     if wp.static(masked):
-                        # selects, not branches: whether a texel of a tiny triangle's box is covered is a coin toss
+                        # selects, not branches: whether a texel of a tiny triangle's box is covered is a coin
+                        # toss (orthographic only: z is the plane itself, no division)
                         zm = qb0 + qx * fx + qy * fy
-                        if wp.static(persp):
-                            zm = 1.0 / wp.max(zm, 1.0e-30)
                         zm = wp.where(wp.min(wp.min(l0, l1), 1.0 - l0 - l1) >= 0.0, zm, DEPTH_CLEAR)
                         wp.static(frag)(target, x0 + dx, yb0 + dy, wp.where(zm <= lv.far, zm, DEPTH_CLEAR), wp.vec3(0.0), tri)
                     elif l0 >= 0.0 and l1 >= 0.0 and 1.0 - l0 - l1 >= 0.0:

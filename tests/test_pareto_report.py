@@ -1,0 +1,36 @@
+"""The cross-technique report's ranking: penumbra MAE, or the MAE over all pixels where the light casts none."""
+
+from __future__ import annotations
+
+import matplotlib.image as mpimg
+
+from wsoft.bench import pareto
+
+
+def _entry(technique, ms, mae, mae_penumbra, penumbra_pixels, **params):
+    return {"technique": technique, "params": params, "frame_ms": ms, "shared_passes": [], "warnings": [],
+            "error": {"mae": mae, "mae_penumbra": mae_penumbra, "penumbra_pixels": penumbra_pixels, "facing": {"mae": mae}}}
+
+
+def _row(scene, penumbra_pixels):
+    return {"scene": scene, "light": "/World/Light", "light_kind": "point" if not penumbra_pixels else "rect", "device": "cpu", "width": 64, "height": 48,
+            "ground_truth_samples": 1024, "graph_passes": 10, "shared_pass_count": 2, "machine": {},
+            "entries": [_entry("hard", 10.0, 0.03, 0.0 if not penumbra_pixels else 0.20, penumbra_pixels, shadow_map_size=1024),
+                        _entry("hard", 20.0, 0.01, 0.0 if not penumbra_pixels else 0.18, penumbra_pixels, shadow_map_size=2048),
+                        _entry("reference", 40.0, 0.0, 0.0 if not penumbra_pixels else 0.01, penumbra_pixels, samples=16)]}
+
+
+def test_a_light_without_penumbra_ranks_by_the_mae_over_all_pixels(tmp_path):
+    point, area = _row("tower", 0), _row("contact", 500)
+    assert pareto.row_metric(point) == "mae" and pareto.row_metric(area) == "mae_penumbra"
+    # penumbra MAE is 0 for any shadow of a point light: 1024² would "reach" every target; its MAE of 0.03 does not reach 0.02
+    assert pareto.time_to_reach(point["entries"][:2], 0.02, pareto.row_metric(point))["params"]["shadow_map_size"] == 2048
+    assert pareto.time_to_reach(point["entries"][:2], 0.02)["params"]["shadow_map_size"] == 1024
+    md = tmp_path / "pareto.md"
+    pareto.report([point, area], md, {"quick": False, "command": "wsoft bench pareto", "stem": "pareto"})
+    text = md.read_text()
+    assert "| tower | Light (all pixels) |" in text and "| contact | Light |" in text
+    assert "tower/Light has no penumbra pixel" in text
+    # the point light's plot has its points (it was empty when every entry was filtered out by penumbra pixels)
+    img = mpimg.imread(tmp_path / "images" / "pareto" / "tower-Light-cpu.png")
+    assert (img[..., :3].std(axis=-1) > 0.1).mean() > 1e-3  # coloured markers drawn
