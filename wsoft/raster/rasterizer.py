@@ -724,10 +724,10 @@ class Rasterizer:
     _kernels: dict = field(default_factory=dict)
 
     def kernel(self, listed: bool, defer_big: bool, instanced: bool = False, preproj: bool = False):
-        key = (listed, defer_big, instanced, preproj and not instanced)
+        preproj = preproj and not instanced  # an instance's points are placed per instance: never projected first
+        key = (listed, defer_big, instanced, preproj)
         if key not in self._kernels:
-            self._kernels[key] = _make_kernel(self.persp, self.spec, self.conservative, self.alpha, listed, defer_big, self.inner, instanced,
-                                              preproj and not instanced)
+            self._kernels[key] = _make_kernel(self.persp, self.spec, self.conservative, self.alpha, listed, defer_big, self.inner, instanced, preproj)
         return self._kernels[key]
 
     def run(self, points: wp.array, indices: wp.array, cut: Surfaces, view, target, device: str, *,
