@@ -206,6 +206,12 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
     if plain:
         L.append(f"The reference of {', '.join(plain)} has no penumbra pixel (a point light: every pixel is lit or not), where penumbra")
         L.append("MAE is 0 for any shadow: those lines rank by the MAE over all covered pixels, and say so (`all pixels`).")
+        if any(e["technique"] == "izb" for r in rows if row_metric(r) == "mae" for e in r["entries"]):
+            L.append("There `izb` (the exact hard shadow of the light's centre) is not exactly 0 either: its shadow ray aims at the")
+            L.append("light's centre from the offset origin, the reference's leaves the offset origin in the direction from the surface")
+            L.append("point to the light. The two part only on knife-edge rays, which pass within the offset of an edge; each")
+            L.append("equals a brute force over every triangle on its own rays")
+            L.append("(`tests/test_izb.py::test_none_differs_from_the_reference_only_where_their_ray_conventions_do`).")
     L.append("")
     L.append("## Time to reach penumbra MAE 0.05 and 0.02")
     L.append("")

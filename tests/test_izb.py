@@ -334,3 +334,51 @@ def test_bench_targets_are_ratios_per_interleaved_round():
                                                                       "subsamples_from_stencil": 8}}
     text = "\n".join(_targets([row]))
     assert "| s | 8x6 | plane | 100 / 140 | 12 (8) | 10.0 / 40.0 (3.00) |" in text  # ratios 4, 3, 2.5: median 3
+
+
+def test_none_differs_from_the_reference_only_where_their_ray_conventions_do():
+    """``aa=none`` against ``reference samples=1`` on a point light: the same receivers, but not
+    quite the same rays. The reference's ray leaves the offset origin in the direction from the
+    *surface point* to the light (:func:`~wsoft.reference.generate_shadow_rays`); ``izb``'s aims
+    at the light's centre from the offset origin (:func:`~wsoft.techniques.izb.shadow_ray`: a ray
+    through the light's centre projects to one point of the light's view, which the grid needs).
+    Each answer equals a brute force over every triangle on its own rays, so the two may differ
+    only on the pixels where the two sets of rays' brute forces differ (knife-edge rays, within
+    the offset of an edge) and must agree everywhere else."""
+    from wsoft.bench.harness import load
+    from wsoft.lightspace.light import light_gpu
+    from wsoft.reference import ray_epsilon, reference_pattern, shadow_rays
+
+    scene = load("tower")
+    w, h = 200, 150
+    res, get, _ = _izb_resources(scene, {"aa": "none", "grid_size": 512}, w, h)
+    smp, ds, blocked, grid = get("izb_samples"), get("scene"), get("izb_blocked"), get("izb_grid")
+    gb = next(v for k, v in res.items() if str(k).startswith("gbuffer"))
+    light = scene.lights[0]
+    assert light.kind == 4  # a point light: the reference's one sample is its centre
+    ref = wsoft.render(scene, "reference", width=w, height=h, device="cpu", samples=1).V.ravel()
+    izb = wsoft.render(scene, "izb", width=w, height=h, device="cpu", aa="none", grid_size=512).V.ravel()
+
+    def brute(origin, dirs, tmax, state):
+        out = wp.empty(origin.shape[0], dtype=wp.int32, device="cpu")
+        wp.launch(_brute_force, dim=origin.shape[0], inputs=[origin, dirs, tmax, state, ds.points, ds.indices, ds.cutouts,
+                                                             int(ds.has_cutouts)], outputs=[out], device="cpu")
+        return out.numpy()
+
+    n = w * h
+    state = smp["state"].numpy()[:n]
+    b_izb = brute(smp["origin"], smp["dir"], smp["tmax"], smp["state"])[:n]
+    vis_izb = np.where(state == 1, 1 - b_izb, 0).astype(np.float32)
+    covered = np.flatnonzero(gb.prim.numpy() >= 0)
+    o, d, t = shadow_rays(ds, light_gpu(light, scene.diagonal), gb, reference_pattern(1, 0, False), True, ray_epsilon(gb, light))
+    tr = t.numpy()
+    b_ref = brute(o, d, t, wp.array(np.where(tr > 0, 1, 0).astype(np.int32), dtype=wp.int32, device="cpu"))
+    vis_ref = np.zeros(n, np.float32)
+    vis_ref[covered] = np.where(tr > 0, 1 - b_ref, 0)
+    cov = np.zeros(n, bool)
+    cov[covered] = True
+    assert np.array_equal(izb[cov], vis_izb[cov]) and np.array_equal(ref[cov], vis_ref[cov])
+    conventions = cov & (vis_izb != vis_ref)
+    assert np.array_equal(cov & (izb != ref), conventions)
+    assert conventions.sum() < 1e-3 * cov.sum()  # knife edges only
+    assert 0.2 < vis_ref[cov].mean() < 0.95  # shadowed and lit pixels both

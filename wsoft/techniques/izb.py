@@ -53,7 +53,12 @@ Steps of one light (the paper's eight, as passes):
 
 Every sample's shadow ray starts at its surface point moved off the surface along the normal (as
 the reference's) and goes to the light's centre; where the light's centre lies behind the tangent
-plane the sample is shadowed without a test (the receiver's own horizon, applied per sample).
+plane the sample is shadowed without a test (the receiver's own horizon, applied per sample). The
+reference's ray leaves the same origin in the direction from the *surface point* to the light, so
+it passes the light's centre at the offset's distance; this one aims at the centre, because a ray
+through the light's centre projects to one point of the light's view, the point the grid lists it
+at. On a point light the two agree but for knife-edge rays, which pass within the offset of an
+edge (``tests/test_izb.py::test_none_differs_from_the_reference_only_where_their_ray_conventions_do``).
 
 UsdLux shadow controls are exact: the light pass draws only the triangles the light's
 ``collection:shadowLink`` lets cast (and its stencil's maps hold only them), and a finite
