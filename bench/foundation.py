@@ -239,8 +239,7 @@ def _raster_bound(case: dict, ctx: dict) -> dict:
     bound.draw()
     ideal_map = bound.depth()
     bound.fetch()
-    big = int((bound.texels.numpy() > BIG_TRIANGLE_TEXELS).sum())
-    small = int(((bound.texels.numpy() > 0) & (bound.texels.numpy() <= SMALL_BOX_TEXELS)).sum())
+    texels = bound.texels.numpy().copy()
     raycast_depth(ds, view, alpha_tested=scene.has_cutouts)
     times = {"real": [], "draw": [], "small": [], "fetch": [], "ray": []}
     for k in range(9):
@@ -251,11 +250,10 @@ def _raster_bound(case: dict, ctx: dict) -> dict:
             if name in ("draw", "small"):
                 bound.clear()  # maps cleared off the clock (the rasterizer clears its own)
             times[name].append(clock(fn))
-    texels = bound.texels.numpy()
     a, r = ideal_map < DEPTH_CLEAR, real_map < DEPTH_CLEAR
     return {"scene": case["scene"], "light": light.path, "device": dev, "size": case["size"], "threads": cpu_threads(),
             "triangles": int(bound.T), "culled": int(bound.skip.numpy().sum()), "covering": int((texels > 0).sum()),
-            "box_texels": int(texels.sum()), "large": big, "small": small, "small_box_texels": SMALL_BOX_TEXELS, "coverage_mismatch": int((a != r).sum()), "covered": int(r.sum()),
+            "box_texels": int(texels.sum()), "large": int((texels > BIG_TRIANGLE_TEXELS).sum()), "small": int(((texels > 0) & (texels <= SMALL_BOX_TEXELS)).sum()), "small_box_texels": SMALL_BOX_TEXELS, "coverage_mismatch": int((a != r).sum()), "covered": int(r.sum()),
             **{f"{n}_ms": statistics.median(v) for n, v in times.items()}, **{f"{n}_ms_runs": v for n, v in times.items()}}
 
 

@@ -191,6 +191,14 @@ def _ratio_text(values: list[float], ok) -> str:
     return f"{med:.2f} ({min(values):.2f}–{max(values):.2f}) {'met' if ok(med) else 'not met'}, {held}/{len(values)}"
 
 
+def _target_order(r: dict) -> tuple:
+    """``izb_targets`` rows by scene, resolution and sub-sample placement (auto, recast, plane)."""
+    return r["scene"], r["width"], SUBSAMPLE_ORDER.index(r["params"]["subsamples"])
+
+
+SUBSAMPLE_ORDER = ("auto", "recast", "plane")
+
+
 def _targets(rows: list[dict]) -> list[str]:
     """The issue's targets, per scene and sub-sample placement, from the interleaved ``izb_targets``
     rows (ratios per round, then their median); the stencil's misses from the adaptive rows. Target
@@ -218,7 +226,7 @@ def _targets(rows: list[dict]) -> list[str]:
     brute = []
     izb = [r for r in rows if r["technique"] == "izb"]
     for t in sorted((r for r in rows if r["technique"] == "izb_targets"),
-                    key=lambda r: (r["scene"], r["width"], ("auto", "recast", "plane").index(r["params"]["subsamples"]))):
+                    key=_target_order):
         sel = [r for r in izb if r["scene"] == t["scene"] and (r["width"], r["height"]) == (t["width"], t["height"])]
         exact = [r for r in sel if r["params"].get("aa") == "adaptive" and r["params"].get("stencil", "bounds") == "bounds"
                  and r["params"].get("subsamples", "auto") != "plane"]
@@ -260,7 +268,7 @@ def _target1_model(rows: list[dict]) -> list[str]:
              "the eye view's multi-sampled render in the paper). Same rounds as the table above.", "",
          "| scene | res | sub-samples | grid + light + resolve cpu ms none / adaptive (median) | target 1 limit | adaptive × none |",
          "|---|---|---|---|---|---|"]
-    for t in sorted(rows, key=lambda r: (r["scene"], r["width"], ("auto", "recast", "plane").index(r["params"]["subsamples"]))):
+    for t in sorted(rows, key=_target_order):
         c = t["cost"]
         n = sum(np.array(c["none"]["passes"][p]) for p in MODEL_PASSES)
         a = sum(np.array(c["adaptive"]["passes"][p]) for p in MODEL_PASSES)
@@ -283,7 +291,7 @@ def _extra_cost(rows: list[dict]) -> list[str]:
          "| scene | res | sub-samples | samples inserted none / adaptive | re-cast (from stencil) | "
          + " | ".join(f"{p[4:]} ms none / adaptive (×)" for p in IZB_PASSES) + " |",
          "|---|---|---|---|---|" + "---|" * len(IZB_PASSES)]
-    for t in sorted(rows, key=lambda r: (r["scene"], r["width"], ("auto", "recast", "plane").index(r["params"]["subsamples"]))):
+    for t in sorted(rows, key=_target_order):
         c, k = t["cost"], t.get("counts", {})
         cells = []
         for p in IZB_PASSES:

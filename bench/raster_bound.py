@@ -28,6 +28,15 @@ import warp as wp
 DEPTH_CLEAR = wp.constant(1.0e30)  # as wsoft.lightspace.view.DEPTH_CLEAR (an empty texel)
 
 
+@wp.func
+def texel_box(a: wp.vec3, b: wp.vec3, c: wp.vec3, width: int, height: int) -> wp.vec4i:
+    """The texel centres a triangle's box covers on the map: (x0, x1, y0, y1), empty when x0 > x1 or y0 > y1."""
+    return wp.vec4i(wp.max(int(wp.ceil(wp.min(a[0], wp.min(b[0], c[0])) - 0.5)), 0),
+                    wp.min(int(wp.floor(wp.max(a[0], wp.max(b[0], c[0])) - 0.5)), width - 1),
+                    wp.max(int(wp.ceil(wp.min(a[1], wp.min(b[1], c[1])) - 0.5)), 0),
+                    wp.min(int(wp.floor(wp.max(a[1], wp.max(b[1], c[1])) - 0.5)), height - 1))
+
+
 @wp.kernel
 def fetch_box(
     offset: int,
@@ -43,13 +52,10 @@ def fetch_box(
     a = proj[indices[3 * t]]
     b = proj[indices[3 * t + 1]]
     c = proj[indices[3 * t + 2]]
-    x0 = wp.max(int(wp.ceil(wp.min(a[0], wp.min(b[0], c[0])) - 0.5)), 0)
-    x1 = wp.min(int(wp.floor(wp.max(a[0], wp.max(b[0], c[0])) - 0.5)), width - 1)
-    y0 = wp.max(int(wp.ceil(wp.min(a[1], wp.min(b[1], c[1])) - 0.5)), 0)
-    y1 = wp.min(int(wp.floor(wp.max(a[1], wp.max(b[1], c[1])) - 0.5)), height - 1)
+    box = texel_box(a, b, c, width, height)
     n = int(0)
-    if x0 <= x1 and y0 <= y1:
-        n = (x1 - x0 + 1) * (y1 - y0 + 1)
+    if box[0] <= box[1] and box[2] <= box[3]:
+        n = (box[1] - box[0] + 1) * (box[3] - box[2] + 1)
     texels[t] = n
 
 
@@ -73,12 +79,11 @@ def draw_min(
     a = proj[indices[3 * t]]
     b = proj[indices[3 * t + 1]]
     c = proj[indices[3 * t + 2]]
-    h = depth.shape[0]
-    w = depth.shape[1]
-    x0 = wp.max(int(wp.ceil(wp.min(a[0], wp.min(b[0], c[0])) - 0.5)), 0)
-    x1 = wp.min(int(wp.floor(wp.max(a[0], wp.max(b[0], c[0])) - 0.5)), w - 1)
-    y0 = wp.max(int(wp.ceil(wp.min(a[1], wp.min(b[1], c[1])) - 0.5)), 0)
-    y1 = wp.min(int(wp.floor(wp.max(a[1], wp.max(b[1], c[1])) - 0.5)), h - 1)
+    box = texel_box(a, b, c, depth.shape[1], depth.shape[0])
+    x0 = box[0]
+    x1 = box[1]
+    y0 = box[2]
+    y1 = box[3]
     if x0 > x1 or y0 > y1 or (x1 - x0 + 1) * (y1 - y0 + 1) > max_texels:
         return
     area = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
