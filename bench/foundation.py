@@ -101,19 +101,27 @@ def _gbuffer_points(scene_name, device, width=320, height=240):
     return np.stack([fr["P.X"], fr["P.Y"], fr["P.Z"]], -1)[fr["A"] > 0]
 
 
+def _light_map_view(case: dict, scene, light):
+    """The scene on the case's device and the light view of a depth-map case: fitted to the
+    receivers a 320x240 render sees, ``case["size"]`` texels per side."""
+    from wsoft.lightspace.view import fit_light_view
+    from wsoft.scene.device import upload_scene
+
+    ds, _ = scene.device_copy(case["device"], upload_scene)
+    lo, hi = scene.bounds
+    return ds, fit_light_view(light, _gbuffer_points(case["scene"], case["device"]), lo, hi, case["size"])
+
+
 def _raster_vs_raycast(case: dict, ctx: dict) -> dict:
     from wsoft.parallel import cpu_threads
-    from wsoft.lightspace.view import DEPTH_CLEAR, fit_light_view
+    from wsoft.lightspace.view import DEPTH_CLEAR
     from wsoft.raster.rasterizer import rasterize
     from wsoft.raster.raycast import raycast_depth
-    from wsoft.scene.device import upload_scene
 
     scene = load(case["scene"])
     light = scene.find_light(case["light"]) if case["light"] else scene.lights[0]
     dev = case["device"]
-    ds, _ = scene.device_copy(dev, upload_scene)
-    lo, hi = scene.bounds
-    view = fit_light_view(light, _gbuffer_points(case["scene"], dev), lo, hi, case["size"])
+    ds, view = _light_map_view(case, scene, light)
     r_wall, r_cpu = _timed(lambda: rasterize(ds, view, alpha_tested=scene.has_cutouts), repeats=5)
     c_wall, c_cpu = _timed(lambda: raycast_depth(ds, view, alpha_tested=scene.has_cutouts), repeats=5)
     a = rasterize(ds, view, scene.has_cutouts).depth.numpy()
@@ -168,9 +176,8 @@ def _raster_baseline(case: dict, ctx: dict) -> dict:
 
     import warp as wp
 
-    from wsoft.lightspace.view import DEPTH_CLEAR, fit_light_view
+    from wsoft.lightspace.view import DEPTH_CLEAR
     from wsoft.raster.rasterizer import rasterize
-    from wsoft.scene.device import upload_scene
 
     scene = load(case["scene"])
     light = scene.find_light(case["light"]) if case["light"] else scene.lights[0]
@@ -178,11 +185,7 @@ def _raster_baseline(case: dict, ctx: dict) -> dict:
     old = _baseline_module(case["baseline"])
     if old is None:
         return row | {"skipped": f"no git history with {case['baseline']}:{BASELINES[case['baseline']][0]} (run from a checkout)"}
-    dev = case["device"]
-    ds, _ = scene.device_copy(dev, upload_scene)
-    lo, hi = scene.bounds
-    rec = _gbuffer_points(case["scene"], dev)
-    view = fit_light_view(light, rec, lo, hi, case["size"])
+    ds, view = _light_map_view(case, scene, light)
     # the same view for both (the old module's own LightView type, the new view's geometry): the
     # views' fitting changed since (a distant light's depth origin), the rasterizers are compared
     oview = old.LightView(light_path=view.light_path, persp=view.persp, origin=view.origin, axes=view.axes, window=view.window,
@@ -214,18 +217,15 @@ def _raster_bound(case: dict, ctx: dict) -> dict:
     import warp as wp
 
     from wsoft.bench.raster_bound import Bound
-    from wsoft.lightspace.view import DEPTH_CLEAR, fit_light_view
+    from wsoft.lightspace.view import DEPTH_CLEAR
     from wsoft.parallel import cpu_threads
     from wsoft.raster.rasterizer import BIG_TRIANGLE_TEXELS, CPU_CHUNK, SMALL_BOX_TEXELS, rasterize
     from wsoft.raster.raycast import raycast_depth
-    from wsoft.scene.device import upload_scene
 
     scene = load(case["scene"])
     light = scene.find_light(case["light"])
     dev = case["device"]
-    ds, _ = scene.device_copy(dev, upload_scene)
-    lo, hi = scene.bounds
-    view = fit_light_view(light, _gbuffer_points(case["scene"], dev), lo, hi, case["size"])
+    ds, view = _light_map_view(case, scene, light)
     bound = Bound(ds, view, cpu_threads(), CPU_CHUNK)
 
     def clock(fn):

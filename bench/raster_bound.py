@@ -25,6 +25,8 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from wsoft.raster.rasterizer import edge
+
 DEPTH_CLEAR = wp.constant(1.0e30)  # as wsoft.lightspace.view.DEPTH_CLEAR (an empty texel)
 
 
@@ -86,15 +88,15 @@ def draw_min(
     y1 = box[3]
     if x0 > x1 or y0 > y1 or (x1 - x0 + 1) * (y1 - y0 + 1) > max_texels:
         return
-    area = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
+    area = edge(a[0], a[1], b[0], b[1], c[0], c[1])
     if wp.abs(area) < 1.0e-12:
         return
     ia = 1.0 / area
     px = float(x0) + 0.5
     py = float(y0) + 0.5
     # barycentrics of a and b at the box's first texel centre, and their steps per texel
-    l0 = ((c[0] - b[0]) * (py - b[1]) - (c[1] - b[1]) * (px - b[0])) * ia
-    l1 = ((a[0] - c[0]) * (py - c[1]) - (a[1] - c[1]) * (px - c[0])) * ia
+    l0 = edge(b[0], b[1], c[0], c[1], px, py) * ia
+    l1 = edge(c[0], c[1], a[0], a[1], px, py) * ia
     g0x = -(c[1] - b[1]) * ia
     g0y = (c[0] - b[0]) * ia
     g1x = -(a[1] - c[1]) * ia

@@ -76,6 +76,14 @@ def _brute_force(
                 blocked[i] = 1
 
 
+def _brute(ds, origin, dirs, tmax, state) -> np.ndarray:
+    """Per ray (state 1 only): 1 where :func:`_brute_force` finds it blocked."""
+    out = wp.empty(origin.shape[0], dtype=wp.int32, device="cpu")
+    wp.launch(_brute_force, dim=origin.shape[0], inputs=[origin, dirs, tmax, state, ds.points, ds.indices, ds.cutouts,
+                                                         int(ds.has_cutouts)], outputs=[out], device="cpu")
+    return out.numpy()
+
+
 def _izb_resources(scene, params, w=96, h=72):
     b = build_graph(scene, "izb", width=w, height=h, device="cpu", params=params)
     extra = [k for p in b.ctx.graph.passes.values() for k in p.outputs]
@@ -94,15 +102,11 @@ def test_every_sample_equals_a_brute_force_trace(scene_name, aa):
     scene = load(scene_name)
     res, get, _ = _izb_resources(scene, {"aa": aa, "grid_size": 256})
     smp, grid, ds = get("izb_samples"), get("izb_grid"), get("scene")
-    n = smp["origin"].shape[0]
-    brute = wp.empty(n, dtype=wp.int32, device="cpu")
-    wp.launch(_brute_force, dim=n, inputs=[smp["origin"], smp["dir"], smp["tmax"], smp["state"], ds.points, ds.indices,
-                                           ds.cutouts, int(ds.has_cutouts)], outputs=[brute], device="cpu")
     state, rank, ins = smp["state"].numpy(), grid.rank.numpy(), smp["insert"].numpy()
     blocked = get("izb_blocked").numpy()
     tested = (state == 1) & (ins != 0)
     got = np.where(rank >= 0, blocked[np.maximum(rank, 0)], 0)
-    b = brute.numpy()
+    b = _brute(ds, smp["origin"], smp["dir"], smp["tmax"], smp["state"])
     assert tested.sum() > 1000 and b[tested].sum() > 50  # shadowed and lit samples both
     assert grid.outside == 0
     assert np.array_equal(got[tested], b[tested])
@@ -363,20 +367,14 @@ def test_none_differs_from_the_reference_only_where_their_ray_conventions_do():
     ref = wsoft.render(scene, "reference", width=w, height=h, device="cpu", samples=1).V.ravel()
     izb = wsoft.render(scene, "izb", width=w, height=h, device="cpu", aa="none", grid_size=512).V.ravel()
 
-    def brute(origin, dirs, tmax, state):
-        out = wp.empty(origin.shape[0], dtype=wp.int32, device="cpu")
-        wp.launch(_brute_force, dim=origin.shape[0], inputs=[origin, dirs, tmax, state, ds.points, ds.indices, ds.cutouts,
-                                                             int(ds.has_cutouts)], outputs=[out], device="cpu")
-        return out.numpy()
-
     n = w * h
     state = smp["state"].numpy()[:n]
-    b_izb = brute(smp["origin"], smp["dir"], smp["tmax"], smp["state"])[:n]
+    b_izb = _brute(ds, smp["origin"], smp["dir"], smp["tmax"], smp["state"])[:n]
     vis_izb = np.where(state == 1, 1 - b_izb, 0).astype(np.float32)
     covered = np.flatnonzero(gb.prim.numpy() >= 0)
     o, d, t = shadow_rays(ds, light_gpu(light, scene.diagonal), gb, reference_pattern(1, 0, False), True, ray_epsilon(gb, light))
     tr = t.numpy()
-    b_ref = brute(o, d, t, wp.array(np.where(tr > 0, 1, 0).astype(np.int32), dtype=wp.int32, device="cpu"))
+    b_ref = _brute(ds, o, d, t, wp.array(np.where(tr > 0, 1, 0).astype(np.int32), dtype=wp.int32, device="cpu"))
     vis_ref = np.zeros(n, np.float32)
     vis_ref[covered] = np.where(tr > 0, 1 - b_ref, 0)
     cov = np.zeros(n, bool)
