@@ -26,7 +26,7 @@ import numpy as np
 from wsoft.bench.stages import add_box, add_camera, add_quad, add_rect_light, add_sun, make_stage
 
 W, H = 48, 36  # frame size of every case (small: the corpus runs in CI)
-MAP = 256  # shadow-map size of every shadow-map technique
+MAP = 256  # texels (cells) per side of every technique's light map or grid (its size_param)
 REF_SAMPLES = 64
 
 
@@ -520,7 +520,7 @@ class Case:
     base: str = "base"  # the stage 'same as base' compares with
     silent_before: bool = False  # one of the issue's silent wrong answers or tracebacks (for the report)
     warn_instead: bool = False  # a technique that misses the answer must say so in a warning with ``message``
-    map_size: int = MAP  # shadow-map size of the shadow-map techniques
+    map_size: int = MAP  # texels (cells) per side of the techniques' light maps or grids (their size_param)
     note: str = ""
 
 
@@ -571,13 +571,21 @@ CASES: list[Case] = [
 BASES = {"base": b_base, "base_sun": b_base_sun}
 
 
+# what the corpus sets beyond a technique's quick parameters: the reference's samples, and izb
+# without anti-aliasing (the checks judge a pixel by its centre sample: an anti-aliased pixel
+# mixes what it covers)
+CORPUS_PARAMS = {"reference": {"samples": REF_SAMPLES}, "izb": {"aa": "none"}}
+
+
 def technique_args(technique: str, map_size: int = MAP) -> list[str]:
-    """Small, CI-sized settings of a technique."""
-    if technique == "reference":
-        return ["--set", f"samples={REF_SAMPLES}"]
-    if technique == "izb":  # the checks judge a pixel by its centre sample: an anti-aliased pixel mixes what it covers
-        return ["--set", f"shadow_map_size={map_size}", "--set", "aa=none"]
-    return ["--set", f"shadow_map_size={map_size}"]
+    """``--set`` arguments of a technique in the corpus: its quick parameters
+    (``Technique.quick_params``), ``map_size`` for its map or grid (``Technique.size_param``) and
+    :data:`CORPUS_PARAMS`."""
+    from wsoft.techniques import get_technique
+
+    cls = get_technique(technique)
+    params = {**cls.quick_params, **({cls.size_param: map_size} if cls.size_param else {}), **CORPUS_PARAMS.get(technique, {})}
+    return [a for k, v in params.items() for a in ("--set", f"{k}={v}")]
 
 
 @dataclass

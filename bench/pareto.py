@@ -3,7 +3,7 @@
 For every bundled scene and each of its shadow-casting lights, one frame graph holds every
 registered technique that supports the light, at each of its declared quality settings
 (``Technique.quality_settings()``: its defaults, then each quality knob's values one at a time)
-and two shadow-map sizes, plus ``reference`` at 1-256 samples (its own quality knob, seed 1).
+and two sizes of its light-space map or grid (its ``size_param``), plus ``reference`` at 1-256 samples (its own quality knob, seed 1).
 Passes they have in common (the G-buffer, each depth map, ESSM's SATs across its shading knobs,
 SSM's pruning structures across budgets) run once. Each technique's frame time is the sum of
 the passes it needs (shared ones included), median of 3 runs after a warm-up; its error is the
@@ -73,9 +73,9 @@ def settings(scene, light, sizes: list[int], quick: bool) -> list[tuple[str, dic
             values = q.values[:3] if quick else q.values
             out += [(name, {q.param: v, "seed": CURVE_SEED}) for v in values]
             continue
-        for size in sizes:
+        for size in sizes if cls.size_param else [None]:
             for q in qs:
-                out.append((name, {"shadow_map_size": size, **q}))
+                out.append((name, {cls.size_param: size, **q} if cls.size_param else dict(q)))
     return out
 
 
@@ -126,12 +126,21 @@ def _err(entry: dict, metric: str = "mae_penumbra") -> float:
     return entry["error"][metric]
 
 
+def size_param(technique: str) -> str | None:
+    """The parameter the sweep turned as ``technique``'s map size (None: none, or not registered now)."""
+    from wsoft.techniques import TECHNIQUES
+
+    cls = TECHNIQUES.get(technique)
+    return cls.size_param if cls is not None else None
+
+
 def setting_text(entry: dict) -> str:
     p = entry["params"]
     if entry["technique"] == "reference":
         return f"reference {p['samples']} spp"
-    rest = ", ".join(f"{k}={v}" for k, v in p.items() if k != "shadow_map_size")
-    return f"{entry['technique']} {p['shadow_map_size']}²" + (f" {rest}" if rest else "")
+    size = size_param(entry["technique"])
+    rest = ", ".join(f"{k}={v}" for k, v in p.items() if k != size)
+    return f"{entry['technique']}" + (f" {p[size]}²" if size in p else "") + (f" {rest}" if rest else "")
 
 
 def time_to_reach(entries: list[dict], target: float, metric: str = "mae_penumbra") -> dict | None:
@@ -193,7 +202,7 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
         md.write_text("\n".join(L) + "\n")
         return
     techs = sorted({e["technique"] for r in rows for e in r["entries"]})
-    sizes = sorted({e["params"]["shadow_map_size"] for r in rows for e in r["entries"] if "shadow_map_size" in e["params"]})
+    sizes = sorted({e["params"][size_param(e["technique"])] for r in rows for e in r["entries"] if size_param(e["technique"]) in e["params"]})
     L.append(f"Every registered technique that supports the light ({', '.join(techs)}) at each of its declared quality settings and")
     L.append(f"map sizes {', '.join(f'{s}²' for s in sizes)}, and the reference at "
              f"{', '.join(sorted({str(e['params']['samples']) for r in rows for e in r['entries'] if e['technique'] == 'reference'}, key=int))} samples,")

@@ -12,6 +12,7 @@ import pytest
 from conftest import ROOT, scene_path
 
 from wsoft.io import read_exr
+from wsoft.techniques import TECHNIQUES
 
 
 def run(*args, check=True):
@@ -77,7 +78,7 @@ def _bad_mesh(tmp_path):
         ("broken", "cannot open USD stage"),
         ("face", "/Tri: faceVertexIndices[2] = 9 is out of range"),
         ("nolight", "no shadow-casting light"),
-        ("technique", "unknown technique 'nope'; techniques: dcs, esm, essm, hard, izb, pcf, pcss, pwedge, reference, salzman, ssm, vsm, vssm"),
+        ("technique", "unknown technique 'nope'; techniques: " + ", ".join(sorted(TECHNIQUES))),
         ("param", "technique 'hard' has no parameter samples"),
         ("value", "shadow_map_size='abc' is not a valid int"),
         ("camera", "no camera '/World/Nope'"),

@@ -1,8 +1,10 @@
-"""Contracts every registered technique keeps (run over ``TECHNIQUES``, not a hand-written list):
-its manual matches its ``Params``, unknown keys and out-of-range values are rejected, ``supports``
-agrees with ``wsoft plan`` and ``render``, its output is finite on every bundled scene it supports,
-it comes within its declared tolerance of the exact parallel-rectangle answer, it never edits a
-resource another pass wrote, and the README's technique table is the one the code generates."""
+"""Contracts every registered technique keeps (run over ``TECHNIQUES``, not a hand-written list;
+``tests/test_plugins.py`` runs the same checks on a plugin): its manual matches its ``Params``,
+unknown keys and out-of-range values are rejected, its quick parameters and quality settings are
+valid, the passes it adds are the ones it declares, ``supports`` agrees with ``wsoft plan`` and
+``render``, its output is finite on every bundled scene it supports, it comes within its declared
+tolerance of the exact parallel-rectangle answer, it never edits a resource another pass wrote,
+and the README's technique table is the one the code generates."""
 
 from __future__ import annotations
 
@@ -34,6 +36,10 @@ def numeric_fields(cls):
 
 @pytest.mark.parametrize("name", NAMES)
 def test_manual_matches_params(name):
+    check_manual(name)
+
+
+def check_manual(name):
     cls = TECHNIQUES[name]
     d = cls.describe()
     fields = [f.name for f in dataclasses.fields(cls.Params)]
@@ -55,6 +61,10 @@ def test_manual_matches_params(name):
 
 @pytest.mark.parametrize("name", NAMES)
 def test_unknown_keys_and_bad_values_rejected(name):
+    check_bad_values(name)
+
+
+def check_bad_values(name):
     cls = TECHNIQUES[name]
     with pytest.raises(wsoft.ParameterError, match="has no parameter no_such_thing"):
         create(name, {"no_such_thing": 1})
@@ -70,11 +80,73 @@ def test_unknown_keys_and_bad_values_rejected(name):
 
 @pytest.mark.parametrize("name", NAMES)
 def test_quality_settings_are_valid(name):
+    check_settings(name)
+
+
+def check_settings(name):
     cls = TECHNIQUES[name]
+    assert cls.declaration_problem() is None
     settings = cls.quality_settings()
     assert settings[0] == {} and len(settings) == len({str(s) for s in settings})
     for s in settings:
         create(name, s)
+    create(name, cls.quick_params)
+    if cls.size_param:
+        create(name, {cls.size_param: 512, **cls.quick_params})
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_passes_are_the_declared_ones(name):
+    check_passes(name)
+
+
+def check_passes(name, scenes=("box_plane.usda", "cutout.usda")):
+    """On a plain and a cutout scene, at its quick settings and each quality setting: every pass the
+    technique adds is of a declared stage (the graph checks its inputs and outputs against the
+    declaration), every stage declared to run always ran, and ``wsoft techniques`` prints them."""
+    from wsoft.render import build_graph
+
+    cls = TECHNIQUES[name]
+    seen = set()
+    for scene_name in scenes:
+        scene = wsoft.load_scene(scene_path(scene_name))
+        for q in cls.quality_settings():
+            built = build_graph(scene, create(name, {**cls.quick_params, **q}), width=24, height=18, device="cpu", strict=False)
+            label = built.labels[0]
+            if label not in built.channels:
+                continue
+            mine = [p for p in built.ctx.graph.schedule([built.channels[label]]) if p.technique in (label, "") and p.kind in ("technique", "reference")]
+            stages = {p.stage for p in mine}
+            assert {s.stage for s in cls.passes if not s.when} <= stages, (name, scene_name, q, stages)
+            seen |= stages
+    assert seen <= {s.stage for s in cls.passes}
+    d = cls.describe()
+    assert [p["stage"] for p in d["passes"]] == [s.stage for s in cls.passes]
+    assert "visibility" in d["writes"] and not set(d["reads"]) & set(d["writes"])
+
+
+def test_the_declaration_check_can_fail():
+    """A technique whose pass reads a resource its declaration leaves out, or adds a pass of a stage
+    it does not declare, stops the graph's construction with a one-line error naming both."""
+    from wsoft.errors import DeclarationError
+    from wsoft.render import build_graph
+    from wsoft.techniques import PassSpec
+
+    hard = TECHNIQUES["hard"]
+
+    class Liar(hard):
+        name = "liar"
+        passes = (PassSpec("shadow", reads=("gbuffer",), writes=("visibility",)),)
+
+    class Stranger(hard):
+        name = "stranger"
+        passes = (PassSpec("filter", reads=("gbuffer", "light_depth"), writes=("visibility",)),)
+
+    scene = wsoft.load_scene(scene_path("box_plane.usda"))
+    with pytest.raises(DeclarationError, match=r"pass 'hard\[Light\]' reads gbuffer, light_depth .* declares shadow: gbuffer -> visibility"):
+        build_graph(scene, Liar(Liar.make_params({})), width=8, height=8)
+    with pytest.raises(DeclarationError, match="adds a pass of stage 'shadow', which it does not declare"):
+        build_graph(scene, Stranger(Stranger.make_params({})), width=8, height=8)
 
 
 def _two_lights():
@@ -133,7 +205,7 @@ def test_finite_on_every_bundled_scene(scene_name):
 
     scene = load_stage(str(usd_scenes.path(scene_name)))  # as the command line loads it (forest keeps its instances)
     for name in NAMES:
-        params = {"samples": 4} if name == "reference" else {"shadow_map_size": 256}
+        params = TECHNIQUES[name].quick_params
         lights = [l for l in scene.lights if create(name, params).supports(scene, l) is None]
         if not lights:
             continue
@@ -149,6 +221,10 @@ def test_finite_on_every_bundled_scene(scene_name):
 
 @pytest.mark.parametrize("name", NAMES)
 def test_within_declared_tolerance_of_the_exact_answer(device, name):
+    check_tolerance(name, device)
+
+
+def check_tolerance(name, device="cpu"):
     """box_plane: a square occluder parallel to a square light and the ground, at default parameters."""
     tol = TECHNIQUES[name].tolerance
     assert tol is not None, f"{name} declares no tolerance"
@@ -159,10 +235,14 @@ def test_within_declared_tolerance_of_the_exact_answer(device, name):
 
 @pytest.mark.parametrize("name", NAMES)
 def test_no_pass_edits_another_pass_resource(name):
+    check_immutable(name)
+
+
+def check_immutable(name):
     from wsoft.render import build_graph, execute
 
     scene = wsoft.load_scene(scene_path("contact.usda"))
-    params = {"samples": 4} if name == "reference" else {"shadow_map_size": 256}
+    params = TECHNIQUES[name].quick_params
     built = build_graph(scene, create(name, params), width=32, height=24, device="cpu", pixel_samples=2 if name == "ssm" else 1)
     execute(built, "cpu", check_immutable=True)  # raises if a pass changed an input
 
@@ -194,12 +274,16 @@ def test_readme_technique_table_is_generated_from_the_code():
 
 
 def test_every_technique_is_registered():
-    """Each module under wsoft/techniques defining a Technique subclass is in TECHNIQUES."""
-    found = set()
+    """Every class under wsoft/techniques that declares a technique ``name`` is registered, under the
+    name of the module (or package) that holds it: the registry needs no list of its own."""
+    found = {}
     for path in (ROOT / "wsoft" / "techniques").rglob("*.py"):
         for node in ast.walk(ast.parse(path.read_text())):
-            if isinstance(node, ast.ClassDef) and any(ast.unparse(b) == "Technique" for b in node.bases):
+            if isinstance(node, ast.ClassDef):
                 for stmt in node.body:
                     if isinstance(stmt, ast.Assign) and ast.unparse(stmt.targets[0]) == "name":
-                        found.add(ast.literal_eval(stmt.value))
-    assert found == set(TECHNIQUES)
+                        rel = path.relative_to(ROOT / "wsoft" / "techniques")
+                        found[ast.literal_eval(stmt.value)] = rel.parts[0].removesuffix(".py")
+    assert len(found) >= 13 and all(name == module for name, module in found.items()), found
+    bundled = {n for n, c in TECHNIQUES.items() if c.__module__.startswith("wsoft.techniques.")}
+    assert set(found) == bundled == set(wsoft.techniques.bundled_names())

@@ -63,7 +63,7 @@ def test_stsv_pass_only_for_perforated_triangles():
     ({"decorrelate": "shuffle"}, "decorrelate"),
     ({"pattern": "poisson", "decorrelate": "per_pixel"}, "per_pixel"),
     ({"pattern": "jittered", "samples": 12}, "square"),
-    ({"shadow_map_size": 4}, "shadow_map_size"),
+    ({"grid_size": 4}, "grid_size"),
     ({"grid": 3}, "has no parameter grid"),
     ({"estimator": "mean"}, "estimator"),
 ])

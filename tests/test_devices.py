@@ -23,7 +23,7 @@ SMALL = dict(width=40, height=30)
 
 
 def _params(technique: str) -> dict:
-    return {"samples": 16} if technique == "reference" else {"shadow_map_size": 256}
+    return TECHNIQUES[technique].quick_params
 
 
 @pytest.mark.parametrize("technique", sorted(TECHNIQUES))

@@ -13,9 +13,12 @@ from instancing_util import rot, split, xf
 from wsoft.errors import ParameterError
 from wsoft.render import build_graph, render
 from wsoft.scene.usd import load_scene
+from wsoft.techniques import TECHNIQUES
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CUTOUT = os.path.join(ROOT, "usd_scenes", "cutout.usda")
+# the techniques that read light depth maps and keep a stage's instances
+MAP_TECHNIQUES_KEEPING_INSTANCES = [n for n, c in sorted(TECHNIQUES.items()) if not c.instancing_refusal and "light_depth" in c.reads()]
 
 # the fence (a cutout quad) and the leaf box (closed, single-sided) become prototypes; instances:
 # identity, rotated + anisotropically scaled, translated, rotated + mirrored (negative x scale)
@@ -82,7 +85,7 @@ def test_reference_equals_flat_bit_for_bit(pair, device):
         render(inst, "reference", width=32, height=24, samples=16, traversal="packet", device=device)
 
 
-@pytest.mark.parametrize("tech", ["hard", "pcf", "pcss", "vsm", "esm", "essm", "vssm", "ssm"])
+@pytest.mark.parametrize("tech", MAP_TECHNIQUES_KEEPING_INSTANCES)
 def test_map_techniques_keep_instances(pair, tech):
     """The maps draw the instances; the image equals the flat scene's but for pixels whose eye
     point moved by float rounding on a borderline (self-shadowed) surface."""
@@ -261,7 +264,7 @@ def test_light_inside_an_instanced_closed_box(mirror):
     inst, flat = split(sc, ["Fence", "Leaf"], [(1, M)])
     assert inst.instances.count == 1
     for tech in ("hard", "pcss", "reference"):
-        kw = {"samples": 16} if tech == "reference" else {"shadow_map_size": 256}
+        kw = TECHNIQUES[tech].quick_params
         a = render(inst, tech, width=48, height=36, **kw)
         b = render(flat, tech, width=48, height=36, **kw)
         covered = a["A"] > 0 if "A" in a.channels else np.ones_like(a.V, bool)

@@ -244,7 +244,7 @@ def test_stsv_pass_only_for_lights_whose_view_holds_perforated_triangles():
     ({"pattern": "blue"}, "pattern"),
     ({"decorrelate": "shuffle"}, "decorrelate"),
     ({"pattern": "sobol02", "decorrelate": "per_pixel"}, "per_pixel"),
-    ({"shadow_map_size": 4}, "shadow_map_size"),
+    ({"grid_size": 4}, "grid_size"),
     ({"wedges": 3}, "has no parameter wedges"),
 ])
 def test_bad_parameters_are_one_line_errors(params, match):

@@ -245,6 +245,8 @@ def cmd_techniques(args) -> int:
     for d in desc:
         print(f"{d['name']}: {d['summary']}")
         print(f"  reads: {', '.join(d['reads'])}; writes: {', '.join(d['writes'])}")
+        for spec in TECHNIQUES[d["name"]].passes:
+            print(f"  pass {spec.text()}")
         for p in d["parameters"]:
             rng = f" [{p['range']}]" if p["range"] else ""
             print(f"  {p['name']:<16} {p['type']:<6} default {p['default']!s:<8} {p['meaning']}{rng}")
@@ -397,6 +399,25 @@ _RS_HELP = ("RenderSettings prim to use (default: the stage metadata renderSetti
             "UsdRender.Settings.GetStageRenderSettings, else none); --width/--height/--camera override its values")
 
 
+def _one_line_warnings() -> None:
+    """wsoft's own warnings (a technique plugin left out, non-finite values) print as one line,
+    ``warning: ...``; other warnings keep Python's format."""
+    import warnings
+
+    if getattr(warnings.showwarning, "_wsoft", False):
+        return
+    default = warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if category.__module__.startswith("wsoft."):
+            print(f"warning: {message}", file=file or sys.stderr)
+        else:
+            default(message, category, filename, lineno, file, line)
+
+    show._wsoft = True
+    warnings.showwarning = show
+
+
 def main(argv: list[str] | None = None) -> int:
     from wsoft.bench.harness import SWEEPS
     from wsoft.techniques import NAMES  # the names only: the technique modules import Warp
@@ -492,6 +513,8 @@ def main(argv: list[str] | None = None) -> int:
 
     args = ap.parse_args(argv)
     from wsoft.errors import WsoftError
+
+    _one_line_warnings()
 
     try:
         return int(args.fn(args) or 0)

@@ -30,6 +30,11 @@ class ParameterError(WsoftError):
     """An unknown technique, unknown parameter key or a bad parameter value."""
 
 
+class DeclarationError(WsoftError):
+    """A technique whose passes disagree with what it declares (:class:`wsoft.techniques.PassSpec`):
+    a pass of an undeclared stage, or one reading or writing other kinds of resource."""
+
+
 class NonFiniteWarning(RuntimeWarning):
     """A rendered channel holds NaN or inf values (counted in the stats; an EXR gets 0 there).
     The test suite turns it into an error."""

@@ -32,19 +32,22 @@ PASS_KINDS = ("scene", "gbuffer", "light_map", "technique", "reference", "shade"
 class Key:
     """A resource of the frame graph.
 
-    ``kind``: what it is (``gbuffer``, ``light_depth``, ``visibility``, ``essm_sat``...);
+    ``kind``: what it is (``gbuffer``, ``light_depth``, ``visibility``, ``essm_sat``...: what a
+    technique's :class:`~wsoft.techniques.PassSpec` names); ``flavour``: how a resource of that
+    kind was made, when several ways exist (a depth map ``_alpha``-tested, ``_conservative``...);
     ``light``: the light's label, or empty; ``technique``: the technique (instance label) it
-    belongs to, or empty for a resource any technique may share; ``variant``: what else tells
-    it apart (a map size, the parameters it was built with)."""
+    belongs to, or empty for a resource any technique may share; ``variant``: what else tells it
+    apart (a map size, the parameters it was built with)."""
 
     kind: str
     light: str = ""
     technique: str = ""
     variant: str = ""
+    flavour: str = ""
 
     def __str__(self) -> str:
         inner = ":".join(x for x in (self.technique, self.light) if x)
-        return self.kind + (f"[{inner}]" if inner else "") + self.variant
+        return self.kind + self.flavour + (f"[{inner}]" if inner else "") + self.variant
 
 
 class Resources(dict):

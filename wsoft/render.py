@@ -22,11 +22,11 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from wsoft.errors import NonFiniteWarning, ParameterError, SceneError
+from wsoft.errors import DeclarationError, NonFiniteWarning, ParameterError, SceneError
 from wsoft.io import nonfinite_counts
 from wsoft.graph import FrameGraph, Key, Pass, Resources
 from wsoft.lightspace.light import disk_shaped, light_gpu
-from wsoft.lightspace.view import fit_light_view
+from wsoft.lightspace.view import fit_light_view, outside_view_warning
 from wsoft.parallel import compile_time, cpu_threads, resolve_device
 from wsoft.raster.camera import camera_gpu, conform_aperture
 from wsoft.raster.gbuffer import GBuffer, render_gbuffer
@@ -160,9 +160,7 @@ class RenderContext:
             view = fit_light_view(light, rec, lo, hi, size, casters=self.scene.caster_points if soft or distant else None)
             self.pass_counters(name)["receivers_outside"] = view.receivers_outside
             if view.receivers_outside:
-                self.warn(name, f"light {light.path}: {view.receivers_outside} of {len(rec)} visible samples lie outside its "
-                          f"single-frustum view (more than 80 degrees off its axis) and are left unshadowed; "
-                          f"a light that surrounds its receivers needs a cube map, which this technique does not build")
+                self.warn(name, outside_view_warning(light, f"{view.receivers_outside} of {len(rec)} visible samples"))
             return {key: view}
 
         return self.add(Pass(name, (gk,), (key,), run, kind="light_map", light=self.label(light)))
@@ -181,9 +179,9 @@ class RenderContext:
         casting = self.scene.casting_triangles(light)  # None: every triangle (no list, no extra work)
         vk = self.light_view(light, size, soft)
         alpha = self.scene.has_cutouts and not opaque
-        kind = ("light_depth" + ("_alpha" if alpha else "") + ("_inner" if inner else "_conservative" if conservative else "")
-                + ("" if faces == "all" else f"_{faces}"))
-        key = Key(kind, self.label(light), variant=f"@{size}" + ("+soft" if soft else ""))
+        flavour = (("_alpha" if alpha else "") + ("_inner" if inner else "_conservative" if conservative else "")
+                   + ("" if faces == "all" else f"_{faces}"))
+        key = Key("light_depth", self.label(light), variant=f"@{size}" + ("+soft" if soft else ""), flavour=flavour)
         name = str(key)
 
         def run(res):
@@ -226,7 +224,8 @@ class RenderContext:
             v = res[vis_key]
             return {key: Visibility(clip_to_front(v.vis, res[fk]), v.stderr)}
 
-        return tctx.add_pass(tctx.pass_name(f"horizon_{tctx.tech.name}", light), (vis_key, fk), (key,), run, kind="shade", stage="horizon", light=light)
+        return self.add(Pass(tctx.pass_name(f"horizon_{tctx.tech.name}", light), (vis_key, fk), (key,), run, kind="shade", stage="horizon",
+                             technique=tctx.label_, light=self.label(light)))
 
     def provide(self, key: Key, value: Any, *, name: str | None = None, kind: str = "reference") -> Key:
         """A resource computed outside the graph (a cached reference image): a pass that hands it over."""
@@ -281,25 +280,18 @@ class TechniqueContext:
         """A resource of this technique instance alone."""
         return Key(kind, self.label(light), technique=self.label_, variant=variant)
 
-    def shared_key(self, kind: str, light: Light, *params: str) -> Key:
+    def shared_key(self, kind: str, light: Light, size: int, *params: str) -> Key:
         """A resource any instance of this technique may share: it depends on the light, the map
-        size and the named parameters only (non-default values appear in the variant)."""
+        ``size`` and the named parameters only (non-default values appear in the variant)."""
         p = self.tech.params
         d = self.tech.defaults()
         extra = ",".join(f"{n}={getattr(p, n)}" for n in params if getattr(p, n) != d[n])
-        return Key(kind, self.label(light), variant=f"@{p.shadow_map_size}" + (f"{{{extra}}}" if extra else ""))
+        return Key(kind, self.label(light), variant=f"@{size}" + (f"{{{extra}}}" if extra else ""))
 
     def pass_name(self, base: str, light: Light, suffix: str = "") -> str:
         """``base[light]suffix``, or ``base[label:light]suffix`` for a labelled instance."""
         inner = self.label(light) if self.label_ == self.tech.name else f"{self.label_}:{self.label(light)}"
         return f"{base}[{inner}]{suffix}"
-
-    def warn_distance(self, pass_name: str, light: Light) -> None:
-        """The warning of a depth-map technique that applies ``inputs:shadow:distance`` to the caster
-        its map keeps per texel (the one nearest the light)."""
-        self.ctx.warn(pass_name, f"light {light.path}: inputs:shadow:distance = {light.shadow_distance:g} is tested against the "
-                                 f"caster nearest the light in each texel of the depth map: a caster behind it within the distance "
-                                 f"is missed (reference and izb test every caster)")
 
     def visibility(self, vis: wp.array, stderr: wp.array | None = None) -> Visibility:
         return Visibility(vis, stderr)
@@ -309,14 +301,29 @@ class TechniqueContext:
         t = self.ctx.counters["techniques"].setdefault(self.label_, {})
         return t.setdefault(self.label(light), {})
 
-    def add_pass(self, name: str, inputs, outputs, run, *, kind: str | None = None, stage: str = "", light: Light | None = None) -> Key:
-        """Register a pass of this technique; ``name`` from :meth:`pass_name`, ``kind`` defaults to
-        ``reference`` for the reference and ``technique`` otherwise."""
+    def add_pass(self, name: str, inputs, outputs, run, *, stage: str, kind: str | None = None, light: Light | None = None) -> Key:
+        """Register a pass of this technique, of its declared ``stage`` (:class:`~wsoft.techniques.PassSpec`:
+        the kinds of ``inputs`` and ``outputs`` must be the declared ones, else a
+        :class:`~wsoft.errors.DeclarationError`); ``name`` from :meth:`pass_name`, ``kind`` defaults
+        to ``reference`` for the reference and ``technique`` otherwise."""
+        check_declared(self.tech, name, stage, inputs, outputs)
         if kind is None:
             kind = "reference" if self.tech.name == "reference" else "technique"
         shared = all(not k.technique for k in outputs)
         return self.ctx.add(Pass(name, tuple(inputs), tuple(outputs), run, kind=kind, stage=stage,
                                  technique="" if shared else self.label_, light=self.label(light) if light is not None else ""))
+
+
+def check_declared(tech, name: str, stage: str, inputs, outputs) -> None:
+    """Raise a :class:`~wsoft.errors.DeclarationError` unless the pass ``name`` of ``tech`` reads and
+    writes the kinds of resource its :class:`~wsoft.techniques.PassSpec` of ``stage`` declares
+    (every declared read, optional ones or not, nothing else; exactly the declared writes)."""
+    spec = tech.pass_spec(stage)
+    got_in, got_out = {k.kind for k in inputs}, {k.kind for k in outputs}
+    need, may = set(spec.reads), set(spec.reads) | set(spec.optional)
+    if not need <= got_in <= may or got_out != set(spec.writes):
+        raise DeclarationError(f"technique {tech.name!r}: pass {name!r} reads {', '.join(sorted(got_in)) or 'nothing'} and writes "
+                               f"{', '.join(sorted(got_out))}; its stage {stage!r} declares {spec.text()}")
 
 
 # --------------------------------------------------------------------------- frames
@@ -648,7 +655,19 @@ def visibility_of(ctx: RenderContext, tctx: TechniqueContext, light: Light) -> K
     reference applies it per light sample, every other technique is capped by its front fraction."""
     tech = tctx.tech
     vk = tech.add_passes(tctx, light)
+    if tech.distance_caveat and light.distance_limited:
+        ctx.warn(ctx.graph.producers[vk], distance_caveat_warning(tech, light))
     return vk if tech.horizon == "exact" else ctx.clip_to_front(tctx, light, vk)
+
+
+def distance_caveat_warning(tech, light: Light) -> str:
+    """The warning of a technique that tests ``inputs:shadow:distance`` against some casters only
+    (:attr:`~wsoft.techniques.Technique.distance_caveat`), naming those that test every caster."""
+    from wsoft.techniques import TECHNIQUES
+
+    exact = [n for n, c in TECHNIQUES.items() if not c.distance_refusal and not c.distance_caveat]
+    return (f"light {light.path}: inputs:shadow:distance = {light.shadow_distance:g} is tested against {tech.distance_caveat}: a caster "
+            f"behind it within the distance is missed ({' and '.join(exact) or 'no technique'} test every caster)")
 
 
 def _add_resolve(ctx: RenderContext, tech, label: str, lights: list[Light], vis_keys: list[Key], single: bool) -> Key:

@@ -30,7 +30,15 @@ from wsoft.scene.types import LIGHT_DISTANT, LIGHT_POINT, LIGHT_SPHERE, Light
 
 DEPTH_CLEAR = 1.0e30  # value of texels no surface covers (finite on purpose)
 MISS = wp.constant(-3.0e38)  # receiver_plane_depth: the ray does not meet the plane in front of the view
-MAX_TAN = math.tan(math.radians(80.0))  # widest half-angle a perspective light view may open
+MAX_HALF_ANGLE = 80.0  # degrees: the widest half-angle a perspective light view may open
+MAX_TAN = math.tan(math.radians(MAX_HALF_ANGLE))
+
+
+def outside_view_warning(light: Light, what: str) -> str:
+    """The warning for receivers a light's single-frustum view leaves out (``what``: how many of
+    what, "12 of 3000 visible samples"): they are left unshadowed."""
+    return (f"light {light.path}: {what} lie outside its single-frustum view (more than {MAX_HALF_ANGLE:g} degrees off its axis) and are "
+            f"left unshadowed; a light that surrounds its receivers needs a cube map, which this technique does not build")
 
 
 def to_frame(p: np.ndarray, origin: np.ndarray, axes: np.ndarray, threads: bool = True) -> np.ndarray:
@@ -600,19 +608,6 @@ def within_distance(lv: ViewGPU, pv: wp.vec3, m: wp.vec2, d: float, dmax: float)
     if dmax < 0.0:
         return True
     return caster_distance(lv, pv, m, d) <= dmax
-
-
-@wp.func
-def receiver_texel(lv: ViewGPU, p: wp.vec3) -> wp.vec4:
-    """(tx, ty, view depth, 1) of a world point seen by the light inside its map, else w = 0
-    (behind a perspective light's near plane or outside the map: nothing mapped can shadow it)."""
-    pv = view_of(lv, p)
-    if not in_front_of_light(lv, pv):
-        return wp.vec4(0.0, 0.0, pv[2], 0.0)
-    tc = texel_of(lv, pv)
-    if not inside_map(lv, tc):
-        return wp.vec4(tc[0], tc[1], pv[2], 0.0)
-    return wp.vec4(tc[0], tc[1], pv[2], 1.0)
 
 
 @wp.func

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import warp as wp
 
-from wsoft.lightspace.view import ViewGPU, in_front_of_light, view_of
+from wsoft.lightspace.view import ViewGPU, in_front_of_light, inside_map, map_coords, texel_of, view_of
 from wsoft.parallel import launch_chunked
 from wsoft.raster.camera import CameraGPU
 from wsoft.scene.device import Surfaces, DeviceScene, nearest_from, surface_present
@@ -207,6 +207,18 @@ def gb_receiver(lv: ViewGPU, gb: GBufferGPU, i: int) -> wp.vec4:
     if not in_front_of_light(lv, v):
         return wp.vec4(v[0], v[1], v[2], 0.0)
     return wp.vec4(v[0], v[1], v[2], 1.0)
+
+
+@wp.func
+def gb_mapped_receiver(lv: ViewGPU, gb: GBufferGPU, i: int):
+    """Sample ``i`` as a technique that reads a light map at the receiver sees it: (mapped, its
+    view-space point, its window coordinates, its continuous texel coordinates). ``mapped`` is false
+    where nothing mapped can shadow it (the background, behind a perspective light's near plane,
+    or outside the map): such a sample is lit."""
+    r = gb_receiver(lv, gb, i)
+    pv = wp.vec3(r[0], r[1], r[2])
+    t = texel_of(lv, pv)
+    return r[3] != 0.0 and inside_map(lv, t), pv, map_coords(lv, pv), t
 
 
 @dataclass

@@ -1,15 +1,23 @@
-"""What every technique is: parameters (a frozen dataclass), what it reads and writes, what it
-supports, how it trades quality for time, and the passes it adds to a frame graph for one light.
+"""What every technique is: parameters (a frozen dataclass), the passes it adds to a frame graph
+for one light (each with the resources it reads and writes), what it supports, how it trades
+quality for time, and the parameters of a quick, CI-sized run.
 
-Copy ``techniques/hard.py`` to add a technique: declare ``Params`` (fields made with
-:func:`~wsoft.params.param`, ranges for every number), ``reads``/``writes``, ``quality`` (the
-knobs a sweep should turn), ``tolerance`` (how close it comes to the exact parallel-rectangle
-answer), and implement :meth:`Technique.add_passes`, which registers passes through the
-:class:`~wsoft.render.TechniqueContext` it is given (scene arrays, G-buffer, light depth maps)
-and returns the key of the visibility it writes. Override :meth:`Technique.supports` when some
-lights or scenes are out of the technique's reach: ``wsoft plan`` lists the reason, ``render``
-skips the light (or stops with the reason when nothing is left); a technique that cannot render a
-point light only sets ``point_refusal``. Override
+Copy ``techniques/hard.py`` to add a technique: one module (or package) named after it, holding
+one :class:`Technique` subclass whose ``name`` is the module's name. Declare ``Params`` (fields
+made with :func:`~wsoft.params.param`, a range for every number), ``passes`` (one
+:class:`PassSpec` per pass: the frame graph checks each pass added against it), ``quality`` (the
+knobs a sweep should turn), ``quick_params`` (what a quick run changes: smaller maps, fewer
+samples), ``tolerance`` (how close it comes to the exact parallel-rectangle answer), and implement
+:meth:`Technique.add_passes`, which registers the passes through the
+:class:`~wsoft.render.TechniqueContext` it is given (scene arrays, G-buffer, light depth maps) and
+returns the key of the visibility it writes. Nothing else lists techniques: the registry
+(:mod:`wsoft.techniques`) finds the module, and every test, sweep and report that runs "every
+technique" takes it from there. A technique in another package joins through the entry-point
+group ``wsoft.techniques`` (see the README).
+
+Override :meth:`Technique.supports` when some lights or scenes are out of the technique's reach:
+``wsoft plan`` lists the reason, ``render`` skips the light (or stops with the reason when nothing
+is left); a technique that cannot render a point light only sets ``point_refusal``. Override
 :meth:`Technique.bake_support` when the technique needs a camera image (``wsoft bake`` refuses it
 with the reason).
 
@@ -28,10 +36,10 @@ import typing
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
-from wsoft.errors import ParameterError
+from wsoft.errors import DeclarationError, ParameterError
 from wsoft.params import check, param, range_text
 
-__all__ = ["Quality", "Technique", "Tolerance", "check", "param"]
+__all__ = ["PassSpec", "Quality", "Technique", "Tolerance", "check", "param"]
 
 
 @dataclass(frozen=True)
@@ -41,6 +49,31 @@ class Quality:
     param: str
     values: tuple
     note: str = ""
+
+
+@dataclass(frozen=True)
+class PassSpec:
+    """One pass a technique adds per light: its ``stage`` (unique within the technique), the kinds
+    of the resources it reads and writes (:attr:`wsoft.graph.Key.kind`: the shared ``scene``,
+    ``gbuffer``, ``light_view``, ``light_depth``, a technique's own ``vsm_moments``, and
+    ``visibility`` for its result), ``optional``: kinds it reads only in some graphs (a pass that
+    runs only with cutouts feeds it), ``when``: in words, when the pass runs at all (empty: always).
+    ``wsoft techniques`` prints the declarations and the frame graph checks each pass against its own."""
+
+    stage: str
+    reads: tuple[str, ...]
+    writes: tuple[str, ...]
+    optional: tuple[str, ...] = ()
+    when: str = ""
+
+    def describe(self) -> dict:
+        return {"stage": self.stage, "reads": list(self.reads), "optional": list(self.optional), "writes": list(self.writes),
+                "when": self.when}
+
+    def text(self) -> str:
+        """``stage: reads [, optional?] -> writes (when ...)``."""
+        ins = list(self.reads) + [f"{k}?" for k in self.optional]
+        return f"{self.stage}: {', '.join(ins) or '-'} -> {', '.join(self.writes)}" + (f" (when {self.when})" if self.when else "")
 
 
 @dataclass(frozen=True)
@@ -88,9 +121,15 @@ class Technique:
     name: ClassVar[str]
     summary: ClassVar[str] = ""
     Params: ClassVar[type]
-    reads: ClassVar[tuple[str, ...]] = ()
-    writes: ClassVar[tuple[str, ...]] = ("visibility",)
+    # the passes it adds per light, declared once: the frame graph checks every pass against them
+    passes: ClassVar[tuple[PassSpec, ...]] = ()
     quality: ClassVar[tuple[Quality, ...]] = ()
+    # parameters of a quick, CI-sized run (tests, --quick sweeps, the adversarial corpus): smaller
+    # maps and grids, fewer samples; {} when the defaults are already cheap
+    quick_params: ClassVar[dict[str, Any]] = {}
+    # the parameter setting the resolution of the light-space map or grid it works on (texels or
+    # cells per side): the one sweeps over map sizes turn; None when it has none
+    size_param: ClassVar[str | None] = None
     tolerance: ClassVar[Tolerance | None] = None
     # the receiver's horizon (wsoft.raster.horizon): "fraction" caps V by the part of the light in
     # front of the tangent plane, "centre" zeroes V where the light's centre is behind it (a
@@ -100,6 +139,10 @@ class Technique:
     # line); supports() then refuses a light with a finite distance, naming the attribute. Every
     # technique honours collection:shadowLink (its maps and rays see only a light's casters).
     distance_refusal: ClassVar[str] = ""
+    # a technique that honours inputs:shadow:distance only for some casters: which ones it tests
+    # (e.g. "the caster nearest the light in each texel of the depth map"); every frame with a
+    # finite distance then warns that a caster behind that one within the distance is missed
+    distance_caveat: ClassVar[str] = ""
     # instanced stages (load_scene(..., instancing=True)): "" when the technique's passes draw and
     # trace instances as they are (prototypes once, wsoft.scene.instancing), else why it needs the
     # triangle soup; the frame graph then flattens the stage for it (wsoft.render.instancing_plan)
@@ -183,6 +226,51 @@ class Technique:
                     out.append(s)
         return out
 
+    # -- passes ----------------------------------------------------------------------------------
+    @classmethod
+    def pass_spec(cls, stage: str) -> PassSpec:
+        """The declaration of the pass ``stage`` (a :class:`~wsoft.errors.DeclarationError` when none)."""
+        for spec in cls.passes:
+            if spec.stage == stage:
+                return spec
+        raise DeclarationError(f"technique {cls.name!r} adds a pass of stage {stage!r}, which it does not declare "
+                               f"(its passes: {', '.join(s.stage for s in cls.passes) or 'none'})")
+
+    @classmethod
+    def reads(cls) -> tuple[str, ...]:
+        """The kinds of resource its passes read and do not write themselves (what it takes from the graph)."""
+        written = cls.writes()
+        return tuple(dict.fromkeys(k for s in cls.passes for k in s.reads + s.optional if k not in written))
+
+    @classmethod
+    def writes(cls) -> tuple[str, ...]:
+        """The kinds of resource its passes write (``visibility`` among them)."""
+        return tuple(dict.fromkeys(k for s in cls.passes for k in s.writes))
+
+    @classmethod
+    def declaration_problem(cls) -> str | None:
+        """What is wrong with the class as a technique (for a plugin: why it is left out), else None:
+        a name, a frozen ``Params`` dataclass, quick parameters and quality knobs it has, passes with
+        distinct stages, one of which writes ``visibility``."""
+        name = cls.__dict__.get("name")
+        if not isinstance(name, str) or not name.isidentifier():
+            return f"its name {name!r} is not an identifier"
+        params = getattr(cls, "Params", None)
+        if not (dataclasses.is_dataclass(params) and params.__dataclass_params__.frozen):
+            return "its Params is not a frozen dataclass"
+        fields = {f.name for f in dataclasses.fields(params)}
+        named = set(cls.quick_params) | {q.param for q in cls.quality} | ({cls.size_param} if cls.size_param else set())
+        if named - fields:
+            return f"quick_params, quality or size_param name parameters it does not have: {', '.join(sorted(named - fields))}"
+        stages = [s.stage for s in cls.passes]
+        if not stages:
+            return "it declares no passes"
+        if len(set(stages)) != len(stages):
+            return f"two of its passes share a stage: {', '.join(sorted({s for s in stages if stages.count(s) > 1}))}"
+        if "visibility" not in cls.writes():
+            return "none of its passes writes visibility"
+        return None
+
     # -- the manual ------------------------------------------------------------------------------
     @classmethod
     def describe(cls) -> dict:
@@ -190,9 +278,12 @@ class Technique:
         return {
             "name": cls.name,
             "summary": cls.summary,
-            "reads": list(cls.reads),
+            "reads": list(cls.reads()),
             "keeps_instances": not cls.instancing_refusal,
-            "writes": list(cls.writes),
+            "writes": list(cls.writes()),
+            "passes": [s.describe() for s in cls.passes],
+            "quick_params": dict(cls.quick_params),
+            "size_param": cls.size_param,
             "parameters": [
                 {"name": f.name, "type": getattr(hints.get(f.name), "__name__", str(f.type)), "default": f.default,
                  "range": range_text(f), "meaning": f.metadata.get("help", "")}

@@ -45,7 +45,7 @@ inconsistent winding all follow one rule), and ``V`` only asks whether the count
    An edge is a silhouette from ``o`` exactly when it is one from the light point on the line
    through ``o`` and the crossing (the plane is the same), so the filter loses nothing.
 3. **Binning** (:mod:`wsoft.accel.dcs_bins`). No hardware rasterizer: a light view fitted to the
-   receivers (``shadow_map_size`` cells per side) and, per potential edge, the conservative
+   receivers (``grid_size`` cells per side) and, per potential edge, the conservative
    rectangle of cells its wedge can reach (the edge's projection widened by the light's extent at
    the receivers' depths, as :func:`~wsoft.lightspace.view.fit_light_view` widens windows for soft
    casters); the (cell, edge) pairs are sorted into per-cell lists. Each receiver *gathers*: it
@@ -102,18 +102,18 @@ import numpy as np
 import warp as wp
 
 from wsoft.accel.dcs_bins import BinsGPU, receiver_cell
-from wsoft.accel.occluders import Prep, count_crossings, edge_pass, perforated_volumes, side, triangle_masks
+from wsoft.accel.occluders import count_crossings, side
 from wsoft.lightspace.light import LightGPU, in_front, light_bound, light_point
-from wsoft.lightspace.samples import KINDS, LightSamples, SamplePattern, check_decorrelation, paper_pattern, sample_coords
+from wsoft.lightspace.samples import LightSamples, sample_coords
 from wsoft.lightspace.stsv import in_volume, light_ball, planes_t, receiver_matrix, s_triangle, sample_blocked
-from wsoft.params import check_ranges
 from wsoft.parallel import launch_chunked
 from wsoft.raster.gbuffer import GBufferGPU, gb_covered
 from wsoft.reference import ray_epsilon, receiver_begin
 from wsoft.scene.adjacency import silhouette_candidates
 from wsoft.scene.device import Surfaces
 from wsoft.scene.types import LIGHT_RECT
-from wsoft.techniques.base import Quality, Technique, Tolerance, check, param
+from wsoft.techniques._object_based import ObjectBased, ObjectBasedParams, object_based_passes
+from wsoft.techniques.base import Quality, Tolerance, check, param
 
 MAX_SAMPLES = 64
 ESTIMATORS = ("v_coef", "direct")
@@ -123,28 +123,16 @@ BLOCKED = wp.constant(1 << 20)  # a sample behind the receiver's tangent plane
 
 
 @dataclass(frozen=True)
-class DCSParams:
+class DCSParams(ObjectBasedParams):
     samples: int = param(16, "light samples per receiver (the paper: 16 or 64)", range=(1, MAX_SAMPLES))
-    pattern: str = param("stratified", "sample pattern: " + ", ".join(KINDS) + " (poisson: the paper's minimum distances at 16 and 64)")
-    decorrelate: str = param("rotate", "between pixels: rotate (the set turned per pixel), interleave (n x n sets), per_pixel (a new set "
-                                       "per pixel: with pattern=stratified the reference's own samples), none (one set everywhere)")
-    interleave: int = param(4, "decorrelate=interleave: n of the n x n interleaved sets", range=(1, 16))
-    seed: int = param(0, "random seed of the sample sets", range=(0, 2**31 - 1))
     estimator: str = param("v_coef", "v_coef: V is the fraction of samples with no occluder (the paper's physically plausible "
                                      "v_coef); direct: the Monte-Carlo direct-lighting variant, each sample weighted by its "
                                      "unshadowed irradiance (cosines over squared distance), V the fraction of that irradiance "
                                      "that arrives")
-    shadow_map_size: int = param(128, "cells per side of the light-space grid (a light view fitted to the receivers) that bins "
-                                      "receivers against edge wedges and perforated triangles' volumes", range=(8, 4096))
 
     def __post_init__(self):
-        check_ranges(self)
-        why = check_decorrelation(self.pattern, self.samples, self.decorrelate)
-        check(why is None, why)
+        super().__post_init__()
         check(self.estimator in ESTIMATORS, f"estimator {self.estimator!r} is not one of {', '.join(ESTIMATORS)}")
-
-    def sample_pattern(self) -> SamplePattern:
-        return paper_pattern(self.pattern, self.samples, self.seed, self.decorrelate, self.interleave)
 
 
 # --------------------------------------------------------------------------- kernels
@@ -319,7 +307,7 @@ def dcs_visibility(
 # --------------------------------------------------------------------------- host
 
 
-class DCS(Technique):
+class DCS(ObjectBased):
     """Depth complexity sampling: per receiver and light sample, the occluder layers crossed (one
     ray to the light's centre plus silhouette-edge updates), soft textured shadow volumes for
     perforated triangles; V = the fraction of samples with none."""
@@ -328,7 +316,8 @@ class DCS(Technique):
     summary = ("depth complexity sampling: exact per-sample occluder counts from one ray per pixel and silhouette-edge "
                "updates, soft textured shadow volumes for perforated triangles")
     Params = DCSParams
-    reads = ("gbuffer", "scene.triangles", "scene.adjacency", "scene.textures")
+    final_stage = "count"
+    passes = object_based_passes("dcs", final_stage)
     quality = (Quality("samples", (4, 16, 64), "more light samples: noise down as with the reference, time up about linearly"),)
     tolerance = Tolerance(mae=0.003, mae_penumbra=0.075)  # measured 0.0015, 0.060 (16 rotated stratified samples)
     horizon = "exact"  # per light sample, as the reference
@@ -336,76 +325,34 @@ class DCS(Technique):
     instancing_refusal = "its edges come from the flattened soup's adjacency and its reference rays walk the soup's BVH"
     point_refusal = "a point light has no area: depth complexity sampling needs light samples spread over it (use hard or izb)"
 
-    def add_passes(self, ctx, light):
+    def edges(self, scene, opaque, light, device):
+        """The potential silhouette edges of the light's bound, with both faces' far corners."""
+        pts, nf = silhouette_candidates(scene, opaque, *light_bound(light))
+        arrays = {"edge_pts": wp.array(pts.reshape(-1, 4, 3) if len(pts) else np.zeros((1, 4, 3), np.float32), dtype=wp.vec3, device=device),
+                  "edge_faces": wp.array(nf if len(nf) else np.zeros(1, np.int32), dtype=wp.int32, device=device)}
+        corners = pts[:, :2] if len(pts) else np.zeros((0, 2, 3), np.float32)
+        return corners, arrays, {"potential_edges": int(len(pts))}
+
+    def visibility(self, ctx, light, gb, ds, prep, st):
         p = self.params
-        gbuf = ctx.gbuffer()
-        scene_key = ctx.scene_arrays()
-        scene = ctx.scene
-        out = ctx.visibility_key(light)
-        L = ctx.light_gpu(light)
-        pattern = p.sample_pattern()
-        disk = light.kind != LIGHT_RECT
-        opaque, perforated = triangle_masks(scene, light)
-        edges_key = ctx.key("dcs_edges", light)
-        edges_name = ctx.pass_name("dcs_edges", light)
-
-        def run_edges(res):
-            dev = ctx.device
-            pts, nf = silhouette_candidates(scene, opaque, *light_bound(light))
-            arrays = {"edge_pts": wp.array(pts.reshape(-1, 4, 3) if len(pts) else np.zeros((1, 4, 3), np.float32), dtype=wp.vec3,
-                                           device=dev),
-                      "edge_faces": wp.array(nf if len(nf) else np.zeros(1, np.int32), dtype=wp.int32, device=dev)}
-            corners = pts[:, :2] if len(pts) else np.zeros((0, 2, 3), np.float32)
-            prep = edge_pass(ctx, light, res[gbuf], scene, opaque, perforated, p.shadow_map_size, corners, edges_name, arrays,
-                             {"potential_edges": int(len(pts))})
-            return {edges_key: prep}
-
-        ctx.add_pass(edges_name, inputs=(gbuf, scene_key), outputs=(edges_key,), run=run_edges, light=light)
-        inputs = [gbuf, scene_key, edges_key]
-
-        stsv_key = None
-        if perforated.any():
-            stsv_key = ctx.key("dcs_stsv", light)
-            inputs.append(stsv_key)
-
-            def run_stsv(res):
-                prep = res[edges_key]
-                counters, data = perforated_volumes(scene, perforated, L, light, prep.view, prep.zr_max, ctx.device)
-                return {stsv_key: Prep(view=prep.view, zr_max=prep.zr_max, counters=counters, data=data)}
-
-            ctx.add_pass(ctx.pass_name("dcs_stsv", light), inputs=(edges_key, scene_key), outputs=(stsv_key,), run=run_stsv, light=light)
-
-        def run(res):
-            gb = res[gbuf]
-            ds = res[scene_key]
-            prep = res[edges_key]
-            a = prep.data
-            dev = ctx.device
-            n = gb.count
-            st = res[stsv_key] if stsv_key is not None else None
-            if st is None:
-                tb, stri, planes, cut_pts = a["ebins"].gpu, wp.zeros(1, dtype=wp.int32, device=dev), wp.zeros((1, 2), dtype=planes_t, device=dev), a["tri_pts"]
-            else:
-                tb, stri, planes, cut_pts = st.data["tbins"].gpu, st.data["stri"], st.data["planes"], st.data["cut_pts"]
-            vis = wp.empty(n, dtype=float, device=dev)
-            wt = wp.empty(n, dtype=wp.int32, device=dev)
-            vt = wp.empty(n, dtype=wp.int32, device=dev)
-            wh = wp.empty(n, dtype=wp.int32, device=dev)
-            bvh_id = a["bvh"].id if a["bvh"] is not None else wp.uint64(0)
-            launch_chunked(
-                dcs_visibility, n,
-                inputs=[gb.gpu(), pattern.on(dev, disk), L, ray_epsilon(gb, light), a["has_opaque"], bvh_id, a["tri_pts"],
-                        a["ebins"].gpu, a["edge_pts"], a["edge_faces"], int(st is not None), tb, stri, planes, ds.cutouts, cut_pts,
-                        int(p.estimator == "direct")],
-                outputs=[vis, wt, wh, vt], device=dev, min_chunk=256, per_thread=32)
-            c = ctx.counters(light)
-            c.update(prep.counters)
-            if st is not None:
-                c.update(st.counters)
-            c["wedge_tests"] = int(wt.numpy().astype(np.int64).sum())
-            c["wedge_receivers"] = int(wh.numpy().astype(np.int64).sum())
-            c["stsv_tests"] = int(vt.numpy().astype(np.int64).sum())
-            c["samples"] = p.samples
-            return {out: ctx.visibility(vis)}
-
-        return ctx.add_pass(ctx.pass_name("dcs", light), inputs=tuple(inputs), outputs=(out,), run=run, light=light)
+        a = prep.data
+        dev = ctx.device
+        n = gb.count
+        if st is None:
+            tb, stri, planes, cut_pts = a["ebins"].gpu, wp.zeros(1, dtype=wp.int32, device=dev), wp.zeros((1, 2), dtype=planes_t, device=dev), a["tri_pts"]
+        else:
+            tb, stri, planes, cut_pts = st.data["tbins"].gpu, st.data["stri"], st.data["planes"], st.data["cut_pts"]
+        vis = wp.empty(n, dtype=float, device=dev)
+        wt = wp.empty(n, dtype=wp.int32, device=dev)
+        vt = wp.empty(n, dtype=wp.int32, device=dev)
+        wh = wp.empty(n, dtype=wp.int32, device=dev)
+        bvh_id = a["bvh"].id if a["bvh"] is not None else wp.uint64(0)
+        launch_chunked(
+            dcs_visibility, n,
+            inputs=[gb.gpu(), p.sample_pattern().on(dev, light.kind != LIGHT_RECT), ctx.light_gpu(light), ray_epsilon(gb, light),
+                    a["has_opaque"], bvh_id, a["tri_pts"], a["ebins"].gpu, a["edge_pts"], a["edge_faces"], int(st is not None), tb, stri,
+                    planes, ds.cutouts, cut_pts, int(p.estimator == "direct")],
+            outputs=[vis, wt, wh, vt], device=dev, min_chunk=256, per_thread=32)
+        counters = {"wedge_tests": int(wt.numpy().astype(np.int64).sum()), "wedge_receivers": int(wh.numpy().astype(np.int64).sum()),
+                    "stsv_tests": int(vt.numpy().astype(np.int64).sum())}
+        return vis, counters

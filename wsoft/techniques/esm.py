@@ -16,11 +16,11 @@ from dataclasses import dataclass
 import warp as wp
 
 from wsoft.accel.blur import blur_log
-from wsoft.lightspace.view import ViewGPU, bilinear_cell, inside_map, map_coords, normalised_depth, window_to_texel
+from wsoft.lightspace.view import ViewGPU, bilinear_cell, normalised_depth
 from wsoft.parallel import launch_chunked
-from wsoft.raster.gbuffer import GBufferGPU, gb_receiver
+from wsoft.raster.gbuffer import GBufferGPU, gb_mapped_receiver
 from wsoft.params import check_ranges
-from wsoft.techniques.base import Quality, Technique, Tolerance, check, param
+from wsoft.techniques.base import PassSpec, Quality, Technique, Tolerance, check, param
 
 
 @dataclass(frozen=True)
@@ -33,7 +33,6 @@ class ESMParams:
 
     def __post_init__(self):
         check_ranges(self)
-        check(256 <= self.shadow_map_size <= 8192, f"shadow_map_size {self.shadow_map_size} out of range [256, 8192]")
         check(self.filter in ("box", "gaussian"), f"filter {self.filter!r} is not box or gaussian")
 
 
@@ -82,13 +81,8 @@ def shade_esm(
     vis: wp.array[float],
 ):
     i = wp.tid() + offset
-    r = gb_receiver(lv, gb, i)
-    if r[3] == 0.0:
-        vis[i] = 1.0
-        return
-    pv = wp.vec3(r[0], r[1], r[2])
-    m = map_coords(lv, pv)
-    if not inside_map(lv, window_to_texel(lv, m)):
+    mapped, pv, m, t = gb_mapped_receiver(lv, gb, i)
+    if not mapped:
         vis[i] = 1.0
         return
     z = normalised_depth(pv[2], lv.near, lv.far - lv.near) - bias
@@ -102,8 +96,12 @@ class ESM(Technique):
     instancing_refusal = ""  # its maps draw instances (wsoft.raster.rasterizer.instance_runs)
     summary = "exponential shadow maps: exp(c d) prefiltered in log space"
     Params = ESMParams
-    reads = ("gbuffer", "light_depth")
-    writes = ("visibility",)
+    passes = (
+        PassSpec("basis", reads=("light_depth",), writes=("esm_basis",)),
+        PassSpec("shadow", reads=("gbuffer", "light_depth", "esm_basis"), writes=("visibility",)),
+    )
+    quick_params = {"shadow_map_size": 256}
+    size_param = "shadow_map_size"
 
     quality = (Quality("c", (40.0, 80.0, 160.0), "a larger exponent: less light leaking near contacts, harder edges; same time"),)
     tolerance = Tolerance(mae=0.008, mae_penumbra=0.33)
@@ -113,7 +111,7 @@ class ESM(Technique):
         p = self.params
         gbuf = ctx.gbuffer()
         depth = ctx.light_depth(light, size=p.shadow_map_size, soft=True)
-        basis = ctx.shared_key("esm_basis", light, "c", "filter", "radius")
+        basis = ctx.shared_key("esm_basis", light, p.shadow_map_size, "c", "filter", "radius")
         out = ctx.visibility_key(light)
 
         def build(res):

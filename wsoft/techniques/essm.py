@@ -54,15 +54,14 @@ from wsoft.lightspace.view import (
     map_coords,
     normalised_depth,
     receiver_plane_depth_or,
-    receiver_texel,
     texel_of,
     view_dir,
     view_of,
 )
 from wsoft.parallel import launch_chunked
-from wsoft.raster.gbuffer import GBufferGPU, gb_covered, gb_neighbour
+from wsoft.raster.gbuffer import GBufferGPU, gb_covered, gb_mapped_receiver, gb_neighbour
 from wsoft.params import check_ranges
-from wsoft.techniques.base import Quality, Technique, Tolerance, check, param
+from wsoft.techniques.base import PassSpec, Quality, Technique, Tolerance, check, param
 
 FLT_MAX_LOG = math.log(np.finfo(np.float32).max)
 
@@ -317,14 +316,10 @@ def essm_shade(
     looks[i] = 0
     fallbacks[i] = 0
     vis[i] = 1.0
-    if not gb_covered(gb, i):
+    mapped, pv, mc, tc = gb_mapped_receiver(lv, gb, i)
+    if not mapped:
         return
-    rt = receiver_texel(lv, gb.pos[i])
-    if rt[3] == 0.0:
-        return
-    tc = wp.vec2(rt[0], rt[1])
-    pv = view_of(lv, gb.pos[i])
-    d_lin = rt[2]
+    d_lin = pv[2]
     dn = normalised_depth(d_lin, q.zmin, q.zrange) - q.bias
     # the receiver's tangent plane in normalised depth per texel (receiver-plane depth)
     nv = view_dir(lv, gb.nrm[i])
@@ -541,8 +536,13 @@ class ESSM(Technique):
     instancing_refusal = ""  # its maps draw instances (wsoft.raster.rasterizer.instance_runs)
     summary = "exponential soft shadow mapping: ESM-Z blocker depth, overflow-free SAT tile grids, anisotropic kernels, micro-subdivision"
     Params = ESSMParams
-    reads = ("gbuffer", "light_depth", "scene_bounds")
-    writes = ("visibility", "essm_basis", "essm_sat")
+    passes = (
+        PassSpec("basis", reads=("light_depth",), writes=("essm_basis",)),
+        PassSpec("sat", reads=("essm_basis",), writes=("essm_sat",)),
+        PassSpec("shadow", reads=("gbuffer", "light_depth", "essm_basis", "essm_sat"), writes=("visibility",)),
+    )
+    quick_params = {"shadow_map_size": 256}
+    size_param = "shadow_map_size"
     quality = (
         Quality("H", (10.0, 5.0, 2.0), "thinner rectangles: a closer fit of the elliptic kernel, more look-ups"),
         Quality("subdivision", (1, 3, 5), "finer micro-subdivision of the kernels: fewer wrong lit kernels, more look-ups"),
@@ -558,8 +558,8 @@ class ESSM(Technique):
         out = ctx.visibility_key(light)
         # the basis and its SAT depend on the storage, not on how the kernel is shaded: instances
         # that differ only in H, level, subdivision, epsilon or bias share them
-        bkey = ctx.shared_key("essm_basis", light, "sat", "mu", "c", "depth_range", "tile")
-        skey = ctx.shared_key("essm_sat", light, "sat", "mu", "c", "depth_range", "tile", "build", "reads")
+        bkey = ctx.shared_key("essm_basis", light, p.shadow_map_size, "sat", "mu", "c", "depth_range", "tile")
+        skey = ctx.shared_key("essm_sat", light, p.shadow_map_size, "sat", "mu", "c", "depth_range", "tile", "build", "reads")
         k = light_kernel(light)
 
         def run_basis(res):

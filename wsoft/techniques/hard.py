@@ -24,11 +24,11 @@ from dataclasses import dataclass
 import warp as wp
 
 from wsoft.lightspace.light import LightGPU, receiver_bias
-from wsoft.lightspace.view import ViewGPU, inside_map, map_coords, texel_of, within_distance
+from wsoft.lightspace.view import ViewGPU, within_distance
 from wsoft.parallel import launch_chunked
-from wsoft.raster.gbuffer import GBufferGPU, gb_receiver
+from wsoft.raster.gbuffer import GBufferGPU, gb_mapped_receiver
 from wsoft.params import check_ranges
-from wsoft.techniques.base import Technique, Tolerance, check, param
+from wsoft.techniques.base import PassSpec, Technique, Tolerance, param
 
 
 @dataclass(frozen=True)
@@ -40,7 +40,6 @@ class HardParams:
 
     def __post_init__(self):
         check_ranges(self)
-        check(256 <= self.shadow_map_size <= 8192, f"shadow_map_size {self.shadow_map_size} out of range [256, 8192]")
 
 
 @wp.kernel
@@ -57,23 +56,17 @@ def shade_hard(
     vis: wp.array[float],
 ):
     i = wp.tid() + offset
-    r = gb_receiver(lv, gb, i)
-    if r[3] == 0.0:
+    mapped, v, m, t = gb_mapped_receiver(lv, gb, i)
+    if not mapped:
         vis[i] = 1.0  # background, or outside the light's view: nothing between it and the light was mapped
-        return
-    p = gb.pos[i]
-    v = wp.vec3(r[0], r[1], r[2])
-    t = texel_of(lv, v)
-    if not inside_map(lv, t):
-        vis[i] = 1.0
         return
     x = int(wp.floor(t[0]))
     y = int(wp.floor(t[1]))
-    b = receiver_bias(lv, L, p, gb.nrm[i], v[2], bias, slope_texels)
+    b = receiver_bias(lv, L, gb.pos[i], gb.nrm[i], v[2], bias, slope_texels)
     d = depth[y, x]
     blocked = v[2] - b > d
     if blocked and dmax >= 0.0:  # inputs:shadow:distance: a caster farther from the receiver does not count
-        blocked = within_distance(lv, v, map_coords(lv, v), d, dmax)
+        blocked = within_distance(lv, v, m, d, dmax)
     vis[i] = wp.where(blocked, 0.0, 1.0)
 
 
@@ -84,8 +77,11 @@ class Hard(Technique):
     instancing_refusal = ""  # its maps draw instances (wsoft.raster.rasterizer.instance_runs)
     summary = "classic shadow map from the light's centre (binary visibility)"
     Params = HardParams
-    reads = ("gbuffer", "light_depth")
-    writes = ("visibility",)
+    passes = (PassSpec("shadow", reads=("gbuffer", "light_depth"), writes=("visibility",)),)
+    quick_params = {"shadow_map_size": 256}
+    size_param = "shadow_map_size"
+    # a finite inputs:shadow:distance is tested against the caster the map keeps per texel
+    distance_caveat = "the caster nearest the light in each texel of the depth map"
     # a binary shadow of the light's centre: right in the umbra and the fully lit region, wrong by
     # up to 1 in the penumbra (about half of it on box_plane)
     tolerance = Tolerance(mae=0.009, mae_penumbra=0.36)
@@ -104,9 +100,7 @@ class Hard(Technique):
             vis = wp.empty(gb.count, dtype=float, device=ctx.device)
             launch_chunked(shade_hard, gb.count, inputs=[dm.view.gpu(), L, dm.depth, gb.gpu(), bias, p.slope_bias, light.shadow_distance],
                            outputs=[vis], device=ctx.device)
-            if light.distance_limited:
-                ctx.warn_distance(name, light)
             return {out: ctx.visibility(vis)}
 
         name = ctx.pass_name("hard", light)
-        return ctx.add_pass(name, inputs=(gbuf, depth), outputs=(out,), run=run, light=light)
+        return ctx.add_pass(name, inputs=(gbuf, depth), outputs=(out,), run=run, stage="shadow", light=light)

@@ -27,7 +27,7 @@ from wsoft.lightspace.view import ViewGPU, map_coords, texel_size, view_dir
 from wsoft.parallel import launch_chunked
 from wsoft.raster.gbuffer import GBufferGPU, gb_receiver
 from wsoft.params import check_ranges
-from wsoft.techniques.base import Quality, Technique, Tolerance, check, param
+from wsoft.techniques.base import PassSpec, Quality, Technique, Tolerance, check, param
 
 
 @dataclass(frozen=True)
@@ -42,7 +42,6 @@ class PCFParams:
 
     def __post_init__(self):
         check_ranges(self)
-        check(256 <= self.shadow_map_size <= 8192, f"shadow_map_size {self.shadow_map_size} out of range [256, 8192]")
         check(self.pattern in ("grid", "poisson"), f"pattern {self.pattern!r} is not grid or poisson")
         check(self.pattern != "grid" or math.isqrt(self.taps) ** 2 == self.taps, f"the grid pattern needs a square tap count, not {self.taps}")
 
@@ -86,8 +85,11 @@ class PCF(Technique):
     instancing_refusal = ""  # its maps draw instances (wsoft.raster.rasterizer.instance_runs)
     summary = "percentage-closer filtering: fixed kernel, grid or Poisson taps, receiver-plane bias"
     Params = PCFParams
-    reads = ("gbuffer", "light_depth")
-    writes = ("visibility",)
+    passes = (PassSpec("shadow", reads=("gbuffer", "light_depth"), writes=("visibility",)),)
+    quick_params = {"shadow_map_size": 256}
+    size_param = "shadow_map_size"
+    # a finite inputs:shadow:distance is tested against the caster the map keeps per texel
+    distance_caveat = "the caster nearest the light in each texel of the depth map"
     quality = (Quality("taps", (4, 16, 64), "more taps: a smoother filter, linearly more time"),)
     # a fixed 2-texel kernel: nearly as hard as `hard`
     tolerance = Tolerance(mae=0.0075, mae_penumbra=0.3)
@@ -110,9 +112,7 @@ class PCF(Technique):
                         p.radius, bias, int(p.receiver_plane), p.slope_bias, light.shadow_distance],
                 outputs=[vis], device=ctx.device, min_chunk=256,
             )
-            if light.distance_limited:
-                ctx.warn_distance(name, light)
             return {out: ctx.visibility(vis)}
 
         name = ctx.pass_name("pcf", light)
-        return ctx.add_pass(name, inputs=(gbuf, depth), outputs=(out,), run=run, light=light)
+        return ctx.add_pass(name, inputs=(gbuf, depth), outputs=(out,), run=run, stage="shadow", light=light)

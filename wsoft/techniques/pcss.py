@@ -47,7 +47,7 @@ from wsoft.lightspace.view import (
 from wsoft.parallel import launch_chunked
 from wsoft.raster.gbuffer import GBufferGPU, gb_receiver
 from wsoft.params import check_ranges
-from wsoft.techniques.base import Quality, Technique, Tolerance, check, param
+from wsoft.techniques.base import PassSpec, Quality, Technique, Tolerance, check, param
 
 
 @dataclass(frozen=True)
@@ -62,7 +62,6 @@ class PCSSParams:
 
     def __post_init__(self):
         check_ranges(self)
-        check(256 <= self.shadow_map_size <= 8192, f"shadow_map_size {self.shadow_map_size} out of range [256, 8192]")
         check(self.pattern in ("grid", "poisson"), f"pattern {self.pattern!r} is not grid or poisson")
         if self.pattern == "grid":
             for n in (self.blocker_samples, self.filter_samples):
@@ -138,8 +137,11 @@ class PCSS(Technique):
     instancing_refusal = ""  # its maps draw instances (wsoft.raster.rasterizer.instance_runs)
     summary = "percentage-closer soft shadows: blocker search, penumbra from the average blocker depth, light-shaped PCF"
     Params = PCSSParams
-    reads = ("gbuffer", "light_depth")
-    writes = ("visibility",)
+    passes = (PassSpec("shadow", reads=("gbuffer", "light_depth"), writes=("visibility",)),)
+    quick_params = {"shadow_map_size": 256}
+    size_param = "shadow_map_size"
+    # a finite inputs:shadow:distance is tested against the caster the map keeps per texel
+    distance_caveat = "the caster nearest the light in each texel of the depth map"
 
     quality = (Quality("filter_samples", (16, 36, 100), "more filter taps: smoother penumbrae, linearly more time"),)
     tolerance = Tolerance(mae=0.0025, mae_penumbra=0.06)
@@ -169,9 +171,7 @@ class PCSS(Technique):
                 outputs=[vis, blk], device=ctx.device, min_chunk=256,
             )
             ctx.counters(light)["samples_with_blockers"] = int(np.count_nonzero(blk.numpy()))
-            if light.distance_limited:
-                ctx.warn_distance(name, light)
             return {out: ctx.visibility(vis)}
 
         name = ctx.pass_name("pcss", light)
-        return ctx.add_pass(name, inputs=(gbuf, depth), outputs=(out,), run=run, light=light)
+        return ctx.add_pass(name, inputs=(gbuf, depth), outputs=(out,), run=run, stage="shadow", light=light)

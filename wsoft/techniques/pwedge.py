@@ -37,7 +37,7 @@ added to the wedges' coverage, not merged with it, so a cutout over an opaque ca
 over-shadowed too (Fig. 4(a)'s fence). ``dcs`` counts per light sample and has neither artifact.
 
 No hardware rasterizer: wedges and volumes are binned into a light-space grid fitted to the
-receivers (:mod:`wsoft.accel.dcs_bins`, ``shadow_map_size`` cells per side) and each receiver
+receivers (:mod:`wsoft.accel.dcs_bins`, ``grid_size`` cells per side) and each receiver
 gathers the ones of its cell, writing only its own result (no atomics: Warp's CPU atomics are
 not thread-safe across the thread pool). A scan conversion of wedge polygons into screen tiles
 would do the same tests on more pixels: a wedge's screen footprint bounds its receivers loosely
@@ -69,45 +69,32 @@ import numpy as np
 import warp as wp
 
 from wsoft.accel.dcs_bins import BinsGPU, receiver_cell
-from wsoft.accel.occluders import Prep, count_crossings, edge_pass, perforated_volumes, triangle_masks
+from wsoft.accel.occluders import count_crossings
 from wsoft.lightspace.bitmask import popcount
 from wsoft.lightspace.coverage import edge_coverage, light_frame
 from wsoft.lightspace.light import LightGPU, light_bound, light_point
-from wsoft.lightspace.samples import KINDS, LightSamples, SamplePattern, check_decorrelation, paper_pattern, sample_coords
+from wsoft.lightspace.samples import LightSamples, sample_coords
 from wsoft.lightspace.stsv import in_volume, light_ball, planes_t, receiver_matrix, s_triangle, sample_blocked
-from wsoft.params import check_ranges
 from wsoft.parallel import launch_chunked
 from wsoft.raster.gbuffer import GBufferGPU, gb_covered
 from wsoft.reference import ray_epsilon, ray_offset, ray_origin, receiver_begin
 from wsoft.scene.adjacency import silhouette_candidates
 from wsoft.scene.device import Surfaces
 from wsoft.scene.types import LIGHT_RECT
-from wsoft.techniques.base import Quality, Technique, Tolerance, check, param
+from wsoft.techniques._object_based import ObjectBased, ObjectBasedParams, object_based_passes
+from wsoft.techniques.base import Quality, Tolerance, check, param
 
 MAX_SAMPLES = 64
 points_t = wp.types.matrix(shape=(MAX_SAMPLES, 3), dtype=wp.float32)
 
 
 @dataclass(frozen=True)
-class PWedgeParams:
+class PWedgeParams(ObjectBasedParams):
     samples: int = param(16, "light samples of the perforated triangles' LS_buffer (bits per pixel; the paper: 16 or 64; a "
                              "multiple of 8)", range=(8, MAX_SAMPLES))
-    pattern: str = param("stratified", "LS_buffer sample pattern: " + ", ".join(KINDS) + " (poisson: the paper's minimum distances)")
-    decorrelate: str = param("rotate", "between pixels: rotate (the set turned per pixel), interleave (n x n sets), per_pixel "
-                                       "(a new set per pixel), none (one set everywhere)")
-    interleave: int = param(4, "decorrelate=interleave: n of the n x n interleaved sets", range=(1, 16))
-    seed: int = param(0, "random seed of the sample sets", range=(0, 2**31 - 1))
-    shadow_map_size: int = param(128, "cells per side of the light-space grid (a light view fitted to the receivers) that bins "
-                                      "receivers against wedges and perforated triangles' volumes", range=(8, 4096))
 
-    def __post_init__(self):
-        check_ranges(self)
+    def check_samples(self) -> None:
         check(self.samples % 8 == 0, f"samples must be a multiple of 8 (the LS_buffer holds whole bytes), not {self.samples}")
-        why = check_decorrelation(self.pattern, self.samples, self.decorrelate)
-        check(why is None, why)
-
-    def sample_pattern(self) -> SamplePattern:
-        return paper_pattern(self.pattern, self.samples, self.seed, self.decorrelate, self.interleave)
 
 
 # --------------------------------------------------------------------------- kernels
@@ -275,7 +262,7 @@ def centre_silhouettes(scene, opaque: np.ndarray, light) -> tuple[np.ndarray, np
     return pts[keep, :2].astype(np.float32), quad
 
 
-class PWedge(Technique):
+class PWedge(ObjectBased):
     """Penumbra wedges: the hard shadow from the light's centre corrected, per silhouette edge whose
     wedge holds the receiver, by the light area the edge covers; perforated triangles through
     soft textured shadow volumes into an LS_buffer bitmask whose bits are added."""
@@ -284,92 +271,56 @@ class PWedge(Technique):
     summary = ("penumbra wedges: hard shadow from the light's centre plus each silhouette edge's covered light area "
                "(over-shadows where silhouettes overlap); soft textured shadow volumes into an LS_buffer for perforated triangles")
     Params = PWedgeParams
-    reads = ("gbuffer", "scene.triangles", "scene.adjacency", "scene.textures")
+    final_stage = "wedges"
+    passes = object_based_passes("pwedge", final_stage)
     quality = (Quality("samples", (8, 16, 64), "more LS_buffer samples: noise of perforated triangles' shadows down, time up"),)
     tolerance = Tolerance(mae=0.0003, mae_penumbra=0.01)  # measured 1.3e-5, 0.0005: exact for one convex occluder, up to float
     distance_refusal = "its hard shadow and wedges run from the receiver to the light"
     instancing_refusal = "its edges come from the flattened soup's adjacency and its centre rays walk the soup's BVH"
     point_refusal = "a point light has no penumbra: penumbra wedges need an area (use hard or izb)"
 
-    def add_passes(self, ctx, light):
+    def edges(self, scene, opaque, light, device):
+        """The silhouette edges seen from the light's centre, with their hard shadow quads' planes."""
+        pts, quad = centre_silhouettes(scene, opaque, light)
+        arrays = {"edge_pts": wp.array(pts if len(pts) else np.zeros((1, 2, 3), np.float32), dtype=wp.vec3, device=device),
+                  "edge_quad": wp.array(quad if len(quad) else np.zeros((1, 3), np.float32), dtype=wp.vec3, device=device)}
+        return pts, arrays, {"silhouette_edges": int(len(pts))}
+
+    def perforated(self, ctx, light, gb, ds, counters, data):
+        """The LS_buffer: per receiver, the light samples its perforated triangles block (one bit each)."""
         p = self.params
-        gbuf = ctx.gbuffer()
-        scene_key = ctx.scene_arrays()
-        scene = ctx.scene
-        out = ctx.visibility_key(light)
-        L = ctx.light_gpu(light)
-        opaque, perforated = triangle_masks(scene, light)
-        edges_key = ctx.key("pwedge_edges", light)
-        edges_name = ctx.pass_name("pwedge_edges", light)
-
-        def run_edges(res):
-            dev = ctx.device
-            pts, quad = centre_silhouettes(scene, opaque, light)
-            arrays = {"edge_pts": wp.array(pts if len(pts) else np.zeros((1, 2, 3), np.float32), dtype=wp.vec3, device=dev),
-                      "edge_quad": wp.array(quad if len(quad) else np.zeros((1, 3), np.float32), dtype=wp.vec3, device=dev)}
-            prep = edge_pass(ctx, light, res[gbuf], scene, opaque, perforated, p.shadow_map_size, pts, edges_name, arrays,
-                             {"silhouette_edges": int(len(pts))})
-            return {edges_key: prep}
-
-        ctx.add_pass(edges_name, inputs=(gbuf, scene_key), outputs=(edges_key,), run=run_edges, light=light)
-        inputs = [gbuf, scene_key, edges_key]
-
-        ls_key = None
+        dev = ctx.device
         nbytes = p.samples // 8
-        if perforated.any():
-            ls_key = ctx.key("pwedge_stsv", light)
-            inputs.append(ls_key)
-            pattern = p.sample_pattern()
+        n = gb.count
+        buf = wp.empty(n * nbytes, dtype=wp.uint8, device=dev)
+        vt = wp.empty(n, dtype=wp.int32, device=dev)
+        launch_chunked(
+            ls_buffer_pass, n,
+            inputs=[gb.gpu(), p.sample_pattern().on(dev, light.kind != LIGHT_RECT), ctx.light_gpu(light), ray_epsilon(gb, light),
+                    data["tbins"].gpu, data["stri"], data["planes"], ds.cutouts, data["cut_pts"], nbytes],
+            outputs=[buf, vt], device=dev, min_chunk=256, per_thread=32)
+        counters["stsv_tests"] = int(vt.numpy().astype(np.int64).sum())
+        counters["ls_buffer_bytes"] = int(buf.size)
+        return counters, {"ls_buffer": buf}
 
-            def run_stsv(res):
-                gb = res[gbuf]
-                ds = res[scene_key]
-                prep = res[edges_key]
-                dev = ctx.device
-                counters, data = perforated_volumes(scene, perforated, L, light, prep.view, prep.zr_max, dev)
-                n = gb.count
-                buf = wp.empty(n * nbytes, dtype=wp.uint8, device=dev)
-                vt = wp.empty(n, dtype=wp.int32, device=dev)
-                launch_chunked(
-                    ls_buffer_pass, n,
-                    inputs=[gb.gpu(), pattern.on(dev, light.kind != LIGHT_RECT), L, ray_epsilon(gb, light), data["tbins"].gpu,
-                            data["stri"], data["planes"], ds.cutouts, data["cut_pts"], nbytes],
-                    outputs=[buf, vt], device=dev, min_chunk=256, per_thread=32)
-                counters["stsv_tests"] = int(vt.numpy().astype(np.int64).sum())
-                counters["ls_buffer_bytes"] = int(buf.size)
-                return {ls_key: Prep(view=prep.view, zr_max=prep.zr_max, counters=counters, data={"ls_buffer": buf})}
-
-            ctx.add_pass(ctx.pass_name("pwedge_stsv", light), inputs=(gbuf, scene_key, edges_key), outputs=(ls_key,), run=run_stsv,
-                         light=light)
-
-        def run(res):
-            gb = res[gbuf]
-            prep = res[edges_key]
-            a = prep.data
-            dev = ctx.device
-            n = gb.count
-            st = res[ls_key] if ls_key is not None else None
-            buf = st.data["ls_buffer"] if st is not None else wp.zeros(1, dtype=wp.uint8, device=dev)
-            vis = wp.empty(n, dtype=float, device=dev)
-            wt = wp.empty(n, dtype=wp.int32, device=dev)
-            wh = wp.empty(n, dtype=wp.int32, device=dev)
-            cl = wp.empty(n, dtype=wp.int32, device=dev)
-            bvh_id = a["bvh"].id if a["bvh"] is not None else wp.uint64(0)
-            launch_chunked(
-                pwedge_visibility, n,
-                inputs=[gb.gpu(), L, ray_epsilon(gb, light), a["has_opaque"], bvh_id, a["tri_pts"], a["ebins"].gpu, a["edge_pts"],
-                        a["edge_quad"], int(st is not None), buf, nbytes, p.samples],
-                outputs=[vis, wt, wh, cl], device=dev, min_chunk=256, per_thread=32)
-            c = ctx.counters(light)
-            c.update(prep.counters)
-            if st is not None:
-                c.update(st.counters)
-            whn = wh.numpy()
-            c["wedge_tests"] = int(wt.numpy().astype(np.int64).sum())
-            c["wedge_receivers"] = int((whn > 0).sum())
-            c["wedge_hits"] = int(whn.astype(np.int64).sum())
-            c["clamped"] = int(cl.numpy().sum())
-            c["samples"] = p.samples
-            return {out: ctx.visibility(vis)}
-
-        return ctx.add_pass(ctx.pass_name("pwedge", light), inputs=tuple(inputs), outputs=(out,), run=run, light=light)
+    def visibility(self, ctx, light, gb, ds, prep, st):
+        p = self.params
+        a = prep.data
+        dev = ctx.device
+        n = gb.count
+        nbytes = p.samples // 8
+        buf = st.data["ls_buffer"] if st is not None else wp.zeros(1, dtype=wp.uint8, device=dev)
+        vis = wp.empty(n, dtype=float, device=dev)
+        wt = wp.empty(n, dtype=wp.int32, device=dev)
+        wh = wp.empty(n, dtype=wp.int32, device=dev)
+        cl = wp.empty(n, dtype=wp.int32, device=dev)
+        bvh_id = a["bvh"].id if a["bvh"] is not None else wp.uint64(0)
+        launch_chunked(
+            pwedge_visibility, n,
+            inputs=[gb.gpu(), ctx.light_gpu(light), ray_epsilon(gb, light), a["has_opaque"], bvh_id, a["tri_pts"], a["ebins"].gpu,
+                    a["edge_pts"], a["edge_quad"], int(st is not None), buf, nbytes, p.samples],
+            outputs=[vis, wt, wh, cl], device=dev, min_chunk=256, per_thread=32)
+        whn = wh.numpy()
+        counters = {"wedge_tests": int(wt.numpy().astype(np.int64).sum()), "wedge_receivers": int((whn > 0).sum()),
+                    "wedge_hits": int(whn.astype(np.int64).sum()), "clamped": int(cl.numpy().sum())}
+        return vis, counters

@@ -19,7 +19,7 @@ from wsoft.lightspace.light import disk_shaped
 from wsoft.reference import TRAVERSALS, ray_epsilon, reference_pattern, trace_reference
 from wsoft.scene.device import upload_scene
 from wsoft.params import check_ranges
-from wsoft.techniques.base import Quality, Technique, Tolerance, check, param
+from wsoft.techniques.base import PassSpec, Quality, Technique, Tolerance, check, param
 
 
 @dataclass(frozen=True)
@@ -45,8 +45,9 @@ class Reference(Technique):
     instancing_refusal = ""  # rays go through the instances' top-level BVH (wsoft.scene.instancing)
     summary = "ray-traced ground truth: stratified light samples, BVH any-hit, alpha-tested, with standard error"
     Params = ReferenceParams
-    reads = ("gbuffer", "scene.bvh", "scene.triangles", "scene.textures")
-    writes = ("visibility", "V_stderr")
+    # the visibility carries its standard error (V_stderr)
+    passes = (PassSpec("trace", reads=("gbuffer", "scene"), writes=("visibility",)),)
+    quick_params = {"samples": 4}
     quality = (Quality("samples", (1, 4, 16, 64, 256), "more light samples: error down as 1/sqrt(samples), time up linearly"),)
     tolerance = Tolerance(mae=0.0003, mae_penumbra=0.01)
     horizon = "exact"  # per light sample, in the tracing kernel
@@ -89,4 +90,4 @@ class Reference(Technique):
                 ctx.ctx.warn(pass_name, f"traced ray by ray, not in packets: {counters['packet_fallback']}")
             return {out: ctx.visibility(vis, err)}
 
-        return ctx.add_pass(pass_name, inputs=(gbuf, scene_key), outputs=(out,), run=run, light=light)
+        return ctx.add_pass(pass_name, inputs=(gbuf, scene_key), outputs=(out,), run=run, stage="trace", light=light)

@@ -34,12 +34,12 @@ import warp as wp
 
 from wsoft.accel.blur import blur_vec4_within
 from wsoft.accel.grid import build_grid
-from wsoft.lightspace.view import DEPTH_CLEAR, ViewGPU, bilinear, inside_map, map_coords, normalised_depth, window_to_texel
+from wsoft.lightspace.view import DEPTH_CLEAR, ViewGPU, bilinear, normalised_depth
 from wsoft.parallel import launch_chunked
-from wsoft.raster.gbuffer import GBufferGPU, gb_receiver
+from wsoft.raster.gbuffer import GBufferGPU, gb_mapped_receiver
 from wsoft.raster.rasterizer import rasterize
 from wsoft.params import check_ranges
-from wsoft.techniques.base import Quality, Technique, Tolerance, check, param
+from wsoft.techniques.base import PassSpec, Quality, Technique, Tolerance, check, param
 
 
 @dataclass(frozen=True)
@@ -56,7 +56,6 @@ class SalzmanParams:
 
     def __post_init__(self):
         check_ranges(self)
-        check(256 <= self.shadow_map_size <= 8192, f"shadow_map_size {self.shadow_map_size} out of range [256, 8192]")
         check(self.filter in ("box", "gaussian"), f"filter {self.filter!r} is not box or gaussian")
         check(self.bits in (8, 32), "bits must be 8 or 32")
         check(self.grid == 0 or 2 <= self.grid <= 1024, "grid must be 0 or in [2, 1024]")
@@ -137,13 +136,8 @@ def shade_salzman(
     i = wp.tid() + offset
     vis[i] = 1.0
     rejected[i] = 0
-    r = gb_receiver(lv, gb, i)
-    if r[3] == 0.0:
-        return
-    pv = wp.vec3(r[0], r[1], r[2])
-    m = map_coords(lv, pv)
-    t = window_to_texel(lv, m)
-    if not inside_map(lv, t):
+    mapped, pv, m, t = gb_mapped_receiver(lv, gb, i)
+    if not mapped:
         return
     if gsize > 0:
         cx = int(t[0]) * gsize / lv.width
@@ -162,8 +156,12 @@ class Salzman(Technique):
     instancing_refusal = "its static/dynamic split and gated maps work on the soup's triangle lists"
     summary = "Salzman 2007: blurred depth+mask map of dynamic casters, reconstructed caster depth, far bound, transparency, caster grid, 8-bit option"
     Params = SalzmanParams
-    reads = ("gbuffer", "scene.triangles", "light_view")
-    writes = ("visibility",)
+    passes = (
+        PassSpec("map", reads=("scene", "light_view"), writes=("salzman_map",)),
+        PassSpec("shadow", reads=("gbuffer", "light_view", "salzman_map"), writes=("visibility",)),
+    )
+    quick_params = {"shadow_map_size": 256}
+    size_param = "shadow_map_size"
     quality = (Quality("radius", (2, 4, 8), "a wider blur: wider (uniform) penumbrae, more time"),)
     # one blur width for every penumbra: the parallel-rectangle penumbra is matched only roughly
     tolerance = Tolerance(mae=0.007, mae_penumbra=0.28)

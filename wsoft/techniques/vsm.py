@@ -17,11 +17,12 @@ from dataclasses import dataclass
 import warp as wp
 
 from wsoft.accel.blur import blur_moments
-from wsoft.lightspace.view import ViewGPU, bilinear, inside_map, map_coords, normalised_depth, window_to_texel
+from wsoft.lightspace.moments import chebyshev_bound, moments_variance
+from wsoft.lightspace.view import ViewGPU, bilinear, normalised_depth
 from wsoft.parallel import launch_chunked
-from wsoft.raster.gbuffer import GBufferGPU, gb_receiver
+from wsoft.raster.gbuffer import GBufferGPU, gb_mapped_receiver
 from wsoft.params import check_ranges
-from wsoft.techniques.base import Quality, Technique, Tolerance, check, param
+from wsoft.techniques.base import PassSpec, Quality, Technique, Tolerance, check, param
 
 
 @dataclass(frozen=True)
@@ -35,7 +36,6 @@ class VSMParams:
 
     def __post_init__(self):
         check_ranges(self)
-        check(256 <= self.shadow_map_size <= 8192, f"shadow_map_size {self.shadow_map_size} out of range [256, 8192]")
         check(self.filter in ("box", "gaussian"), f"filter {self.filter!r} is not box or gaussian")
 
 
@@ -66,13 +66,8 @@ def shade_vsm(
     vis: wp.array[float],
 ):
     i = wp.tid() + offset
-    r = gb_receiver(lv, gb, i)
-    if r[3] == 0.0:
-        vis[i] = 1.0
-        return
-    pv = wp.vec3(r[0], r[1], r[2])
-    m = map_coords(lv, pv)
-    if not inside_map(lv, window_to_texel(lv, m)):
+    mapped, pv, m, t = gb_mapped_receiver(lv, gb, i)
+    if not mapped:
         vis[i] = 1.0
         return
     z = normalised_depth(pv[2], lv.near, lv.far - lv.near) - bias
@@ -81,9 +76,7 @@ def shade_vsm(
     if z <= mu:
         vis[i] = 1.0
         return
-    var = wp.max(e[1] - mu * mu, min_variance)
-    dz = z - mu
-    p = var / (var + dz * dz)
+    p = chebyshev_bound(mu, moments_variance(mu, e[1], min_variance), z)
     vis[i] = wp.clamp((p - bleed) / (1.0 - bleed), 0.0, 1.0)
 
 
@@ -94,8 +87,12 @@ class VSM(Technique):
     instancing_refusal = ""  # its maps draw instances (wsoft.raster.rasterizer.instance_runs)
     summary = "variance shadow maps: blurred (d, d^2) moments, Chebyshev bound, light-bleeding reduction"
     Params = VSMParams
-    reads = ("gbuffer", "light_depth")
-    writes = ("visibility",)
+    passes = (
+        PassSpec("moments", reads=("light_depth",), writes=("vsm_moments",)),
+        PassSpec("shadow", reads=("gbuffer", "light_depth", "vsm_moments"), writes=("visibility",)),
+    )
+    quick_params = {"shadow_map_size": 256}
+    size_param = "shadow_map_size"
 
     quality = (Quality("radius", (1, 2, 4), "a wider prefilter: softer edges (not wider penumbrae), a little more time"),)
     tolerance = Tolerance(mae=0.0085, mae_penumbra=0.34)
@@ -105,7 +102,7 @@ class VSM(Technique):
         p = self.params
         gbuf = ctx.gbuffer()
         depth = ctx.light_depth(light, size=p.shadow_map_size, soft=True)
-        moments = ctx.shared_key("vsm_moments", light, "filter", "radius")
+        moments = ctx.shared_key("vsm_moments", light, p.shadow_map_size, "filter", "radius")
         out = ctx.visibility_key(light)
 
         def build(res):

@@ -27,11 +27,12 @@ import warp as wp
 from wsoft.accel.pyramid import effective_depth_range
 from wsoft.accel.sat import box_area, build_sat, check_sat_params, mean_pyramid, sat_box
 from wsoft.lightspace.light import LightKernel, light_kernel, spread_texels
-from wsoft.lightspace.view import ViewGPU, normalised_depth, receiver_texel
+from wsoft.lightspace.moments import chebyshev_bound, moments_variance
+from wsoft.lightspace.view import ViewGPU, normalised_depth
 from wsoft.params import check_ranges
 from wsoft.parallel import launch_chunked
-from wsoft.raster.gbuffer import GBufferGPU, gb_covered
-from wsoft.techniques.base import Quality, Technique, Tolerance, param
+from wsoft.raster.gbuffer import GBufferGPU, gb_mapped_receiver
+from wsoft.techniques.base import PassSpec, Quality, Technique, Tolerance, param
 
 
 @dataclass(frozen=True)
@@ -95,14 +96,13 @@ def chebyshev(q: VSSMConsts, data: wp.array3d(dtype=Any), u0: float, u1: float, 
     outside = wp.float64(fa - a)
     m1 = float((sat_box(data, 0, q.n, q.tile, u0, u1, v0, v1) * q.unit + outside) / wp.float64(fa))
     m2 = float((sat_box(data, 1, q.n, q.tile, u0, u1, v0, v1) * q.unit + outside) / wp.float64(fa))
-    var = wp.max(m2 - m1 * m1, q.min_var)
+    var = moments_variance(m1, m2, q.min_var)
     if d <= m1:
         flag = float(0.0)
         if var > q.min_var * 4.0:
             flag = 1.0
         return wp.vec3(1.0, 0.0, flag)
-    t = d - m1
-    p = var / (var + t * t)
+    p = chebyshev_bound(m1, var, d)
     if q.bleed > 0.0:
         p = wp.clamp((p - q.bleed) / (1.0 - q.bleed), 0.0, 1.0)
     bw = wp.clamp(m1 - p * d, 0.0, (1.0 - p) * d)
@@ -146,13 +146,10 @@ def vssm_shade(
     i = wp.tid() + offset
     vis[i] = 1.0
     looks[i] = 0
-    if not gb_covered(gb, i):
+    mapped, pv, m, tc = gb_mapped_receiver(lv, gb, i)
+    if not mapped:
         return
-    rt = receiver_texel(lv, gb.pos[i])
-    if rt[3] == 0.0:
-        return
-    tc = wp.vec2(rt[0], rt[1])
-    d_lin = rt[2]
+    d_lin = pv[2]
     d = normalised_depth(d_lin, q.zmin, q.zrange) - q.bias
     sh = spread_texels(lv, k, q.zmin, d_lin, 0.5, q.max_r)
     r = vregion(q, data, tc[0] - sh[0], tc[0] + sh[0], tc[1] - sh[1], tc[1] + sh[1], d)
@@ -190,8 +187,13 @@ class VSSM(Technique):
     instancing_refusal = ""  # its maps draw instances (wsoft.raster.rasterizer.instance_runs)
     summary = "variance soft shadow mapping: SAT of depth moments, Chebyshev blocker estimate, subdivision of non-planar kernels"
     Params = VSSMParams
-    reads = ("gbuffer", "light_depth")
-    writes = ("visibility", "vssm_moments", "vssm_sat")
+    passes = (
+        PassSpec("moments", reads=("light_depth",), writes=("vssm_moments",)),
+        PassSpec("sat", reads=("vssm_moments",), writes=("vssm_sat",)),
+        PassSpec("shadow", reads=("gbuffer", "light_depth", "vssm_moments", "vssm_sat"), writes=("visibility",)),
+    )
+    quick_params = {"shadow_map_size": 256}
+    size_param = "shadow_map_size"
     quality = (Quality("subdivision", (1, 3, 5), "finer subdivision of non-planar kernels: less light leaking, more look-ups"),)
     tolerance = Tolerance(mae=0.0003, mae_penumbra=0.01)
     distance_refusal = "its summed-area tables of depth moments sum every caster of a kernel together, so they cannot tell which lie within the distance"
@@ -201,8 +203,8 @@ class VSSM(Technique):
         gbuf = ctx.gbuffer()
         depth = ctx.light_depth(light, size=p.shadow_map_size, soft=True)
         out = ctx.visibility_key(light)
-        mkey = ctx.shared_key("vssm_moments", light, "sat")
-        skey = ctx.shared_key("vssm_sat", light, "sat", "mu", "build")
+        mkey = ctx.shared_key("vssm_moments", light, p.shadow_map_size, "sat")
+        skey = ctx.shared_key("vssm_sat", light, p.shadow_map_size, "sat", "mu", "build")
         k = light_kernel(light)
 
         def run_moments(res):

@@ -74,7 +74,7 @@ from wsoft.lightspace.samples import SamplePattern
 from wsoft.parallel import launch_chunked
 from wsoft.scene.types import LIGHT_DISTANT, LIGHT_POINT, LIGHT_RECT
 from wsoft.params import check_ranges
-from wsoft.techniques.base import Quality, Technique, Tolerance, check, param
+from wsoft.techniques.base import PassSpec, Quality, Technique, Tolerance, check, param
 from wsoft.techniques.ssm.kernels import (
     OCC_MICROPATCH,
     OCC_MICROQUAD,
@@ -331,8 +331,14 @@ class SSM(Technique):
     instancing_refusal = ""  # its maps draw instances (wsoft.raster.rasterizer.instance_runs)
     summary = "backprojection soft shadow mapping (micropatches/microquads/microrects, area or bitmask, HSM/MSSM/YSM, budget, smooth LOQ, MSAA resolve)"
     Params = SSMParams
-    reads = ("gbuffer", "light_depth")
-    writes = ("visibility",)
+    passes = (
+        PassSpec("structure", reads=("light_depth",), writes=("ssm_maps",)),
+        PassSpec("search", reads=("gbuffer", "light_depth", "ssm_maps"), writes=("ssm_search",)),
+        PassSpec("smooth", reads=("gbuffer", "light_depth", "ssm_search"), writes=("ssm_loq",)),
+        PassSpec("backprojection", reads=("gbuffer", "light_depth", "ssm_maps", "ssm_search", "ssm_loq"), writes=("visibility",)),
+    )
+    quick_params = {"shadow_map_size": 256}
+    size_param = "shadow_map_size"
     quality = (Quality("budget", (4.0, 8.0, 16.0, math.inf), "b_mo, micro-occluders per axis: more is closer to level 0 and slower"),)
     tolerance = Tolerance(mae=0.0005, mae_penumbra=0.012)
     distance_refusal = "its pruning pyramids and merged micro-occluders classify receivers by depth ranges of all casters, not by each caster's distance"
@@ -357,7 +363,7 @@ class SSM(Technique):
         depth = ctx.light_depth(light, size=p.shadow_map_size, soft=True)
         k = light_kernel(light)
         # the pruning structure and microrects depend on the map only: shared by every budget
-        maps_key = ctx.shared_key("ssm_maps", light, "structure", "ysm_size", "occluder", "microrect_diagonal")
+        maps_key = ctx.shared_key("ssm_maps", light, p.shadow_map_size, "structure", "ysm_size", "occluder", "microrect_diagonal")
         search_key = ctx.key("ssm_search", light)
         loq_key = ctx.key("ssm_loq", light)
         out = ctx.visibility_key(light)
