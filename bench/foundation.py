@@ -115,7 +115,7 @@ def _light_map_view(case: dict, scene, light):
 def _raster_vs_raycast(case: dict, ctx: dict) -> dict:
     from wsoft.parallel import cpu_threads
     from wsoft.lightspace.view import DEPTH_CLEAR
-    from wsoft.raster.rasterizer import rasterize
+    from wsoft.raster.depth_map import rasterize
     from wsoft.raster.raycast import raycast_depth
 
     scene = load(case["scene"])
@@ -177,7 +177,7 @@ def _raster_baseline(case: dict, ctx: dict) -> dict:
     import warp as wp
 
     from wsoft.lightspace.view import DEPTH_CLEAR
-    from wsoft.raster.rasterizer import rasterize
+    from wsoft.raster.depth_map import rasterize
 
     scene = load(case["scene"])
     light = scene.find_light(case["light"]) if case["light"] else scene.lights[0]
@@ -219,7 +219,9 @@ def _raster_bound(case: dict, ctx: dict) -> dict:
     from wsoft.bench.raster_bound import Bound
     from wsoft.lightspace.view import DEPTH_CLEAR
     from wsoft.parallel import cpu_threads
-    from wsoft.raster.rasterizer import BIG_TRIANGLE_TEXELS, CPU_CHUNK, SMALL_BOX_TEXELS, rasterize
+    from wsoft.raster.depth_map import rasterize
+    from wsoft.raster.rasterizer import BIG_TRIANGLE_TEXELS, CPU_CHUNK
+    from wsoft.raster.triangle import SMALL_BOX_TEXELS
     from wsoft.raster.raycast import raycast_depth
 
     scene = load(case["scene"])
@@ -267,7 +269,7 @@ def bundled_scenes() -> list[str]:
 def _reference_frame(case: dict, ctx: dict) -> dict:
     """``reference samples=N`` on every light of a scene, per-ray against packet traversal: the
     reference passes' time (median of 3 after a warm-up), whether V is identical and, where not,
-    how many pixels differ and by how much. A stage kept instanced (:func:`~wsoft.render.load_stage`)
+    how many pixels differ and by how much. A stage kept instanced (:func:`~wsoft.pipeline.load_stage`)
     is traced ray by ray only: packets walk the triangle soup."""
     import wsoft
 
@@ -303,17 +305,16 @@ def _throughput(case: dict, ctx: dict) -> dict:
     from wsoft.lightspace.light import disk_shaped
     from wsoft.reference import ray_epsilon, reference_pattern, shadow_rays, trace_ray_packets, trace_reference, trace_rays
     from wsoft.scene.packets import packed_bvh
-    from wsoft.render import RenderContext
+    from wsoft.pipeline import RenderContext, frame_setup
     from wsoft.raster.camera import camera_gpu
     from wsoft.raster.gbuffer import render_gbuffer
-    from wsoft.render import _pick_camera
     from wsoft.scene.device import upload_scene
 
     scene = load(case["scene"])
     light = scene.find_light(case["light"]) if case["light"] else scene.lights[0]
     dev, w, h, n = case["device"], case["width"], case["height"], case["samples"]
     ds, _ = scene.device_copy(dev, upload_scene)
-    ctx_r = RenderContext(scene, _pick_camera(scene, None, w, h), w, h, dev)
+    ctx_r = RenderContext(scene, frame_setup(scene, w, h).camera, w, h, dev)
     gb = render_gbuffer(ds, camera_gpu(ctx_r.camera), w, h, 1, scene.has_cutouts)
     L = ctx_r.light_gpu(light)
     covered = int((gb.prim.numpy() >= 0).sum())

@@ -81,9 +81,9 @@ _SCENES: dict[str, object] = {}
 
 def load(name: str):
     """A stage by name (:func:`scene_file`), loaded once, as the CLI loads it
-    (:func:`~wsoft.render.load_stage`, ``instancing=auto``): one triangle soup, unless its instances
+    (:func:`~wsoft.pipeline.load_stage`, ``instancing=auto``): one triangle soup, unless its instances
     place more triangles than would fit flattened (``forest``: 56 million), which stay instances."""
-    from wsoft.render import load_stage
+    from wsoft.pipeline import load_stage
 
     f = scene_file(name)
     if f not in _SCENES:

@@ -89,7 +89,7 @@ def measure(case: dict) -> dict:
 
     from wsoft.bench.harness import scene_file
     from wsoft.parallel import resolve_device
-    from wsoft.render import render
+    from wsoft.pipeline import render
     from wsoft.scene.device import upload_scene
     from wsoft.scene.usd import load_scene
 
@@ -137,7 +137,7 @@ def _rays(scene, ds, light, w, h, samples, dev) -> dict:
     from wsoft.raster.camera import camera_gpu
     from wsoft.raster.gbuffer import render_gbuffer
     from wsoft.reference import ray_epsilon, reference_pattern, shadow_rays, trace_ray_packets, trace_rays
-    from wsoft.render import frame_setup
+    from wsoft.pipeline import frame_setup
 
     cam = camera_gpu(frame_setup(scene, w, h).camera)
     gb = render_gbuffer(ds, cam, w, h, 1, scene.has_cutouts)

@@ -69,7 +69,7 @@ def _area_reference(scene_name: str, w: int, h: int, device: str) -> np.ndarray:
 
 
 def _stencil(scene, params, w, h, device) -> np.ndarray:
-    from wsoft.render import build_graph, execute
+    from wsoft.pipeline import build_graph, execute
 
     b = build_graph(scene, "izb", width=w, height=h, device=device, params=params)
     extra = [k for p in b.ctx.graph.passes.values() for k in p.outputs if str(k).startswith("izb_stencil")]

@@ -1,6 +1,6 @@
 """A bound on what the light-view rasterizer could reach on the CPU (issue 11 item 3).
 
-Two stripped kernels, timed beside the real rasterizer (:func:`wsoft.raster.rasterizer.rasterize`)
+Two stripped kernels, timed beside the real rasterizer (:func:`wsoft.raster.depth_map.rasterize`)
 on the same orthographic view, in the same thread layout (one private map per worker, interleaved
 chunks of triangles):
 
@@ -25,7 +25,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from wsoft.raster.rasterizer import edge
+from wsoft.raster.triangle import edge
 
 DEPTH_CLEAR = wp.constant(1.0e30)  # as wsoft.lightspace.view.DEPTH_CLEAR (an empty texel)
 

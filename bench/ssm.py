@@ -88,7 +88,7 @@ class SearchView:
 def run_ssm(scene_name: str, params: dict, w: int, h: int, device: str, pixel_samples: int = 1):
     """Render ``ssm`` and keep its search and LOQ resources: (channels, search, counters), the
     counters with ``_maps`` (its pruning structure and microrects)."""
-    from wsoft.render import build_graph, execute
+    from wsoft.pipeline import build_graph, execute
     from wsoft.techniques import create
 
     scene = load(scene_name)
@@ -331,7 +331,7 @@ def _multi_depth_pixels(scene_name: str, w: int, h: int, dev: str) -> np.ndarray
     """Pixels whose 4 samples are not all within tau = 0.01 of the first covered one (depth edges)."""
     import warp as wp
 
-    from wsoft.render import build_graph
+    from wsoft.pipeline import build_graph
     from wsoft.techniques import create
 
     built = build_graph(load(scene_name), create("hard", {}), width=w, height=h, device=dev, pixel_samples=4)

@@ -36,7 +36,7 @@ def cases(quick: bool, devices: list[str]) -> list[dict]:
 
 def depth_map(scene_name: str, size: int, device: str):
     """The soft light view's depth map of the scene's first light (as ``ssm`` renders it)."""
-    from wsoft.render import build_graph
+    from wsoft.pipeline import build_graph
     from wsoft.techniques import create
 
     scene = load(scene_name)

@@ -126,7 +126,7 @@ def _render_settings(case: dict, folder: Path, stem: str) -> dict:
     import wsoft
     from PIL import Image
 
-    from wsoft.render import frame_setup
+    from wsoft.pipeline import frame_setup
 
     stage = folder / "render_settings.usda"
     _settings_stage(stage, case["resolution"])
@@ -174,7 +174,7 @@ def _shadow_link(case: dict, folder: Path, stem: str) -> dict:
     import wsoft
     from pxr import Usd, UsdLux
 
-    from wsoft.render import shadow_controls
+    from wsoft.pipeline import shadow_controls
 
     out = {"scene": f"{stem}/shadow_link.usda", "width": case["width"], "height": case["height"], "variants": []}
     for exclude in (False, True):

@@ -12,7 +12,7 @@ import pytest
 from conftest import ROOT, add_box, add_quad, add_rect_light, make_stage, parallel_rect_exact, scene_path
 
 import wsoft
-from wsoft.bake import fill_from_nearest, texel_coverage
+from wsoft.baking import fill_from_nearest, texel_coverage
 from wsoft.io import read_exr
 from wsoft.techniques import TECHNIQUES
 
@@ -148,9 +148,9 @@ def test_a_bake_of_an_eye_views_own_points_is_the_eye_view(name):
     import warp as wp
 
     from conftest import add_camera
-    from wsoft.bake import BakeContext
+    from wsoft.baking import BakeContext
     from wsoft.raster.gbuffer import bake_gbuffer
-    from wsoft.render import as_techniques, visibility_of
+    from wsoft.pipeline.build import as_techniques, visibility_of
 
     stage = parallel_stage(8)
     add_camera(stage, "/World/Camera", (0.0, 0.0, 8.0), (0.0, 0.0, 0.0), up=(0, 1, 0), focal=36.0)

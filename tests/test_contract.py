@@ -104,7 +104,7 @@ def check_passes(name, scenes=("box_plane.usda", "cutout.usda")):
     """On a plain and a cutout scene, at its quick settings and each quality setting: every pass the
     technique adds is of a declared stage (the graph checks its inputs and outputs against the
     declaration), every stage declared to run always ran, and ``wsoft techniques`` prints them."""
-    from wsoft.render import build_graph
+    from wsoft.pipeline import build_graph
 
     cls = TECHNIQUES[name]
     seen = set()
@@ -129,7 +129,7 @@ def test_the_declaration_check_can_fail():
     """A technique whose pass reads a resource its declaration leaves out, or adds a pass of a stage
     it does not declare, stops the graph's construction with a one-line error naming both."""
     from wsoft.errors import DeclarationError
-    from wsoft.render import build_graph
+    from wsoft.pipeline import build_graph
     from wsoft.techniques import PassSpec
 
     hard = TECHNIQUES["hard"]
@@ -201,7 +201,7 @@ def test_plan_lists_a_point_light_instead_of_failing(tmp_path):
 def test_finite_on_every_bundled_scene(scene_name):
     """Every technique, on every light of every bundled stage it supports: finite, in [0, 1]."""
     from wsoft.errors import ParameterError
-    from wsoft.render import load_stage
+    from wsoft.pipeline import load_stage
 
     scene = load_stage(str(usd_scenes.path(scene_name)))  # as the command line loads it (forest keeps its instances)
     for name in NAMES:
@@ -239,7 +239,7 @@ def test_no_pass_edits_another_pass_resource(name):
 
 
 def check_immutable(name):
-    from wsoft.render import build_graph, execute
+    from wsoft.pipeline import build_graph, execute
 
     scene = wsoft.load_scene(scene_path("contact.usda"))
     params = TECHNIQUES[name].quick_params

@@ -58,8 +58,7 @@ def test_cuda_frames_match_the_cpu(technique):
 @pytest.mark.skipif(not GPU, reason="no GPU here: this comparison runs where one is present (python -m wsoft.gpu_check)")
 def test_cuda_depth_maps_match_the_cpu():
     """The rasterizer's CUDA path (bands with atomic_min) against the CPU's private targets."""
-    from wsoft.raster.rasterizer import rasterize
-    from wsoft.render import RenderContext, _pick_camera
+    from wsoft.raster.depth_map import rasterize
     from wsoft.scene.device import upload_scene
     from wsoft.lightspace.view import fit_light_view
 

@@ -9,7 +9,7 @@ from conftest import box_plane_ground_error, scene_path
 import wsoft
 from wsoft.bench.essm_cases import essm_contact_box, essm_nonplanar
 from wsoft.errors import ParameterError
-from wsoft.render import build_graph
+from wsoft.pipeline import build_graph
 from wsoft.techniques import create
 from wsoft.techniques.essm import optimal_exponent
 

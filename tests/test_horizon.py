@@ -55,18 +55,15 @@ def test_a_nan_in_a_technique_is_counted_and_warned(monkeypatch):
     per channel and a NonFiniteWarning (an error everywhere else in the suite)."""
     import warp as wp
 
-    import importlib
-
     from wsoft.errors import NonFiniteWarning
-
-    render = importlib.import_module("wsoft.render")  # the module (wsoft.render is also the function)
+    from wsoft.pipeline import context
 
     def broken(vis, front):
         v = vis.numpy()
         v[::7] = np.nan
         return wp.array(v, dtype=float, device=vis.device)
 
-    monkeypatch.setattr(render, "clip_to_front", broken)
+    monkeypatch.setattr(context, "clip_to_front", broken)
     scene = _wall_under_light()
     with pytest.warns(NonFiniteWarning, match="V"):
         f = wsoft.render(scene, "pcss", width=16, height=12, device="cpu")

@@ -11,7 +11,7 @@ import warp as wp
 
 from instancing_util import rot, split, xf
 from wsoft.errors import ParameterError
-from wsoft.render import build_graph, render
+from wsoft.pipeline import build_graph, render
 from wsoft.scene.usd import load_scene
 from wsoft.techniques import TECHNIQUES
 
@@ -36,7 +36,7 @@ def pair():
 def gbuffer_of(scene, device, w=96, h=72):
     from wsoft.raster.camera import camera_gpu
     from wsoft.raster.gbuffer import render_gbuffer
-    from wsoft.render import frame_setup
+    from wsoft.pipeline import frame_setup
     from wsoft.scene.device import upload_scene
 
     cam = camera_gpu(frame_setup(scene, w, h).camera)
@@ -104,7 +104,7 @@ def test_depth_map_of_instances_equals_flat_map(device):
     written, depths within float rounding (a mirrored closed box's far faces are culled as the flat
     scene's are; culling the wrong side would move depths by the box's thickness)."""
     from wsoft.lightspace.view import fit_light_view
-    from wsoft.raster.rasterizer import rasterize
+    from wsoft.raster.depth_map import rasterize
 
     from wsoft.lightspace.view import DEPTH_CLEAR
 
@@ -155,7 +155,7 @@ def test_all_instanced_scene_has_no_stray_soup_triangle(device):
     """A stage whose every mesh is instanced keeps a zero-area stand-in soup triangle: no ray hits
     it and no map, not even a conservative one, draws it."""
     from wsoft.lightspace.view import fit_light_view
-    from wsoft.raster.rasterizer import rasterize
+    from wsoft.raster.depth_map import rasterize
     from wsoft.scene.device import upload_scene
 
     sc = load_scene(CUTOUT)
@@ -206,27 +206,23 @@ def test_techniques_that_read_the_soup_get_it_flattened(pair):
 
 
 def test_flattening_a_huge_instanced_stage_is_refused(pair, monkeypatch):
-    import sys
+    from wsoft.pipeline import loading
 
-    wr = sys.modules["wsoft.render"]  # the module (the package's ``render`` is the function)
     inst, _ = pair
-    monkeypatch.setattr(wr, "FLATTEN_LIMIT", 10)
+    monkeypatch.setattr(loading, "FLATTEN_LIMIT", 10)
     with pytest.raises(ParameterError, match=r"izb \(its light pass.*needs the stage flattened.*techniques that keep instances: .*hard"):
         build_graph(inst, "izb", width=32, height=24)
     build_graph(inst, "hard", width=32, height=24)  # keeps instances: no limit
 
 
 def test_plan_says_what_keeps_instances(pair, monkeypatch):
-    import sys
+    from wsoft.pipeline import loading, plan
 
-    from wsoft.render import plan
-
-    wr = sys.modules["wsoft.render"]
     inst, _ = pair
     p = plan(inst, ["hard", "izb"], width=32, height=24)
     assert p["instancing"]["mode"] == "kept" and p["instancing"]["instances"] == 4
     assert "izb" in p["flattened_for"] and "hard" not in p.get("flattened_for", {}) and "izb" in p["techniques"]
-    monkeypatch.setattr(wr, "FLATTEN_LIMIT", 10)
+    monkeypatch.setattr(loading, "FLATTEN_LIMIT", 10)
     p = plan(inst, ["hard", "izb"], width=32, height=24)
     assert "izb" not in p["techniques"] and "needs the stage flattened" in p["not_applicable"]["izb"][0]["reason"]
 

@@ -12,7 +12,7 @@ from wsoft.accel.izb_grid import build_grid
 from wsoft.errors import ParameterError
 from wsoft.lightspace.view import LightView
 from wsoft.raster.camera import subpixel_pattern
-from wsoft.render import build_graph, execute
+from wsoft.pipeline import build_graph, execute
 from wsoft.scene.device import Surfaces, surface_present, without_culling
 from wsoft.scene.packets import ray_triangle
 

@@ -22,9 +22,9 @@ LAYERS = [
     ("raster", ("wsoft.raster", "wsoft.reference")),
     ("accel", ("wsoft.accel",)),
     ("techniques", ("wsoft.techniques",)),
-    ("render", ("wsoft.render",)),
+    ("pipeline", ("wsoft.pipeline",)),
     ("metrics", ("wsoft.metrics",)),
-    ("bake", ("wsoft.bake",)),
+    ("baking", ("wsoft.baking",)),
     ("cli/bench", ("wsoft.cli", "wsoft.__main__", "wsoft.bench", "wsoft.usd_scenes", "wsoft")),
 ]
 
@@ -83,7 +83,7 @@ def test_every_module_has_a_layer():
 
 
 def test_imports_point_down():
-    """scene -> light space -> raster -> accel -> techniques -> render -> metrics -> bake -> cli/bench."""
+    """scene -> light space -> raster -> accel -> techniques -> pipeline -> metrics -> baking -> cli/bench."""
     bad = []
     for path in sources():
         me = module_name(path)
@@ -128,7 +128,7 @@ def test_the_check_itself_sees_an_upward_import(tmp_path):
 
 
 @pytest.mark.parametrize("mod", ["wsoft.techniques.ssm.kernels", "wsoft.accel.sat", "wsoft.accel.ssm_structures", "wsoft.lightspace.samples",
-                                 "wsoft.raster.rasterizer", "wsoft.techniques.essm", "wsoft.metrics", "wsoft.bake",
+                                 "wsoft.raster.rasterizer", "wsoft.techniques.essm", "wsoft.metrics", "wsoft.baking",
                                  "wsoft.scene.mesh_points", "wsoft.bench.pareto"])
 def test_module_imports_on_its_own(mod):
     p = subprocess.run([sys.executable, "-c", f"import {mod}"], capture_output=True, text=True, timeout=300, cwd=str(ROOT))

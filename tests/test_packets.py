@@ -65,13 +65,13 @@ def test_explicit_ray_packets_equal_per_ray(device):
     from wsoft.raster.camera import camera_gpu
     from wsoft.raster.gbuffer import render_gbuffer
     from wsoft.reference import ray_epsilon, reference_pattern, shadow_rays, trace_ray_packets, trace_rays
-    from wsoft.render import RenderContext, _pick_camera
+    from wsoft.pipeline import RenderContext, frame_setup
     from wsoft.scene.device import upload_scene
 
     scene = wsoft.load_scene(scene_path("multi_light.usda"))
     light = scene.find_light("Disk")
     ds, _ = scene.device_copy(device, upload_scene)
-    ctx = RenderContext(scene, _pick_camera(scene, None, 40, 30), 40, 30, device)
+    ctx = RenderContext(scene, frame_setup(scene, 40, 30).camera, 40, 30, device)
     gb = render_gbuffer(ds, camera_gpu(ctx.camera), 40, 30, 1, scene.has_cutouts)
     pattern = reference_pattern(40, 3, True)
     o, d, t = shadow_rays(ds, ctx.light_gpu(light), gb, pattern, disk_shaped(light), ray_epsilon(gb, light))
@@ -156,13 +156,13 @@ def _pixel_rays(file: str, light_path: str, x: int, y: int):
     from wsoft.raster.camera import camera_gpu
     from wsoft.raster.gbuffer import render_gbuffer
     from wsoft.reference import generate_shadow_rays, ray_epsilon, reference_pattern, trace_ray_packets, trace_rays
-    from wsoft.render import RenderContext, _pick_camera
+    from wsoft.pipeline import RenderContext, frame_setup
     from wsoft.scene.device import upload_scene
 
     scene = wsoft.load_scene(scene_path(file))
     light = scene.find_light(light_path)
     ds, _ = scene.device_copy("cpu", upload_scene)
-    ctx = RenderContext(scene, _pick_camera(scene, None, 640, 480), 640, 480, "cpu")
+    ctx = RenderContext(scene, frame_setup(scene, 640, 480).camera, 640, 480, "cpu")
     gb = render_gbuffer(ds, camera_gpu(ctx.camera), 640, 480, 1, scene.has_cutouts)
     pattern = reference_pattern(64, 1, True)
     pix = wp.array([y * 640 + x], dtype=wp.int32)

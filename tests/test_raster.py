@@ -9,7 +9,7 @@ from conftest import scene_path
 
 import wsoft
 from wsoft.lightspace.view import DEPTH_CLEAR, fit_light_view
-from wsoft.raster.rasterizer import rasterize
+from wsoft.raster.depth_map import rasterize
 from wsoft.raster.raycast import raycast_depth
 from wsoft.scene.device import upload_scene
 
@@ -262,7 +262,8 @@ def test_points_projected_first_and_the_branch_free_loop_change_no_texel(device,
     one (the same fragment, unmasked), bit for bit; near-plane clipping included (a light in the scene)."""
     from dataclasses import replace
 
-    from wsoft.raster.rasterizer import DepthTarget, Rasterizer, depth_min, make_rasterizer
+    from wsoft.raster.depth_map import DepthTarget, depth_min
+    from wsoft.raster.rasterizer import Rasterizer, make_rasterizer
     from wsoft.scene.device import view_surfaces
 
     scene = wsoft.load_scene(scene_path(file))

@@ -13,7 +13,7 @@ from wsoft.lightspace.view import DEPTH_CLEAR, fit_light_view
 def test_bound_draws_the_real_rasterizers_map(scene_name, light):
     from wsoft.bench.harness import load
     from wsoft.bench.raster_bound import Bound, culled
-    from wsoft.raster.rasterizer import rasterize
+    from wsoft.raster.depth_map import rasterize
     from wsoft.scene.device import upload_scene
 
     scene = load(scene_name)

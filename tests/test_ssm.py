@@ -281,7 +281,7 @@ def _tilted_plank():
 def test_blending_makes_visibility_continuous_across_levels(device):
     """Neighbouring ground pixels whose budget level ceil(l) differs: without blending V jumps
     there (the transition artifact of Fig. 1a); the smoothed LOQ and blending bound the jump."""
-    from wsoft.render import build_graph
+    from wsoft.pipeline import build_graph
     from wsoft.techniques import create
 
     scene = _tilted_plank()

@@ -104,12 +104,15 @@ def test_help_exits_zero_with_the_usage():
 
 
 def test_public_api_after_importing_submodules_first():
-    """``wsoft.render`` stays the function even when the submodule ``wsoft.render`` was imported
-    first; a module imported on its own still sees Warp configured (no adjoint code); the
-    registry's names agree with the technique classes."""
-    p = python("import wsoft.lightspace.light, wsoft.metrics, wsoft.render, wsoft\n"
+    """``wsoft.render`` and ``wsoft.bake`` are the functions whatever was imported first; a module
+    imported on its own sees Warp configured (no adjoint code: each package that defines Warp code
+    imports wsoft.parallel first); the registry's names agree with the technique classes."""
+    p = python("import wsoft.lightspace.bitmask, wsoft.raster.shade, wsoft.scene.device, wsoft.techniques.hard, wsoft.metrics\n"
+               "import wsoft.pipeline, wsoft.baking, wsoft\n"
                "import warp as wp\n"
-               "assert wp.get_module('wsoft.lightspace.light').options['enable_backward'] is False\n"
+               "for m in ('wsoft.lightspace.bitmask', 'wsoft.raster.shade', 'wsoft.scene.device', 'wsoft.techniques.hard'):\n"
+               "    assert wp.get_module(m).options['enable_backward'] is False, m\n"
+               "assert callable(wsoft.bake) and wsoft.bake.__name__ == 'bake', wsoft.bake\n"
                "from wsoft.techniques import NAMES, TECHNIQUES\n"
                "assert callable(wsoft.render) and wsoft.render.__name__ == 'render', wsoft.render\n"
                "assert callable(wsoft.compare) and callable(wsoft.plan) and callable(wsoft.load_scene)\n"

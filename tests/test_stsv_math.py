@@ -1,4 +1,4 @@
-"""The STSV per-triangle maths (wsoft.lightspace.stsv) against brute force in NumPy: the J/S
+"""The STSV per-triangle maths (wsoft.accel.stsv) against brute force in NumPy: the J/S
 transmittance lookup against Möller–Trumbore, the shadow volume against many light samples."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import warp as wp
 
-from wsoft.lightspace.stsv import points_in_volumes, sample_blocked, s_triangle, receiver_matrix, stsv_lookup, stsv_volumes
+from wsoft.accel.stsv import points_in_volumes, sample_blocked, s_triangle, receiver_matrix, stsv_lookup, stsv_volumes
 from wsoft.scene.device import Surfaces, surface_present, upload_scene
 from wsoft.scene.types import LIGHT_DISTANT, LIGHT_RECT, LIGHT_SPHERE, Light, Material, Scene, Texture
 

@@ -13,6 +13,7 @@ import pytest
 import warp as wp
 
 from wsoft.lightspace.view import DEPTH_CLEAR, LightView
+from wsoft.raster import depth_map as D
 from wsoft.raster import rasterizer as R
 from wsoft.scene.device import upload_scene
 from wsoft.scene.types import Material, Scene
@@ -59,12 +60,12 @@ def run_depth(persp: bool, strategy: str, conservative: bool = False, gate: bool
     ds = upload_scene(soup(), "cpu")
     v = view(persp)
     if gate:
-        t = R.GatedDepthTarget()
-        t.gate = R.rasterize(ds, v, False, triangles=np.arange(0, 35000, dtype=np.int32)).depth
-        frag = R.gated_depth_min
+        t = D.GatedDepthTarget()
+        t.gate = D.rasterize(ds, v, False, triangles=np.arange(0, 35000, dtype=np.int32)).depth
+        frag = D.gated_depth_min
     else:
-        t = R.DepthTarget()
-        frag = R.depth_min
+        t = D.DepthTarget()
+        frag = D.depth_min
     t.depth = wp.full((v.height, v.width), DEPTH_CLEAR, dtype=float, device="cpu")
     st = R.make_rasterizer(v, frag, conservative=conservative).run(ds.points, ds.indices, ds.cutouts, v, t, "cpu", strategy=strategy)
     return t.depth.numpy(), st

@@ -141,7 +141,7 @@ def output_of(scene, out: str | None) -> str:
 
 def cmd_render(args) -> int:
     import wsoft
-    from wsoft.render import load_stage
+    from wsoft.pipeline import load_stage
 
     for path, what in ((args.out, "--out"), (args.stats, "--stats"), (args.png, "--png")):
         check_output(path, what)
@@ -176,7 +176,7 @@ def _compile_note(ms: float) -> str:
 
 def cmd_plan(args) -> int:
     import wsoft
-    from wsoft.render import load_stage
+    from wsoft.pipeline import load_stage
 
     scene = load_stage(scene_arg(args.scene), time=args.time, render_settings=args.render_settings, instancing=args.instancing)
     techs = args.technique or None
@@ -275,7 +275,7 @@ def _technique_sets(names: list[str], sets: list[str] | None) -> list[tuple[str,
 def cmd_compare(args) -> int:
     """Render techniques and the reference in one graph; write EXR/PNG of each and a time / error table."""
     import wsoft
-    from wsoft.render import load_stage
+    from wsoft.pipeline import load_stage
     from wsoft.io import write_gray_png
 
     check_output(args.out_dir, "--out-dir", folder=True)

@@ -30,7 +30,9 @@ QUICK_SWEEPS = ("foundation", "filtered", "essm", "essm-table1", "essm-table2", 
 def device_facts(device: str) -> dict:
     import warp as wp
 
-    wp.init()
+    from wsoft.parallel import init_warp
+
+    init_warp()
     d = wp.get_device(device)
     facts = {"device": device, "name": d.name, "warp": wp.__version__, "python": platform.python_version(),
              "cpu": platform.processor() or platform.machine(), "cores": os.cpu_count()}

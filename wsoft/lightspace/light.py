@@ -103,7 +103,7 @@ def disk_shaped(light: Light) -> bool:
 
 
 def light_bound(light: Light) -> tuple[np.ndarray, float, bool]:
-    """The light's bound on the host, as :func:`~wsoft.lightspace.stsv.light_ball` on the device:
+    """The light's bound on the host, as :func:`~wsoft.accel.stsv.light_ball` on the device:
     (a local light's centre, the radius of its enclosing ball, False) or (a distant light's unit
     direction toward the light, the sine of its cone's half angle, True)."""
     if light.kind == LIGHT_DISTANT:

@@ -131,18 +131,18 @@ def compare(scene, techniques, *, samples: int = 256, ground_truth: GroundTruth 
 
     The reference is ``reference`` with ``samples`` light samples (added unless the list holds a
     reference already), or ``ground_truth`` computed earlier. Returns the
-    :class:`~wsoft.render.FrameSet`; each technique's ``stats["errors"]`` maps light label ->
+    :class:`~wsoft.pipeline.FrameSet`; each technique's ``stats["errors"]`` maps light label ->
     error, ``stats["error"]`` is the first light's. ``width``, ``height``, ``camera``,
     ``render_settings``, ``progress``: as :func:`wsoft.render` takes them (errors are measured on
     the data window's pixels when the settings have one)."""
     import time
 
     from wsoft.parallel import compile_time, resolve_device
-    from wsoft.render import _check_sizes, as_techniques, build_graph, execute, frames_of, is_several, with_render_settings
+    from wsoft.pipeline import check_sizes, as_techniques, build_graph, execute, frames_of, is_several, with_render_settings
     from wsoft.techniques import create
 
     scene = with_render_settings(scene, render_settings, time_code)
-    _check_sizes(width, height, pixel_samples)
+    check_sizes(width, height, pixel_samples)
     techs = as_techniques(list(techniques) if is_several(techniques) else [techniques], {})
     ref_label = None
     if ground_truth is None:

@@ -333,7 +333,7 @@ def render_gbuffer(ds: DeviceScene, cam: CameraGPU, width: int, height: int, spp
 
 
 def bake_gbuffer(pos: np.ndarray, nrm: np.ndarray, prim: np.ndarray, uv: np.ndarray | None, device: str) -> GBuffer:
-    """A G-buffer whose samples are given points (a bake, :mod:`wsoft.bake`) instead of camera-ray
+    """A G-buffer whose samples are given points (a bake, :mod:`wsoft.baking`) instead of camera-ray
     hits: ``pos`` [N, 3] world points, ``nrm`` [N, 3] unit normals (the side whose visibility is
     wanted), ``prim`` [N] the triangle each lies on (>= 0), ``uv`` [N, 2] or None (zeros).
 

@@ -11,7 +11,7 @@ import warp as wp
 
 from wsoft.parallel import launch_chunked
 from wsoft.lightspace.view import DEPTH_CLEAR, LightView, ViewGPU
-from wsoft.raster.rasterizer import DepthMap
+from wsoft.raster.depth_map import DepthMap
 from wsoft.scene.device import Surfaces, DeviceScene, surface_present
 
 

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import warp as wp
 
+import wsoft.parallel  # noqa: F401  (Warp configured before this package's kernels are defined)
 from wsoft.lightspace.light import LightGPU, in_front, light_point
 from wsoft.lightspace.samples import LightSamples, SamplePattern, sample_coords, sampling_begin
 from wsoft.parallel import launch_chunked

@@ -1,5 +1,6 @@
 """Scenes: USD stages turned into world-space triangles, materials, lights and cameras."""
 
+import wsoft.parallel  # noqa: F401  (Warp configured before this package's kernels are defined)
 from wsoft.scene.render_settings import RenderProduct, RenderSettings
 from wsoft.scene.types import Camera, Light, Material, Scene, SkippedLight, Texture
 from wsoft.scene.usd import auto_camera, load_scene

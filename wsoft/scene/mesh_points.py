@@ -1,4 +1,4 @@
-"""What a bake (:mod:`wsoft.bake`) needs of a mesh: its faces' corners, a world normal per corner,
+"""What a bake (:mod:`wsoft.baking`) needs of a mesh: its faces' corners, a world normal per corner,
 whether one value per vertex is enough, and ``st`` per corner.
 
 Topology, authored normals and ``st`` are read from the USD prim at the bake's time code; the world

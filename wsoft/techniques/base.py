@@ -9,7 +9,7 @@ made with :func:`~wsoft.params.param`, a range for every number), ``passes`` (on
 knobs a sweep should turn), ``quick_params`` (what a quick run changes: smaller maps, fewer
 samples), ``tolerance`` (how close it comes to the exact parallel-rectangle answer), and implement
 :meth:`Technique.add_passes`, which registers the passes through the
-:class:`~wsoft.render.TechniqueContext` it is given (scene arrays, G-buffer, light depth maps) and
+:class:`~wsoft.pipeline.TechniqueContext` it is given (scene arrays, G-buffer, light depth maps) and
 returns the key of the visibility it writes. Nothing else lists techniques: the registry
 (:mod:`wsoft.techniques`) finds the module, and every test, sweep and report that runs "every
 technique" takes it from there. A technique in another package joins through the entry-point
@@ -145,7 +145,7 @@ class Technique:
     distance_caveat: ClassVar[str] = ""
     # instanced stages (load_scene(..., instancing=True)): "" when the technique's passes draw and
     # trace instances as they are (prototypes once, wsoft.scene.instancing), else why it needs the
-    # triangle soup; the frame graph then flattens the stage for it (wsoft.render.instancing_plan)
+    # triangle soup; the frame graph then flattens the stage for it (wsoft.pipeline.instancing_plan)
     instancing_refusal: ClassVar[str] = "its passes read the flattened triangle soup"
     # point lights: "" when the technique renders them, else why it cannot (one line, naming what
     # to use instead); supports() then refuses them with it
@@ -207,7 +207,7 @@ class Technique:
 
     def bake_support(self) -> str | None:
         """``None`` when the technique answers for any points given their positions and normals,
-        so that it can bake visibility into a stage (:mod:`wsoft.bake`: its G-buffer holds mesh
+        so that it can bake visibility into a stage (:mod:`wsoft.baking`: its G-buffer holds mesh
         vertices and texel centres, with no camera and no pixel grid), else the reason it cannot
         (it casts eye rays, or reads a per-pixel input)."""
         return None

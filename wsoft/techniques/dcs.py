@@ -61,9 +61,9 @@ inconsistent winding all follow one rule), and ``V`` only asks whether the count
    samples walked.
 4. **STSV** (only when the light's casters hold perforated triangles not wholly behind a rect or
    disk light; ``wsoft plan`` shows the ``dcs_stsv`` pass then and not otherwise). Per perforated
-   triangle both conservative volumes of §6 (:func:`~wsoft.lightspace.stsv.stsv_planes`, one per lit side of its plane), binned like
+   triangle both conservative volumes of §6 (:func:`~wsoft.accel.stsv.stsv_planes`, one per lit side of its plane), binned like
    the edges; a receiver inside either volume looks up every sample
-   (:func:`~wsoft.lightspace.stsv.sample_blocked`: the crossing of eq. 1 and the alpha texture of
+   (:func:`~wsoft.accel.stsv.sample_blocked`: the crossing of eq. 1 and the alpha texture of
    eq. 5) and adds 1 where it is blocked.
 
 5. **V.** ``estimator=v_coef`` (the default, the paper's physically plausible ``v_coef``): the
@@ -105,7 +105,7 @@ from wsoft.accel.dcs_bins import BinsGPU, receiver_cell
 from wsoft.accel.occluders import count_crossings, side
 from wsoft.lightspace.light import LightGPU, in_front, light_bound, light_point
 from wsoft.lightspace.samples import LightSamples, sample_coords
-from wsoft.lightspace.stsv import in_volume, light_ball, planes_t, receiver_matrix, s_triangle, sample_blocked
+from wsoft.accel.stsv import in_volume, light_ball, planes_t, receiver_matrix, s_triangle, sample_blocked
 from wsoft.parallel import launch_chunked
 from wsoft.raster.gbuffer import GBufferGPU, gb_covered
 from wsoft.reference import ray_epsilon, receiver_begin

@@ -93,7 +93,7 @@ class ESM(Technique):
     """Exponential shadow maps with log-space filtering."""
 
     name = "esm"
-    instancing_refusal = ""  # its maps draw instances (wsoft.raster.rasterizer.instance_runs)
+    instancing_refusal = ""  # its maps draw instances (wsoft.raster.depth_map.instance_runs)
     summary = "exponential shadow maps: exp(c d) prefiltered in log space"
     Params = ESMParams
     passes = (

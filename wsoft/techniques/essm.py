@@ -533,7 +533,7 @@ class ESSM(Technique):
     """Exponential soft shadow mapping: ESM-Z blockers, SAT tile grids, anisotropic ellipse kernels, micro-subdivision."""
 
     name = "essm"
-    instancing_refusal = ""  # its maps draw instances (wsoft.raster.rasterizer.instance_runs)
+    instancing_refusal = ""  # its maps draw instances (wsoft.raster.depth_map.instance_runs)
     summary = "exponential soft shadow mapping: ESM-Z blocker depth, overflow-free SAT tile grids, anisotropic kernels, micro-subdivision"
     Params = ESSMParams
     passes = (

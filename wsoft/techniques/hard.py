@@ -74,7 +74,7 @@ class Hard(Technique):
     """Classic (hard) shadow map from the light's centre."""
 
     name = "hard"
-    instancing_refusal = ""  # its maps draw instances (wsoft.raster.rasterizer.instance_runs)
+    instancing_refusal = ""  # its maps draw instances (wsoft.raster.depth_map.instance_runs)
     summary = "classic shadow map from the light's centre (binary visibility)"
     Params = HardParams
     passes = (PassSpec("shadow", reads=("gbuffer", "light_depth"), writes=("visibility",)),)

@@ -82,7 +82,7 @@ class PCF(Technique):
     """Percentage-closer filtering with a fixed kernel."""
 
     name = "pcf"
-    instancing_refusal = ""  # its maps draw instances (wsoft.raster.rasterizer.instance_runs)
+    instancing_refusal = ""  # its maps draw instances (wsoft.raster.depth_map.instance_runs)
     summary = "percentage-closer filtering: fixed kernel, grid or Poisson taps, receiver-plane bias"
     Params = PCFParams
     passes = (PassSpec("shadow", reads=("gbuffer", "light_depth"), writes=("visibility",)),)

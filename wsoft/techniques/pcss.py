@@ -134,7 +134,7 @@ class PCSS(Technique):
     """Percentage-closer soft shadows: blocker search, penumbra estimate, light-shaped PCF."""
 
     name = "pcss"
-    instancing_refusal = ""  # its maps draw instances (wsoft.raster.rasterizer.instance_runs)
+    instancing_refusal = ""  # its maps draw instances (wsoft.raster.depth_map.instance_runs)
     summary = "percentage-closer soft shadows: blocker search, penumbra from the average blocker depth, light-shaped PCF"
     Params = PCSSParams
     passes = (PassSpec("shadow", reads=("gbuffer", "light_depth"), writes=("visibility",)),)

@@ -22,7 +22,7 @@ Per receiver ``o`` (a G-buffer sample, moved off its surface as the reference's 
 4. **STSV** (``pwedge_stsv``, only when the light's casters hold perforated triangles not wholly
    behind a rect or disk light; ``wsoft plan`` shows it). Per perforated triangle both volumes
    of §6, binned by cell; each receiver inside one looks up every light sample (eq. 1-5,
-   :func:`~wsoft.lightspace.stsv.sample_blocked`) and ORs the blocked ones into its *LS_buffer* mask: ``samples`` bits per pixel, exactly
+   :func:`~wsoft.accel.stsv.sample_blocked`) and ORs the blocked ones into its *LS_buffer* mask: ``samples`` bits per pixel, exactly
    ``samples x pixels`` bits in all (``ls_buffer_bytes`` in the counters), light samples from the
    shared generator (16 or 64 in the paper; any multiple of 8 up to 64 here).
 5. ``V = 1 - clamp(covered + popcount(LS_buffer) / samples, 0, 1)`` (``add_v_coef``).
@@ -74,7 +74,7 @@ from wsoft.lightspace.bitmask import popcount
 from wsoft.lightspace.coverage import edge_coverage, light_frame
 from wsoft.lightspace.light import LightGPU, light_bound, light_point
 from wsoft.lightspace.samples import LightSamples, sample_coords
-from wsoft.lightspace.stsv import in_volume, light_ball, planes_t, receiver_matrix, s_triangle, sample_blocked
+from wsoft.accel.stsv import in_volume, light_ball, planes_t, receiver_matrix, s_triangle, sample_blocked
 from wsoft.parallel import launch_chunked
 from wsoft.raster.gbuffer import GBufferGPU, gb_covered
 from wsoft.reference import ray_epsilon, ray_offset, ray_origin, receiver_begin

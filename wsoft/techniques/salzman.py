@@ -37,7 +37,7 @@ from wsoft.accel.grid import build_grid
 from wsoft.lightspace.view import DEPTH_CLEAR, ViewGPU, bilinear, normalised_depth
 from wsoft.parallel import launch_chunked
 from wsoft.raster.gbuffer import GBufferGPU, gb_mapped_receiver
-from wsoft.raster.rasterizer import rasterize
+from wsoft.raster.depth_map import rasterize
 from wsoft.params import check_ranges
 from wsoft.techniques.base import PassSpec, Quality, Technique, Tolerance, check, param
 

@@ -84,7 +84,7 @@ class VSM(Technique):
     """Variance shadow maps: blurred depth moments and Chebyshev's bound."""
 
     name = "vsm"
-    instancing_refusal = ""  # its maps draw instances (wsoft.raster.rasterizer.instance_runs)
+    instancing_refusal = ""  # its maps draw instances (wsoft.raster.depth_map.instance_runs)
     summary = "variance shadow maps: blurred (d, d^2) moments, Chebyshev bound, light-bleeding reduction"
     Params = VSMParams
     passes = (

@@ -184,7 +184,7 @@ class VSSM(Technique):
     """Variance soft shadow mapping: SAT of depth moments, Chebyshev blocker estimate, kernel subdivision."""
 
     name = "vssm"
-    instancing_refusal = ""  # its maps draw instances (wsoft.raster.rasterizer.instance_runs)
+    instancing_refusal = ""  # its maps draw instances (wsoft.raster.depth_map.instance_runs)
     summary = "variance soft shadow mapping: SAT of depth moments, Chebyshev blocker estimate, subdivision of non-planar kernels"
     Params = VSSMParams
     passes = (

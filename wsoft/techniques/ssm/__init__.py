@@ -328,7 +328,7 @@ class SSM(Technique):
     """Backprojection soft shadow mapping: micro-occluders, bitmasks, HSM/MSSM/YSM, budgets, smooth LOQ, MSAA."""
 
     name = "ssm"
-    instancing_refusal = ""  # its maps draw instances (wsoft.raster.rasterizer.instance_runs)
+    instancing_refusal = ""  # its maps draw instances (wsoft.raster.depth_map.instance_runs)
     summary = "backprojection soft shadow mapping (micropatches/microquads/microrects, area or bitmask, HSM/MSSM/YSM, budget, smooth LOQ, MSAA resolve)"
     Params = SSMParams
     passes = (

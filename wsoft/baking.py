@@ -1,4 +1,4 @@
-"""``wsoft.bake``: a technique's visibility baked back into USD, as a layer of ``over``\\ s.
+"""``wsoft.bake`` (:func:`bake`): a technique's visibility baked back into USD, as a layer of ``over``\\ s.
 
 :func:`bake` (``wsoft bake`` on the command line) writes, on every mesh of a stage, a float primvar
 ``primvars:wsoft:visibility:<light>`` per shadow-casting light, time-sampled over the frames asked
@@ -63,7 +63,8 @@ from wsoft.io import nonfinite_counts, write_exr
 from wsoft.params import parse_frames
 from wsoft.parallel import compile_time, resolve_device
 from wsoft.raster.gbuffer import GBuffer, bake_gbuffer
-from wsoft.render import GBUFFER, RenderContext, as_techniques, supported_lights, visibility_of
+from wsoft.pipeline.build import as_techniques, supported_lights, visibility_of
+from wsoft.pipeline.context import GBUFFER, RenderContext
 from wsoft.scene.mesh_points import CREASE_ANGLE, MeshSurface, read_mesh_surface
 from wsoft.scene.types import Scene
 from wsoft.scene.usd import diagnostic_lines, load_scene, open_stage, stage_file
@@ -82,7 +83,7 @@ MAX_TEXTURE_SIZE = 8192
 
 
 class BakeContext(RenderContext):
-    """A :class:`~wsoft.render.RenderContext` whose G-buffer is a given bake G-buffer (points on
+    """A :class:`~wsoft.pipeline.RenderContext` whose G-buffer is a given bake G-buffer (points on
     surfaces, no camera): every provider and technique pass built on ``ctx.gbuffer()`` runs on it."""
 
     def __init__(self, scene: Scene, gbuffer: GBuffer, device: str):

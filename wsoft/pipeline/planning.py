@@ -1,0 +1,90 @@
+"""``wsoft plan``: what a render would run on a stage, without running it (the lights and their
+UsdLux shadow controls, skipped lights, cutouts, the framing, and per technique its passes or why
+it is not applicable to a light)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from wsoft.pipeline.build import build_graph
+from wsoft.pipeline.framing import frame_setup
+from wsoft.pipeline.loading import instancing_plan, too_big_to_flatten
+from wsoft.scene.types import Light, Scene
+
+
+COLOR_APPLIED = "applied to R G B, not to V"
+FALLOFF_APPLIED = "not applied (UsdLux gives no formula for the fade; the shadow ends sharply at shadow:distance)"
+
+
+def shadow_controls(scene: Scene, light: Light) -> dict:
+    """A light's UsdLux shadow controls as ``wsoft plan`` lists them: the ``collection:shadowLink``
+    membership (prims it leaves out of the shadow, of the prims loaded), ``inputs:shadow:distance``
+    (None: unlimited) and which techniques honour it, the shadow colour (applied to ``R G B``, not
+    to ``V``) and falloff (not applied)."""
+    from wsoft.techniques import TECHNIQUES
+
+    out = [scene.prims[i] for i in light.shadow_excluded]
+    casting = scene.casting_mask(light)
+    refused = sorted(n for n, c in TECHNIQUES.items() if c.distance_refusal)
+    return {
+        "link": {"excluded_prims": len(out), "prims": len(scene.prims), "excluded": out[:5],
+                 "casting_triangles": scene.triangle_count if casting is None else int(casting.sum()),
+                 "applied": "excluded prims cast no shadow of this light (still seen, still receive it)" if out else "every prim casts"},
+        "distance": light.shadow_distance if light.distance_limited else None,
+        "distance_applied": ("unlimited" if not light.distance_limited else
+                             f"honoured by {', '.join(n for n in sorted(TECHNIQUES) if n not in refused)}; refused by {', '.join(refused)}"),
+        "color": list(light.shadow_color),
+        "color_applied": COLOR_APPLIED,
+        "falloff": light.shadow_falloff,
+        "falloff_gamma": light.shadow_falloff_gamma,
+        "falloff_applied": FALLOFF_APPLIED if light.shadow_falloff > 0 else "none authored (falloff <= 0)",
+    }
+
+
+def plan(scene: Scene, techniques: list[str] | None = None, *, width: int | None = None, height: int | None = None, light=None,
+         camera=None) -> dict:
+    """What would run: shadow-casting lights (with their UsdLux shadow controls,
+    :func:`shadow_controls`), skipped lights, cutout materials, the purposes loaded, the framing
+    (``framing``: which render settings prim and camera, where each came from, the resolution,
+    conform policy and data window; see :meth:`Framing.describe`), and per technique the passes
+    (with their kinds) or why it is not applicable to a light."""
+    from wsoft.techniques import TECHNIQUES
+
+    out = {
+        "scene": scene.path,
+        "triangles": scene.total_triangles,
+        "instancing": instancing_plan(scene, [], []),
+        "up_axis": scene.up_axis,
+        "meters_per_unit": scene.meters_per_unit,
+        "lights": [{"path": l.path, "kind": l.kind_name, "size": l.size_description(), "shadow": shadow_controls(scene, l)}
+                   for l in scene.lights],
+        "skipped_lights": [{"path": l.path, "kind": l.kind_name, "reason": "shadow:enable = false"} for l in scene.unshadowed_lights]
+        + [{"path": s.path, "kind": s.kind, "reason": s.reason} for s in scene.skipped_lights],
+        "cutout_materials": [{"path": p, "triangles": n} for p, n in scene.cutout_triangle_counts().items()],
+        "dynamic_prims": scene.dynamic_prims(),
+        "baked_light_triangles": 0 if scene.tri_baked is None else int(np.count_nonzero(~np.isnan(scene.tri_baked[:, 0, 0]))),
+        "cameras": [c.path for c in scene.cameras],
+        "purposes": list(scene.purposes),
+        "framing": frame_setup(scene, width, height, camera).describe(),
+        "warnings": list(scene.warnings),
+        "techniques": {},
+        "not_applicable": {},
+    }
+    if not scene.lights:
+        return out
+    for name in techniques or sorted(TECHNIQUES):
+        built = build_graph(scene, name, width=width, height=height, camera=camera, light=light, device="cpu", strict=False)
+        label = built.labels[0]
+        if built.instancing["mode"] == "flattened":
+            why = built.instancing["needs"][0][1]
+            too_big = too_big_to_flatten(scene)
+            if too_big:  # render refuses it: say so instead of listing passes
+                out["not_applicable"][name] = [{"light": "(every light)", "reason": f"{why}: needs the stage flattened, {too_big}"}]
+                continue
+            out.setdefault("flattened_for", {})[name] = why
+        if built.skipped[label]:
+            out["not_applicable"][name] = [{"light": l.path, "reason": why} for l, why in built.skipped[label]]
+        if label in built.channels:
+            out["techniques"][name] = [p.name for p in built.ctx.graph.schedule([built.channels[label]])]
+            out.setdefault("pass_kinds", {}).update({p.name: p.kind for p in built.ctx.graph.schedule([built.channels[label]])})
+    return out
