@@ -174,3 +174,13 @@ def test_launches_name_inputs_and_outputs():
                     if not {"inputs", "outputs"} <= kw:
                         bad.append(f"{path.relative_to(ROOT)}:{node.lineno} {f}")
     assert not bad, "launches without inputs=/outputs=:\n" + "\n".join(bad)
+
+
+def test_every_package_is_installed():
+    """pyproject.toml lists every package (a plain ``pip install .`` installs only those): each folder
+    of wsoft/ with an ``__init__.py``, and bench/ and usd_scenes/ as wsoft.bench and wsoft.usd_scenes."""
+    import tomllib
+
+    listed = set(tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"])
+    found = {".".join(p.parent.relative_to(ROOT).parts) for p in WSOFT.rglob("__init__.py")} | {"wsoft.bench", "wsoft.usd_scenes"}
+    assert listed == found
