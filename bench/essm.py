@@ -80,7 +80,7 @@ CASES = {
 
 def hard_case(case: dict, ctx: dict) -> dict:
     import wsoft
-    from wsoft.bench import essm_cases
+    from wsoft.stages import essm_cases
 
     builder, params, _ = CASES[case["name"]]
     scene = wsoft.load_scene(getattr(essm_cases, builder)())

@@ -57,7 +57,7 @@ def cases(quick: bool, devices: list[str]) -> list[dict]:
                 out.append(base | {"technique": "reference", "params": {"samples": n, "seed": 1}, "image": False})
         if not quick:
             out.append({"kind": "torch", "scene": "lightmapped_bridge", "light": "Sun", "device": dev, "width": 640, "height": 480})
-        from wsoft.bench.failures import FAILURES
+        from wsoft.stages.failures import FAILURES
 
         for name in FAILURES:
             out.append({"kind": "failure", "name": name, "device": dev, "width": 192, "height": 192})
@@ -73,10 +73,10 @@ def run_case(case: dict, ctx: dict) -> dict:
 
 
 def failure_images(case: dict, ctx: dict) -> dict:
-    """A known failure (bench.failures): the technique, the reference and their difference."""
+    """A known failure (wsoft.stages.failures): the technique, the reference and their difference."""
     import wsoft
     from wsoft.bench.common import side_by_side
-    from wsoft.bench.failures import FAILURES
+    from wsoft.stages.failures import FAILURES
 
     build, tech, params, ref_params = FAILURES[case["name"]]
     scene = wsoft.load_scene(build())
@@ -155,7 +155,7 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
     for t in torch:
         L += ["", "## The torch under the bridge (Salzman's far bound)", "", f"![torch]({t['image']})"]
     if failures:
-        L += ["", "## Known failures (each pinned by a test; scenes in `bench/failures.py`)", ""]
+        L += ["", "## Known failures (each pinned by a test; scenes in `wsoft/stages/failures.py`)", ""]
         what = {
             "pcss_overlapping_blockers": "PCSS: blockers at two depths average too near the light; the filter grows and light enters the lower occluder's umbra.",
             "vsm_stacked_occluders": "VSM: an upper occluder's edge over a lower one's umbra; the variance lets light bleed in (bleed reduction 0 here).",

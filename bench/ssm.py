@@ -52,12 +52,12 @@ def cases(quick: bool, devices: list[str]) -> list[dict]:
         fw, fh = (160, 120) if quick else (480, 360)
         out.append({"kind": "fig1", "scene": "fig1_plant", "device": dev, "width": fw, "height": fh, "ref_samples": ref_samples})
         out.append({"kind": "fig8", "scene": "fig8_tree", "device": dev, "width": fw, "height": fh, "ref_samples": ref_samples})
-        from wsoft.bench.ssm_cases import NAMES as SMALL, stage_file
+        from wsoft.stages.ssm_cases import NAMES as SMALL, stage_file
 
         for scene in (["fig1_plant"] if quick else ["fig1_plant", "palm_dino"]):
             out.append({"kind": "fig12", "scene": scene, "device": dev, "width": fw, "height": fh, "ref_samples": ref_samples,
                         "budgets": [4] if quick else [3, 4, 6]})
-        if not quick:  # the small stages that separate the causes (wsoft.bench.ssm_cases)
+        if not quick:  # the small stages that separate the causes (wsoft.stages.ssm_cases)
             for name in SMALL:
                 out.append({"kind": "fig12", "scene": stage_file(name), "device": dev, "width": 240, "height": 180, "ref_samples": 256,
                             "budgets": [3, 4, 6]})
@@ -439,7 +439,7 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
         L.append("over-occlusion). Every occluder type searches the same areas at the same levels (the region grown to the")
         L.append("micro-occluders' support decides lit / umbra only), and microrects read the (b+1)² cells over the search area")
         L.append("(`wide gather`: one more cell each side, up to (b+3)², the old reading). `plate_rotated`, `plate_holes` and")
-        L.append("`plates_stacked` are the small stages of `wsoft.bench.ssm_cases`: a solid plate turned 30° in the light's view,")
+        L.append("`plates_stacked` are the small stages of `wsoft.stages.ssm_cases`: a solid plate turned 30° in the light's view,")
         L.append("the same with a 4×4 grid of holes (where §5's bounding-box union is expected to lose), two stacked plates.")
         L.append("`nearest diagonal` is not the paper's merge (`microrect_diagonal=nearest`, see below); every other row follows §5.2.")
         L += ["", "| scene | b_mo | pixels at levels ≥ 2 | setup | MAE | MAE penumbra | MAE levels ≥ 2 | bias levels ≥ 2 | mean occluders |",

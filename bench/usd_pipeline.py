@@ -1,14 +1,14 @@
 """Sweep ``usd_pipeline``: evidence for issue 14 (USD pipeline integration), every number made here.
 
-1. **Render settings** (UsdRender): a stage the sweep builds and saves (``<out>/<stem>/render_settings.usda``)
-   with two cameras and a ``RenderSettings`` prim, named by the stage metadata
+1. **Render settings** (UsdRender): a stage (:func:`wsoft.stages.pipeline.render_settings_stage`) the
+   sweep saves (``<out>/<stem>/render_settings.usda``) with two cameras and a ``RenderSettings`` prim, named by the stage metadata
    ``renderSettingsPrimPath``, that picks the *second* camera at a non-default resolution with wide
    pixels (``pixelAspectRatio`` 4/3), ``cropAperture`` and a data window, and a product whose
    ``visibility`` RenderVar receives ``V``. It is rendered as ``wsoft render STAGE`` does (no width,
    height or camera given) and, for contrast, with the first camera asked for; the framing each
    used is the frame's ``stats["framing"]``.
-2. **shadowLink** (UsdLux): a light over two blockers, saved with and without a
-   ``collection:shadowLink`` that excludes blocker B; ``pcss`` and ``reference`` images of both, and
+2. **shadowLink** (UsdLux): a light over two blockers (:func:`wsoft.stages.pipeline.shadow_link_stage`),
+   saved with and without a ``collection:shadowLink`` that excludes blocker B; ``pcss`` and ``reference`` images of both, and
    the mean V on the ground in the umbra of each blocker.
 3. **Bake**: ``wsoft.bake`` of the bundled ``lightmapped_bridge`` (``reference`` and ``pcss``) into a
    layer file, composed with the stage as a sublayer in usd-core, its
@@ -33,14 +33,21 @@ from pathlib import Path
 
 import numpy as np
 
+from wsoft.stages.pipeline import (
+    CAM_APERTURE,
+    CONFORM,
+    DATA_WINDOW,
+    LINK_BLOCKER_Z,
+    LINK_BLOCKERS,
+    LINK_HALF,
+    LINK_LIGHT_Z,
+    PIXEL_ASPECT,
+    RS_PRIM,
+    render_settings_stage,
+    shadow_link_stage,
+)
+
 BRIDGE = "lightmapped_bridge"
-RS_PRIM = "/Render/Settings"
-PIXEL_ASPECT = 4.0 / 3.0  # a 1.33x anamorphic squeeze
-DATA_WINDOW = (0.0, 0.1, 1.0, 0.9)  # NDC: the middle 80% of the rows
-CONFORM = "cropAperture"
-CAM_APERTURE = (36.0, 20.25)  # mm, 16:9
-LINK_BLOCKERS = {"A": -1.2, "B": 1.2}  # x of the blockers (height 1, half side 0.4) under a 1 x 1 light at height 3
-LINK_LIGHT_Z, LINK_BLOCKER_Z, LINK_HALF = 3.0, 1.0, 0.4
 UMBRA_HALF = 0.2  # ground pixels within this of a blocker's umbra centre (the umbra's half side is 0.35)
 
 
@@ -84,40 +91,6 @@ def _tag(case: dict) -> str:
 # -- 1. render settings ----------------------------------------------------------------------------
 
 
-def _settings_stage(path: Path, resolution) -> None:
-    """Two cameras over a few blockers; RenderSettings picking the second one (see the module)."""
-    from pxr import Gf, UsdRender
-
-    from wsoft.bench.stages import add_box, add_camera, add_quad, add_rect_light, make_stage
-
-    st = make_stage()
-    add_quad(st, "/World/Ground", (0, 0, 0), 5)
-    add_box(st, "/World/Tower", (-0.4, -0.4, 0.0), (0.4, 0.4, 1.6))
-    add_box(st, "/World/Crate", (1.2, 0.8, 0.0), (2.2, 1.6, 0.5))
-    add_quad(st, "/World/Sheet", (-1.7, 1.3, 1.2), 0.5)
-    add_rect_light(st, "/World/Light", (0.6, -0.8, 4.0), 1.5, 1.5)
-    for path_, eye in (("/World/Cam1", (0.0, -8.0, 4.0)), ("/World/Cam2", (6.5, 4.5, 4.5))):
-        cam = add_camera(st, path_, eye, (0.0, 0.3, 0.5), focal=24.0)
-        cam.GetHorizontalApertureAttr().Set(CAM_APERTURE[0])
-        cam.GetVerticalApertureAttr().Set(CAM_APERTURE[1])
-    rs = UsdRender.Settings.Define(st, RS_PRIM)
-    rs.CreateResolutionAttr(Gf.Vec2i(*resolution))
-    rs.CreateCameraRel().SetTargets(["/World/Cam2"])
-    rs.CreatePixelAspectRatioAttr(PIXEL_ASPECT)
-    rs.CreateAspectRatioConformPolicyAttr(CONFORM)
-    rs.CreateDataWindowNDCAttr(Gf.Vec4f(*DATA_WINDOW))
-    var = UsdRender.Var.Define(st, "/Render/Vars/shadowVis")
-    var.CreateSourceNameAttr("visibility")
-    prod = UsdRender.Product.Define(st, "/Render/Products/shadowPass")
-    prod.CreateProductNameAttr("shadow_pass.exr")
-    prod.CreateOrderedVarsRel().SetTargets([var.GetPath()])
-    rs.CreateProductsRel().SetTargets([prod.GetPath()])
-    st.SetMetadata("renderSettingsPrimPath", RS_PRIM)
-    st.GetRootLayer().documentation = ("Built by wsoft bench usd_pipeline: two cameras; the render settings (named by the stage "
-                                       "metadata renderSettingsPrimPath) pick /World/Cam2 with wide pixels, cropAperture and a data window.")
-    st.GetRootLayer().Export(str(path))
-
-
 def _fov(tan_half) -> list[float]:
     return [round(math.degrees(2 * math.atan(t)), 2) for t in tan_half]
 
@@ -129,7 +102,8 @@ def _render_settings(case: dict, folder: Path, stem: str) -> dict:
     from wsoft.pipeline import frame_setup
 
     stage = folder / "render_settings.usda"
-    _settings_stage(stage, case["resolution"])
+    built = render_settings_stage(case["resolution"])  # held: the layer lives as long as its stage
+    built.GetRootLayer().Export(str(stage))
     scene = wsoft.load_scene(str(stage))
     renders = []
     for label, camera in (("settings", None), ("first camera", "/World/Cam1")):
@@ -154,22 +128,6 @@ def _render_settings(case: dict, folder: Path, stem: str) -> dict:
 # -- 2. shadowLink -----------------------------------------------------------------------------------
 
 
-def _link_stage(path: Path, exclude: bool) -> None:
-    from pxr import Sdf, UsdLux
-
-    from wsoft.bench.stages import add_camera, add_quad, add_rect_light, make_stage
-
-    st = make_stage()
-    add_quad(st, "/World/Ground", (0, 0, 0), 4)
-    for name, x in LINK_BLOCKERS.items():
-        add_quad(st, f"/World/Blocker{name}", (x, 0, LINK_BLOCKER_Z), LINK_HALF)
-    light = add_rect_light(st, "/World/Light", (0, 0, LINK_LIGHT_Z), 1.0, 1.0)
-    if exclude:
-        UsdLux.LightAPI(light.GetPrim()).GetShadowLinkCollectionAPI().GetExcludesRel().AddTarget(Sdf.Path("/World/BlockerB"))
-    add_camera(st, "/World/Cam", (0, -7, 6), (0, 0, 0), focal=18.0)
-    st.GetRootLayer().Export(str(path))
-
-
 def _shadow_link(case: dict, folder: Path, stem: str) -> dict:
     import wsoft
     from pxr import Usd, UsdLux
@@ -179,7 +137,8 @@ def _shadow_link(case: dict, folder: Path, stem: str) -> dict:
     out = {"scene": f"{stem}/shadow_link.usda", "width": case["width"], "height": case["height"], "variants": []}
     for exclude in (False, True):
         stage = folder / ("shadow_link.usda" if exclude else "shadow_link_none.usda")
-        _link_stage(stage, exclude)
+        built = shadow_link_stage(exclude)  # held: the layer lives as long as its stage
+        built.GetRootLayer().Export(str(stage))
         usd = Usd.Stage.Open(str(stage))
         query = UsdLux.LightAPI(usd.GetPrimAtPath("/World/Light")).GetShadowLinkCollectionAPI().ComputeMembershipQuery()
         scene = wsoft.load_scene(str(stage))

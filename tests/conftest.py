@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from wsoft.metrics.exact import parallel_rect_exact  # noqa: F401  (tests import it from here)
-from wsoft.bench.stages import add_box, add_camera, add_quad, add_rect_light, make_stage  # noqa: F401  (the tests' stage builders)
+from wsoft.stages import add_box, add_camera, add_quad, add_rect_light, make_stage  # noqa: F401  (the tests' stage builders)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SCENES = os.path.join(ROOT, "usd_scenes")

@@ -1,4 +1,4 @@
-"""The adversarial corpus (``wsoft.bench.adversarial``): every hard or hostile input x every
+"""The adversarial corpus (``wsoft.stages.adversarial``): every hard or hostile input x every
 technique, through the command line as a user runs it. Exit code, one-line errors naming the
 prim, the warnings, no NaN, and the answer where it is known."""
 
@@ -14,8 +14,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import wsoft
-from wsoft.bench.adversarial import CASES, KNOWN, Corpus, b_missing_sublayer
+from wsoft.bench.adversarial import Corpus
 from wsoft.errors import SceneError
+from wsoft.stages.adversarial import CASES, KNOWN, b_missing_sublayer
 from wsoft.techniques import TECHNIQUES
 
 
@@ -77,7 +78,7 @@ def test_huge_triangle_leaves_biases_and_views_alone(corpus):
 def _mesh_stage(points, counts, indices):
     from pxr import UsdGeom
 
-    from wsoft.bench.stages import add_rect_light, make_stage
+    from wsoft.stages import add_rect_light, make_stage
 
     stage = make_stage()
     m = UsdGeom.Mesh.Define(stage, "/World/M")

@@ -22,7 +22,7 @@ from conftest import box_plane_ground_error, scene_path
 
 import wsoft
 from wsoft import usd_scenes
-from wsoft.bench.stages import add_camera, add_point_light, add_quad, add_rect_light, make_stage
+from wsoft.stages import add_camera, add_point_light, add_quad, add_rect_light, make_stage
 from wsoft.techniques import TECHNIQUES, create, markdown_table
 
 NAMES = sorted(TECHNIQUES)

@@ -10,7 +10,7 @@ import pytest
 from conftest import box_plane_ground_error, scene_path
 
 import wsoft
-from wsoft.bench.stages import add_camera, add_quad, add_rect_light, make_stage
+from wsoft.stages import add_camera, add_quad, add_rect_light, make_stage
 
 W, H = 128, 96
 

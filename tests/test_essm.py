@@ -7,9 +7,9 @@ import pytest
 from conftest import box_plane_ground_error, scene_path
 
 import wsoft
-from wsoft.bench.essm_cases import essm_contact_box, essm_nonplanar
 from wsoft.errors import ParameterError
 from wsoft.pipeline import build_graph
+from wsoft.stages.essm_cases import essm_contact_box, essm_nonplanar
 from wsoft.techniques import create
 from wsoft.techniques.essm import optimal_exponent
 
@@ -75,7 +75,7 @@ def test_optimal_exponent():
 def _tilted_ground(occluder):
     from pxr import Gf, UsdGeom
 
-    from wsoft.bench.stages import add_camera, add_quad, add_rect_light, make_stage
+    from wsoft.stages import add_camera, add_quad, add_rect_light, make_stage
 
     st = make_stage()
     add_quad(st, "/World/G", (0, 0, 0), 4)

@@ -77,7 +77,7 @@ def test_receiver_plane_bias_removes_acne_on_wide_kernels(device):
 def test_pcss_underestimates_umbra_with_overlapping_blockers(device):
     """Known failure (pinned): blockers at two depths average to one too near the light, so the
     filter grows and lets light into the umbra of the lower occluder."""
-    from wsoft.bench.failures import pcss_overlapping_blockers
+    from wsoft.stages.failures import pcss_overlapping_blockers
 
     scene = wsoft.load_scene(pcss_overlapping_blockers())
     ref = wsoft.render(scene, "reference", width=96, height=96, device=device, samples=256)
@@ -119,7 +119,7 @@ def test_vsm_light_bleeding_with_stacked_occluders(device):
     """Known failure (pinned): an upper occluder's edge over a lower occluder's umbra makes the
     blurred moments' variance large there, and Chebyshev's bound lets light bleed in; the
     light-bleeding reduction removes it."""
-    from wsoft.bench.failures import vsm_stacked_occluders
+    from wsoft.stages.failures import vsm_stacked_occluders
 
     both, lower = wsoft.load_scene(vsm_stacked_occluders()), wsoft.load_scene(vsm_stacked_occluders(upper=False))
     ref = wsoft.render(both, "reference", width=96, height=96, device=device, samples=64)
@@ -137,7 +137,7 @@ def test_vsm_light_bleeding_with_stacked_occluders(device):
 def test_esm_light_leaks_near_contact(device):
     """Known failure (pinned): a thin plate just above the ground; the shadowed ground is only a
     little behind the plate, exp(-c (z - d)) stays above 0 and light leaks in unless c is large."""
-    from wsoft.bench.failures import esm_contact
+    from wsoft.stages.failures import esm_contact
 
     scene = wsoft.load_scene(esm_contact())
     ref = wsoft.render(scene, "reference", width=96, height=96, device=device, samples=64)

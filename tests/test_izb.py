@@ -167,7 +167,7 @@ def _grazing_wall():
     """A closed wall lit at a grazing angle (the light 0.6 off its plane, 14 away) with thin closed
     bars 0.004 in front of it: in the light's view the wall's depth changes fast across a texel
     and the shadow rays' offset origins land texels away from their surface points."""
-    from wsoft.bench.stages import add_box, add_camera, add_point_light, make_stage
+    from wsoft.stages import add_box, add_camera, add_point_light, make_stage
 
     st = make_stage()
     add_box(st, "/World/Wall", (-1.0, -3.0, 0.0), (0.0, 3.0, 4.0))

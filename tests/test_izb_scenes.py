@@ -1,4 +1,4 @@
-"""The irregular z-buffer scenes (``tower``, ``tunnel_fan``; usd_scenes/generate.py): a point light,
+"""The irregular z-buffer scenes (``tower``, ``tunnel_fan``; ``wsoft.stages.scenes``): a point light,
 thin occluders, and hard shadows that a render actually shows on the receivers."""
 
 from __future__ import annotations

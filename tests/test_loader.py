@@ -360,7 +360,7 @@ def _instancer_stage(*, invisible=(3,), indices=(0, 1, 0, 1), time_samples=False
     over a ground: positions, scales, orientations (one turned 90 degrees about z), invisibleIds."""
     from pxr import Gf, Sdf, UsdGeom, Vt
 
-    from wsoft.bench.stages import add_box
+    from wsoft.stages import add_box
 
     st = make_stage()
     add_quad(st, "/World/Ground", (0, 0, 0), 4)
@@ -412,7 +412,7 @@ def test_point_instancer_places_its_prototypes_where_usd_does():
 def test_point_instancer_casts_the_shadows_of_the_same_meshes_authored_in_place():
     """The reference's V over an instanced stage equals the one over the same triangles written
     out as plain meshes (the flattened scene, built from the instancer's own world points)."""
-    from wsoft.bench.stages import make_stage as mk
+    from wsoft.stages import make_stage as mk
 
     st, _ = _instancer_stage()
     inst = wsoft.load_scene(st)
@@ -462,7 +462,7 @@ def test_shadow_link_and_shadow_distance_are_applied_not_warned():
     Rendering them: tests/test_shadow_link.py."""
     from pxr import Sdf, UsdLux
 
-    from wsoft.bench.stages import add_box
+    from wsoft.stages import add_box
 
     st = make_stage()
     add_quad(st, "/World/Ground", (0, 0, 0), 3)

@@ -1,4 +1,4 @@
-"""The organic paper-analog scenes (usd_scenes/organic.py) load and are what their docs say."""
+"""The organic paper-analog scenes (``wsoft.stages.scenes.organic``) load and are what their docs say."""
 
 from __future__ import annotations
 

@@ -11,9 +11,9 @@ import warp as wp
 from conftest import scene_path
 
 import wsoft
-from wsoft.bench.stages import add_box, add_camera, add_point_light, add_quad, make_stage
 from wsoft.scene.device import Surfaces, surface_present
 from wsoft.scene.packets import PACKET, pack_bvh, packet_f, ray_triangle, rays_reaching_leaf
+from wsoft.stages import add_box, add_camera, add_point_light, add_quad, make_stage
 
 CASES = [
     ("contact.usda", None),  # rect light, contact shadows

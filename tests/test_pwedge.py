@@ -14,10 +14,10 @@ from hypothesis import strategies as st
 from conftest import box_plane_ground_error, scene_path
 
 import wsoft
-from wsoft.bench.stages import add_camera, add_quad, add_rect_light, make_stage
 from wsoft.lightspace.coverage import edge_coverages
 from wsoft.metrics.exact import CUTOUT, cutout_exact
 from wsoft.scene.types import LIGHT_DISK, LIGHT_RECT, Light
+from wsoft.stages import add_camera, add_quad, add_rect_light, make_stage
 
 W, H = 128, 96
 

@@ -99,7 +99,7 @@ def test_receiver_between_two_casters_escapes(device):
     """Known failure (pinned): a receiver (a shelf) between two casters along the light's rays.
     Inside the upper caster's shadow, near its edge, the blur averages its depth with the lower
     caster's; the reconstructed depth falls behind the shelf, and the shelf escapes the shadow."""
-    from wsoft.bench.failures import salzman_receiver_between_casters
+    from wsoft.stages.failures import salzman_receiver_between_casters
 
     both = wsoft.load_scene(salzman_receiver_between_casters())
     upper = wsoft.load_scene(salzman_receiver_between_casters(lower=False))
@@ -120,7 +120,7 @@ def test_exact_on_parallel_rectangles_and_transparency(device):
     from conftest import parallel_rect_exact
     from pxr import Sdf, UsdShade
 
-    from wsoft.bench.stages import add_camera, add_quad, add_rect_light, make_stage
+    from wsoft.stages import add_camera, add_quad, add_rect_light, make_stage
 
     scene = wsoft.load_scene(scene_path("box_plane.usda"))
     f = wsoft.render(scene, "salzman", width=128, height=96, device=device, radius=16)

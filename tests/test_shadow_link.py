@@ -228,7 +228,7 @@ def test_shadow_distance_under_a_distant_light(name):
     the light): the near one shadows, the far one does not."""
     from pxr import UsdLux
 
-    from wsoft.bench.stages import add_sun
+    from wsoft.stages import add_sun
 
     st = make_stage()
     add_quad(st, "/World/Ground", (0, 0, 0), 4)

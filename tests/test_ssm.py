@@ -459,7 +459,7 @@ def test_microrect_gather_respects_the_budget(device):
     (at most (ceil(b)+1)² micro-occluders a level, as §3/§4.2 cap them, like micropatches); the
     old gather read one more cell each side, up to (b+3)² (kept as ``gather=wide``). Checked on
     foliage (fig1_plant) and on a solid plate, where the budget gather must not under-occlude."""
-    from wsoft.bench.ssm_cases import stage_file
+    from wsoft.stages.ssm_cases import stage_file
 
     b = 3.0
     kw = {"width": 96, "height": 72, "device": device, "budget": b, "blend": False, "occluder": "microrect"}
@@ -485,7 +485,7 @@ def test_nearest_diagonal_microrects_beat_micropatches_on_a_solid_plate(device):
     search areas and levels, microrects with the nearest-depth diagonal beat micropatches on the
     reference's penumbra; §5.2's own merge does not (240 x 180, 256 spp: penumbra MAE 0.178
     micropatches, 0.194 paper microrects, 0.080 nearest)."""
-    from wsoft.bench.ssm_cases import stage_file
+    from wsoft.stages.ssm_cases import stage_file
 
     scene = wsoft.load_scene(stage_file("plate_rotated"))
     kw = {"width": 96, "height": 72, "device": device, "budget": 3.0}

@@ -1,6 +1,6 @@
 """The bundled USD stages (installed as ``wsoft.usd_scenes``): :func:`path` finds one by name.
 
-The stages are written by ``generate.py`` (run it from a checkout: ``python usd_scenes/generate.py``).
+The stages are written by :mod:`wsoft.stages.bundled` (``python -m wsoft.stages.bundled``).
 """
 
 from __future__ import annotations

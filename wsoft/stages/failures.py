@@ -3,7 +3,17 @@ the ``filtered`` sweep shows them (technique, reference, difference)."""
 
 from __future__ import annotations
 
-from wsoft.bench.stages import add_box, add_camera, add_point_light, add_quad, add_rect_light, add_sun, make_stage
+from wsoft.stages.builders import (
+    add_box,
+    add_camera,
+    add_mesh,
+    add_point_light,
+    add_quad,
+    add_rect_light,
+    add_sun,
+    make_stage,
+)
+
 
 def pcss_overlapping_blockers(high: bool = True):
     """Blockers at two depths average to one too near the light: the filter grows into the umbra."""
@@ -43,15 +53,10 @@ def esm_contact():
 def salzman_receiver_between_casters(lower: bool = True):
     """A shelf between two dynamic casters: near the upper caster's edge the blur averages the two
     casters' depths, the reconstructed depth falls behind the shelf and the shelf escapes."""
-    from pxr import UsdGeom
-
     st = make_stage()
     add_quad(st, "/World/Ground", (0, 0, 0), 5)
-    shelf = UsdGeom.Mesh.Define(st, "/World/Shelf")  # a narrow strip: the ground stays in view
-    shelf.CreatePointsAttr([(-1.5, -0.1, 2.0), (1.5, -0.1, 2.0), (1.5, 0.1, 2.0), (-1.5, 0.1, 2.0)])
-    shelf.CreateFaceVertexCountsAttr([4])
-    shelf.CreateFaceVertexIndicesAttr([0, 1, 2, 3])
-    shelf.CreateDoubleSidedAttr(True)
+    shelf = [(-1.5, -0.1, 2.0), (1.5, -0.1, 2.0), (1.5, 0.1, 2.0), (-1.5, 0.1, 2.0)]  # a narrow strip: the ground stays in view
+    add_mesh(st, "/World/Shelf", (shelf, [4], [0, 1, 2, 3]), True, minimal=True)
     add_quad(st, "/World/Upper", (0.3, 0, 2.6), 0.6, dynamic=True)
     if lower:
         add_quad(st, "/World/Lower", (0, 0, 0.1), 1.2, dynamic=True)

@@ -19,7 +19,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from wsoft.bench.stages import add_camera, add_quad, add_rect_light, make_stage
+from wsoft.stages.builders import add_camera, add_mesh, add_quad, add_rect_light, make_stage
 
 
 def _plate(stage, path: str, center, half: float, holes: int = 0, rotate: float = 0.0):
@@ -40,11 +40,7 @@ def _plate(stage, path: str, center, half: float, holes: int = 0, rotate: float 
             pts += [(x0, y0, 0.0), (x0 + step, y0, 0.0), (x0 + step, y0 + step, 0.0), (x0, y0 + step, 0.0)]
             counts.append(4)
             idx += [k, k + 1, k + 2, k + 3]
-    m = UsdGeom.Mesh.Define(stage, path)
-    m.CreatePointsAttr(pts)
-    m.CreateFaceVertexCountsAttr(counts)
-    m.CreateFaceVertexIndicesAttr(idx)
-    m.CreateDoubleSidedAttr(True)
+    m = add_mesh(stage, path, (pts, counts, idx), True, minimal=True)
     xf = UsdGeom.XformCommonAPI(m)
     xf.SetTranslate(Gf.Vec3d(cx, cy, cz))
     xf.SetRotate(Gf.Vec3f(0.0, 0.0, rotate))

@@ -12,41 +12,41 @@ their STSV part.
 * ``wedge_overlap`` (Fig. 4a): penumbra wedges' overlap artifact: two opaque sheets whose
   silhouettes overlap as seen from the ground, and a perforated fence card over an opaque sheet's
   penumbra, under one rect light.
-
-Deterministic (fixed seeds, nothing time-dependent). Only called through ``generate.py``.
 """
 
 from __future__ import annotations
 
 import math
 import os
-import sys
 
 import numpy as np
-from PIL import Image
-from pxr import Gf, Sdf, UsdGeom, UsdLux, UsdShade, Vt
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-
-from generate import (  # noqa: E402
+from wsoft.stages.builders import (
+    add_cutout_material,
+    add_material,
+    add_mesh,
+    add_rect_light,
+    add_sphere_light,
+    add_sun,
+    make_stage,
+    set_doc_string,
+)
+from wsoft.stages.mesh import (
     MeshData,
     box_mesh,
     grid_box_mesh,
     grid_quad_mesh,
-    make_camera,
-    make_material,
-    make_mesh,
     merge_meshes,
-    new_stage,
     prism_z,
-    set_doc_string,
     torus_z,
     translate_mesh,
     triangle_count,
     z_sphere,
 )
+from wsoft.stages.scenes import add_scene_camera
+from wsoft.stages.textures import write_alpha_png
 
-# --------------------------------------------------------------------------- textures
+# --------------------------------------------------------------------------- textures and helpers
 
 FENCE_TILE = 16  # texels per fence cell; the wires are the 2 texels around each cell border
 FENCE_CELLS = (128, 72)  # cells along the fence and up it
@@ -54,15 +54,8 @@ FENCE_SIZE = (4.0, 2.25)  # metres: 3.125 cm cells
 FENCE_BASE = 0.1  # bottom edge height
 
 
-def write_png(path: str, opaque: np.ndarray, rgb=(120, 120, 125)) -> None:
-    """RGBA PNG, alpha 255 where ``opaque`` (row 0 = the image's top), else 0."""
-    os.makedirs(os.path.dirname(path), exist_ok=True)
-    img = np.zeros(opaque.shape + (4,), np.uint8)
-    img[opaque] = (*rgb, 255)
-    Image.fromarray(img, "RGBA").save(path, format="PNG", optimize=False)
-
-
 def fence_tile() -> np.ndarray:
+    """The fence texture's tile: the wires (1 texel each side of a cell border) are True."""
     t = np.arange(FENCE_TILE)
     wire = (t < 1) | (t >= FENCE_TILE - 1)
     return wire[:, None] | wire[None, :]
@@ -88,37 +81,10 @@ def foliage_alpha(size: int = 64, seed: int = 4) -> np.ndarray:
 
 
 def grate_alpha(size: int = 32) -> np.ndarray:
+    """The grate texture: bars 3 texels wide every 8, both ways."""
     t = np.arange(size)
     bar = (t % 8) < 3
     return bar[:, None] | bar[None, :]
-
-
-def cutout_material(stage, path: str, color, texture: str, wrap: str = "repeat") -> UsdShade.Material:
-    """UsdPreviewSurface whose opacity is the alpha of ``texture`` (opacityThreshold 0.5)."""
-    looks = Sdf.Path(path).GetParentPath()
-    if not stage.GetPrimAtPath(looks):
-        UsdGeom.Scope.Define(stage, looks)
-    mat = UsdShade.Material.Define(stage, path)
-    surf = UsdShade.Shader.Define(stage, path + "/PreviewSurface")
-    surf.CreateIdAttr("UsdPreviewSurface")
-    surf.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(*color))
-    surf.CreateInput("roughness", Sdf.ValueTypeNames.Float).Set(0.7)
-    surf.CreateInput("opacityThreshold", Sdf.ValueTypeNames.Float).Set(0.5)
-    reader = UsdShade.Shader.Define(stage, path + "/StReader")
-    reader.CreateIdAttr("UsdPrimvarReader_float2")
-    reader.CreateInput("varname", Sdf.ValueTypeNames.String).Set("st")
-    reader.CreateOutput("result", Sdf.ValueTypeNames.Float2)
-    tex = UsdShade.Shader.Define(stage, path + "/AlphaTexture")
-    tex.CreateIdAttr("UsdUVTexture")
-    tex.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(Sdf.AssetPath(texture))
-    tex.CreateInput("wrapS", Sdf.ValueTypeNames.Token).Set(wrap)
-    tex.CreateInput("wrapT", Sdf.ValueTypeNames.Token).Set(wrap)
-    tex.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set("raw")
-    tex.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(reader.ConnectableAPI(), "result")
-    tex.CreateOutput("a", Sdf.ValueTypeNames.Float)
-    surf.CreateInput("opacity", Sdf.ValueTypeNames.Float).ConnectToSource(tex.ConnectableAPI(), "a")
-    mat.CreateSurfaceOutput().ConnectToSource(surf.ConnectableAPI(), "surface")
-    return mat
 
 
 def cards(stage, path: str, corners: np.ndarray, uv_max, material) -> int:
@@ -126,38 +92,17 @@ def cards(stage, path: str, corners: np.ndarray, uv_max, material) -> int:
     from (0, 0) to ``uv_max`` (each quad split into 2 perforated triangles on load)."""
     q = len(corners)
     m = (corners.reshape(-1, 3), [4] * q, list(range(4 * q)))
-    mesh = make_mesh(stage, path, m, True, material)
     u, v = uv_max
     st = np.tile(np.array([(0, 0), (u, 0), (u, v), (0, v)], np.float32), (q, 1))
-    UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.faceVarying).Set(
-        Vt.Vec2fArray.FromNumpy(st))
+    add_mesh(stage, path, m, True, material, st=st)
     return 2 * q
 
 
 def ground(stage, half: float, n: int = 1, color=(0.7, 0.68, 0.62)) -> int:
+    """A single-sided ``/World/Ground`` of half-side ``half`` at z = 0 as ``n`` x ``n`` quads; its triangles."""
     g = grid_quad_mesh((-half, -half, 0.0), (2 * half, 0, 0), (0, 2 * half, 0), n, n)
-    make_mesh(stage, "/World/Ground", g, False, make_material(stage, "/World/Looks/GroundMat", color))
+    add_mesh(stage, "/World/Ground", g, False, add_material(stage, "/World/Looks/GroundMat", color))
     return triangle_count(g[1])
-
-
-def sphere_light(stage, path: str, pos, radius: float, intensity: float) -> None:
-    light = UsdLux.SphereLight.Define(stage, path)
-    light.CreateRadiusAttr(float(radius))
-    light.CreateIntensityAttr(float(intensity))
-    light.AddTranslateOp().Set(Gf.Vec3d(*map(float, pos)))
-
-
-def distant_light(stage, path: str, toward, angle: float, intensity: float) -> None:
-    """DistantLight whose light arrives from direction ``toward`` (it emits along -toward)."""
-    from generate import look_at_xform
-
-    light = UsdLux.DistantLight.Define(stage, path)
-    light.CreateAngleAttr(float(angle))
-    light.CreateIntensityAttr(float(intensity))
-    t = np.asarray(toward, float)
-    t /= np.linalg.norm(t)
-    up = (0.0, 1.0, 0.0) if abs(t[2]) > 0.9 else (0.0, 0.0, 1.0)
-    light.AddTransformOp().Set(look_at_xform(t * 100.0, (0.0, 0.0, 0.0), up))
 
 
 def quad_at(c, u, v) -> np.ndarray:
@@ -170,23 +115,26 @@ def quad_at(c, u, v) -> np.ndarray:
 
 
 def fence_quad() -> np.ndarray:
+    """The fence's one quad in the plane y = 0, as ``[1, 4, 3]`` corners."""
     w, h = FENCE_SIZE
     return np.array([[(-w / 2, 0.0, FENCE_BASE), (w / 2, 0.0, FENCE_BASE), (w / 2, 0.0, FENCE_BASE + h), (-w / 2, 0.0, FENCE_BASE + h)]])
 
 
 def fence_common(stage, out_dir: str) -> int:
+    """The ground, light and camera both fence stages share; the ground's triangles."""
     tris = ground(stage, 4.0)
-    sphere_light(stage, "/World/Light", (0.6, 2.2, 3.2), 0.35, 40.0)
-    make_camera(stage, (1.2, -4.5, 2.6), (0.0, 1.0, 0.6), (0, 0, 1), clip=(0.1, 100.0))
+    add_sphere_light(stage, "/World/Light", (0.6, 2.2, 3.2), 0.35, 40.0)
+    add_scene_camera(stage, (1.2, -4.5, 2.6), (0.0, 1.0, 0.6), (0, 0, 1), clip=(0.1, 100.0))
     return tris
 
 
 def scene_fence_perforated(out_dir: str) -> dict[str, object]:
+    """Fig. 11a analog: the wire fence as 2 perforated triangles: ``fence_perforated.usda``."""
     path = os.path.join(out_dir, "fence_perforated.usda")
-    write_png(os.path.join(out_dir, "textures", "fence_alpha.png"), fence_tile())
-    stage = new_stage(path, "Z")
+    write_alpha_png(os.path.join(out_dir, "textures", "fence_alpha.png"), fence_tile())
+    stage = make_stage("Z", path)
     tris = fence_common(stage, out_dir)
-    mat = cutout_material(stage, "/World/Looks/FenceMat", (0.5, 0.5, 0.52), "textures/fence_alpha.png")
+    mat = add_cutout_material(stage, "/World/Looks/FenceMat", (0.5, 0.5, 0.52), "textures/fence_alpha.png")
     tris += cards(stage, "/World/Fence", fence_quad(), FENCE_CELLS, mat)
     set_doc_string(stage.GetPrimAtPath("/World"), "wsoft:doc", (
         "Forest et al. 2009 Fig. 11a analog: a %g x %g m wire fence in the plane y = 0 (bottom at z = %g) as "
@@ -228,11 +176,12 @@ def fence_wires() -> MeshData:
 
 
 def scene_fence_mesh(out_dir: str) -> dict[str, object]:
+    """Fig. 11b analog: the same fence with its wires as closed opaque bars: ``fence_mesh.usdc``."""
     path = os.path.join(out_dir, "fence_mesh.usdc")
-    stage = new_stage(path, "Z")
+    stage = make_stage("Z", path)
     tris = fence_common(stage, out_dir)
     wires = fence_wires()
-    make_mesh(stage, "/World/Fence", wires, False, make_material(stage, "/World/Looks/FenceMat", (0.5, 0.5, 0.52)))
+    add_mesh(stage, "/World/Fence", wires, False, add_material(stage, "/World/Looks/FenceMat", (0.5, 0.5, 0.52)))
     tris += triangle_count(wires[1])
     set_doc_string(stage.GetPrimAtPath("/World"), "wsoft:doc", (
         "Forest et al. 2009 Fig. 11b analog: fence_perforated's fence with its wires modelled as %d closed "
@@ -262,34 +211,35 @@ def foliage_tree(rng, base, n_cards: int, height: float, radius: float) -> np.nd
 
 
 def scene_hl2_like(out_dir: str) -> dict[str, object]:
+    """Fig. 7a analog: foliage cards, a ring fence and buildings under 2 distant lights: ``hl2_like.usdc``."""
     path = os.path.join(out_dir, "hl2_like.usdc")
-    write_png(os.path.join(out_dir, "textures", "fence_alpha.png"), fence_tile())
-    write_png(os.path.join(out_dir, "textures", "foliage_alpha.png"), foliage_alpha(), (60, 120, 50))
-    stage = new_stage(path, "Z")
+    write_alpha_png(os.path.join(out_dir, "textures", "fence_alpha.png"), fence_tile())
+    write_alpha_png(os.path.join(out_dir, "textures", "foliage_alpha.png"), foliage_alpha(), (60, 120, 50))
+    stage = make_stage("Z", path)
     rng = np.random.default_rng(2009)
     tris = ground(stage, 30.0, 100)
-    bmat = make_material(stage, "/World/Looks/BuildingMat", (0.65, 0.6, 0.55))
+    bmat = add_material(stage, "/World/Looks/BuildingMat", (0.65, 0.6, 0.55))
     stage.DefinePrim("/World/Buildings", "Xform")
     for k, (x, y, sx, sy, sz) in enumerate([(-14, 8, 6, 5, 8), (-4, 14, 8, 5, 10), (9, 12, 5, 6, 7), (15, -2, 5, 7, 9),
                                             (-16, -10, 6, 6, 6), (4, -16, 7, 5, 8), (-6, -2, 3, 3, 4), (12, -14, 4, 4, 5)]):
         b = grid_box_mesh((x - sx / 2, y - sy / 2, 0.0), (x + sx / 2, y + sy / 2, float(sz)), (16, 16, 24))
-        make_mesh(stage, f"/World/Buildings/B{k}", b, False, bmat)
+        add_mesh(stage, f"/World/Buildings/B{k}", b, False, bmat)
         tris += triangle_count(b[1])
-    fol = cutout_material(stage, "/World/Looks/FoliageMat", (0.25, 0.5, 0.2), "textures/foliage_alpha.png")
+    fol = add_cutout_material(stage, "/World/Looks/FoliageMat", (0.25, 0.5, 0.2), "textures/foliage_alpha.png")
     stage.DefinePrim("/World/Trees", "Xform")
-    trunk_mat = make_material(stage, "/World/Looks/TrunkMat", (0.4, 0.3, 0.2))
+    trunk_mat = add_material(stage, "/World/Looks/TrunkMat", (0.4, 0.3, 0.2))
     perforated = 0
     positions = [(x, y) for x in (-20, -10, 0, 10, 20) for y in (-20, -8, 4, 20)] + [(-24, 0), (24, 6), (-2, 24), (6, -24), (0, 0), (8, 2)]
     for k, (x, y) in enumerate(positions[:25]):
         x, y = x + rng.uniform(-2, 2), y + rng.uniform(-2, 2)
         h = rng.uniform(3.0, 5.0)
         trunk = prism_z(8, 0.15, 0.0, h, center=(x, y))
-        make_mesh(stage, f"/World/Trees/T{k:02d}/Trunk", trunk, False, trunk_mat)
+        add_mesh(stage, f"/World/Trees/T{k:02d}/Trunk", trunk, False, trunk_mat)
         tris += triangle_count(trunk[1])
         c = cards(stage, f"/World/Trees/T{k:02d}/Foliage", foliage_tree(rng, (x, y, 0), 76, h, 1.8), (1, 1), fol)
         perforated += c
         tris += c
-    fmat = cutout_material(stage, "/World/Looks/FenceMat", (0.5, 0.5, 0.52), "textures/fence_alpha.png")
+    fmat = add_cutout_material(stage, "/World/Looks/FenceMat", (0.5, 0.5, 0.52), "textures/fence_alpha.png")
     segs = []
     n_fence = (4002 - perforated) // 2  # fence panels 2 m wide, 1.5 m tall, along a broken line
     for i in range(n_fence):
@@ -301,9 +251,9 @@ def scene_hl2_like(out_dir: str) -> dict[str, object]:
     c = cards(stage, "/World/Fence", np.array(segs), (32, 24), fmat)
     perforated += c
     tris += c
-    distant_light(stage, "/World/Sun", (0.5, -0.35, 0.8), 1.0, 3.0)
-    distant_light(stage, "/World/Sky", (-0.6, 0.5, 0.6), 4.0, 1.0)
-    make_camera(stage, (-22.0, -22.0, 9.0), (0.0, 0.0, 1.5), (0, 0, 1), focal=20.0, clip=(0.1, 300.0))
+    add_sun(stage, "/World/Sun", 1.0, intensity=3.0, toward=(0.5, -0.35, 0.8))
+    add_sun(stage, "/World/Sky", 4.0, intensity=1.0, toward=(-0.6, 0.5, 0.6))
+    add_scene_camera(stage, (-22.0, -22.0, 9.0), (0.0, 0.0, 1.5), (0, 0, 1), focal=20.0, clip=(0.1, 300.0))
     set_doc_string(stage.GetPrimAtPath("/World"), "wsoft:doc", (
         "Forest et al. 2009 Fig. 7a (HL2) analog: %d perforated triangles outdoors — 25 trees of 76 "
         "double-sided foliage cards (textures/foliage_alpha.png) on opaque trunks, and a ring fence of "
@@ -317,12 +267,13 @@ def scene_hl2_like(out_dir: str) -> dict[str, object]:
 
 
 def scene_factory(out_dir: str) -> dict[str, object]:
+    """Fig. 7b analog: high-poly machinery and perforated grates under 4 sphere lights: ``factory.usdc``."""
     path = os.path.join(out_dir, "factory.usdc")
-    write_png(os.path.join(out_dir, "textures", "grate_alpha.png"), grate_alpha())
-    stage = new_stage(path, "Z")
+    write_alpha_png(os.path.join(out_dir, "textures", "grate_alpha.png"), grate_alpha())
+    stage = make_stage("Z", path)
     tris = ground(stage, 10.0, 20)
-    metal = make_material(stage, "/World/Looks/MetalMat", (0.55, 0.57, 0.6), roughness=0.4)
-    paint = make_material(stage, "/World/Looks/PaintMat", (0.7, 0.45, 0.15))
+    metal = add_material(stage, "/World/Looks/MetalMat", (0.55, 0.57, 0.6), roughness=0.4)
+    paint = add_material(stage, "/World/Looks/PaintMat", (0.7, 0.45, 0.15))
     stage.DefinePrim("/World/Machines", "Xform")
     parts = []
     for k in range(6):  # tanks: high-poly cylinders with toroidal rings
@@ -332,7 +283,7 @@ def scene_factory(out_dir: str) -> dict[str, object]:
             parts.append(translate_mesh(torus_z(0.85, 0.07, 160, 24), (x, y, z)))
         parts.append(translate_mesh(z_sphere(0.8, 96, 48), (x, y, 3.0)))
     m = merge_meshes(parts)
-    make_mesh(stage, "/World/Machines/Tanks", m, False, metal)
+    add_mesh(stage, "/World/Machines/Tanks", m, False, metal)
     tris += triangle_count(m[1])
     pipes = []
     for k in range(5):  # horizontal pipes along x (prisms turned: (x, y, z) -> (z, x, y))
@@ -340,16 +291,16 @@ def scene_factory(out_dir: str) -> dict[str, object]:
         p = (p[0][:, [2, 0, 1]] + (0.0, -1.0 + 0.5 * k, 4.0 + 0.3 * (k % 2)), p[1], p[2])
         pipes.append(p)
     m = merge_meshes(pipes)
-    make_mesh(stage, "/World/Machines/Pipes", m, False, paint)
+    add_mesh(stage, "/World/Machines/Pipes", m, False, paint)
     tris += triangle_count(m[1])
-    g = cutout_material(stage, "/World/Looks/GrateMat", (0.3, 0.3, 0.32), "textures/grate_alpha.png")
+    g = add_cutout_material(stage, "/World/Looks/GrateMat", (0.3, 0.3, 0.32), "textures/grate_alpha.png")
     grates = [quad_at((-6.0 + 2.4 * k, 0.0, 2.0), (1.0, 0, 0), (0, 1.4, 0)) for k in range(6)]
     grates.append(quad_at((0.0, 0.0, 5.0), (7.5, 0, 0), (0, 1.5, 0)))
     c = cards(stage, "/World/Grates", np.array(grates), (4, 6), g)
     tris += c
     for k, pos in enumerate([(-4.8, 0.0, 3.2), (2.4, 0.0, 3.4), (-1.0, 1.2, 5.8), (5.0, -1.5, 1.0)]):
-        sphere_light(stage, f"/World/Lamp{k}", pos, 0.15, 8.0)
-    make_camera(stage, (3.0, -9.0, 6.0), (-1.0, 0.5, 1.5), (0, 0, 1), focal=18.0, clip=(0.1, 100.0))
+        add_sphere_light(stage, f"/World/Lamp{k}", pos, 0.15, 8.0)
+    add_scene_camera(stage, (3.0, -9.0, 6.0), (-1.0, 0.5, 1.5), (0, 0, 1), focal=18.0, clip=(0.1, 100.0))
     set_doc_string(stage.GetPrimAtPath("/World"), "wsoft:doc", (
         "Forest et al. 2009 Fig. 7b (factory) analog: high-poly opaque machinery (6 tanks of 256-sided "
         "cylinders, domes and toroidal rings; 5 pipes), 14 perforated triangles (7 double-sided grates, "
@@ -363,12 +314,13 @@ def scene_factory(out_dir: str) -> dict[str, object]:
 
 
 def scene_greece(out_dir: str) -> dict[str, object]:
+    """Fig. 7c analog: leaf cards in vines around a colonnade under 3 sphere lights: ``greece.usdc``."""
     path = os.path.join(out_dir, "greece.usdc")
-    write_png(os.path.join(out_dir, "textures", "leaf_alpha.png"), leaf_alpha(), (70, 130, 40))
-    stage = new_stage(path, "Z")
+    write_alpha_png(os.path.join(out_dir, "textures", "leaf_alpha.png"), leaf_alpha(), (70, 130, 40))
+    stage = make_stage("Z", path)
     rng = np.random.default_rng(1896)
     tris = ground(stage, 12.0, 40, color=(0.8, 0.75, 0.62))
-    marble = make_material(stage, "/World/Looks/MarbleMat", (0.9, 0.88, 0.84))
+    marble = add_material(stage, "/World/Looks/MarbleMat", (0.9, 0.88, 0.84))
     cols = []
     for i in range(6):
         for j in (-1, 1):
@@ -378,9 +330,9 @@ def scene_greece(out_dir: str) -> dict[str, object]:
             cols.append(box_mesh((x - 0.4, y - 0.4, 4.0), (x + 0.4, y + 0.4, 4.3)))
     cols.append(grid_box_mesh((-6.0, -3.2, 4.3), (6.0, 3.2, 4.8), (48, 24, 2)))  # architrave
     m = merge_meshes(cols)
-    make_mesh(stage, "/World/Temple", m, False, marble)
+    add_mesh(stage, "/World/Temple", m, False, marble)
     tris += triangle_count(m[1])
-    leaf = cutout_material(stage, "/World/Looks/LeafMat", (0.3, 0.55, 0.2), "textures/leaf_alpha.png", wrap="clamp")
+    leaf = add_cutout_material(stage, "/World/Looks/LeafMat", (0.3, 0.55, 0.2), "textures/leaf_alpha.png", wrap="clamp")
     stage.DefinePrim("/World/Vines", "Xform")
     leaves = 0
     n_leaves = 13075  # 26,150 perforated triangles, as the paper's Greece scene
@@ -399,10 +351,10 @@ def scene_greece(out_dir: str) -> dict[str, object]:
         quads = np.stack([c - u - v, c + u - v, c + u + v, c - u + v], 1)
         leaves += cards(stage, f"/World/Vines/V{k}", quads, (1, 1), leaf)
     tris += leaves
-    sphere_light(stage, "/World/Light0", (6.0, -7.0, 9.0), 0.8, 30.0)
-    sphere_light(stage, "/World/Light1", (-7.0, -4.0, 6.0), 0.5, 15.0)
-    sphere_light(stage, "/World/Light2", (0.0, 6.0, 7.0), 0.6, 15.0)
-    make_camera(stage, (9.0, -12.0, 6.0), (0.0, 0.0, 2.0), (0, 0, 1), focal=20.0, clip=(0.1, 200.0))
+    add_sphere_light(stage, "/World/Light0", (6.0, -7.0, 9.0), 0.8, 30.0)
+    add_sphere_light(stage, "/World/Light1", (-7.0, -4.0, 6.0), 0.5, 15.0)
+    add_sphere_light(stage, "/World/Light2", (0.0, 6.0, 7.0), 0.6, 15.0)
+    add_scene_camera(stage, (9.0, -12.0, 6.0), (0.0, 0.0, 2.0), (0, 0, 1), focal=20.0, clip=(0.1, 200.0))
     set_doc_string(stage.GetPrimAtPath("/World"), "wsoft:doc", (
         "Forest et al. 2009 Fig. 7c (Greece) analog: %d perforated leaf triangles (%d double-sided leaf "
         "cards of 2 triangles, textures/leaf_alpha.png, in 5 vines and bushes /World/Vines/V*) around a "
@@ -416,24 +368,21 @@ def scene_greece(out_dir: str) -> dict[str, object]:
 
 
 def scene_wedge_overlap(out_dir: str) -> dict[str, object]:
+    """Fig. 4(a) analog, the penumbra wedges' overlap artifact: ``wedge_overlap.usda``."""
     path = os.path.join(out_dir, "wedge_overlap.usda")
-    write_png(os.path.join(out_dir, "textures", "fence_alpha.png"), fence_tile())
-    stage = new_stage(path, "Z")
+    write_alpha_png(os.path.join(out_dir, "textures", "fence_alpha.png"), fence_tile())
+    stage = make_stage("Z", path)
     tris = ground(stage, 4.0)
-    light = UsdLux.RectLight.Define(stage, "/World/Light")
-    light.CreateWidthAttr(1.0)
-    light.CreateHeightAttr(1.0)
-    light.CreateIntensityAttr(10.0)
-    light.AddTranslateOp().Set(Gf.Vec3d(0.0, 0.0, 3.0))
-    grey = make_material(stage, "/World/Looks/SheetMat", (0.55, 0.5, 0.45))
+    add_rect_light(stage, "/World/Light", (0.0, 0.0, 3.0), 1.0, 1.0, intensity=10.0)
+    grey = add_material(stage, "/World/Looks/SheetMat", (0.55, 0.5, 0.45))
     sheets = {"/World/SheetA": ((-2.0, -1.0), (0.0, 1.0), 1.0), "/World/SheetB": ((-2.2, -1.0), (-0.2, 1.0), 1.5),
               "/World/SheetD": ((1.0, 1.5), (3.0, 3.0), 1.0)}
     for name, ((x0, y0), (x1, y1), z) in sheets.items():
-        make_mesh(stage, name, ([(x0, y0, z), (x1, y0, z), (x1, y1, z), (x0, y1, z)], [4], [0, 1, 2, 3]), True, grey)
+        add_mesh(stage, name, ([(x0, y0, z), (x1, y0, z), (x1, y1, z), (x0, y1, z)], [4], [0, 1, 2, 3]), True, grey)
         tris += 2
-    fence = cutout_material(stage, "/World/Looks/FenceMat", (0.5, 0.5, 0.52), "textures/fence_alpha.png")
+    fence = add_cutout_material(stage, "/World/Looks/FenceMat", (0.5, 0.5, 0.52), "textures/fence_alpha.png")
     tris += cards(stage, "/World/FenceC", np.array([[(0.0, 1.5, 1.5), (2.0, 1.5, 1.5), (2.0, 3.0, 1.5), (0.0, 3.0, 1.5)]]), (16, 12), fence)
-    make_camera(stage, (0.4, -4.5, 5.0), (0.2, 0.9, 0.0), (0, 0, 1), clip=(0.1, 100.0))
+    add_scene_camera(stage, (0.4, -4.5, 5.0), (0.2, 0.9, 0.0), (0, 0, 1), clip=(0.1, 100.0))
     set_doc_string(stage.GetPrimAtPath("/World"), "wsoft:doc", (
         "Forest et al. 2009 Fig. 4(a) analog, the penumbra wedges' overlap artifact: a 1 x 1 rect light at z = 3 over an "
         "8 x 8 ground. Opaque double-sided sheets SheetA (x -2..0, y -1..1, z = 1) and SheetB (x -2.2..-0.2, y -1..1, "
@@ -443,13 +392,3 @@ def scene_wedge_overlap(out_dir: str) -> dict[str, object]:
         "16 x 12 times): its LS_buffer bits are added to SheetD's wedge coverage. %d triangles." % tris))
     stage.GetRootLayer().Save()
     return {"file": path, "triangles": tris}
-
-
-STSV_SCENES = {
-    "fence_perforated": scene_fence_perforated,
-    "fence_mesh": scene_fence_mesh,
-    "hl2_like": scene_hl2_like,
-    "factory": scene_factory,
-    "greece": scene_greece,
-    "wedge_overlap": scene_wedge_overlap,
-}

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from wsoft.bench.stages import add_box, add_camera, add_quad, add_rect_light, make_stage
+from wsoft.stages.builders import add_box, add_camera, add_quad, add_rect_light, make_stage
 
 
 def essm_contact_box():
