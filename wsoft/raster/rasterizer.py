@@ -50,7 +50,8 @@ import warp as wp
 
 from wsoft.lightspace.view import DEPTH_CLEAR, LightView, ViewGPU, boxes_in_view, texel_of, view_of
 from wsoft.parallel import cpu_threads, ensure_loaded, launch_chunked, run_tasks
-from wsoft.scene.device import CULL_SKIP, DeviceScene, Surfaces, face_surfaces, surface_present, view_surfaces, without_culling
+from wsoft.scene.device import DeviceScene, face_surfaces, view_surfaces
+from wsoft.scene.surfaces import CULL_SKIP, Surfaces, surface_present, without_culling
 
 GPU_BAND_ROWS = 64  # CUDA: rows per band (one thread per triangle and band)
 SMALL_BOX_TEXELS = 16  # triangles whose texel box is this small take the flat loop (orthographic views)

@@ -89,8 +89,9 @@ from wsoft.raster.camera import CameraGPU, camera_gpu, subpixel_pattern
 from wsoft.scene.instancing import InstancesGPU
 from wsoft.raster.gbuffer import GBufferGPU, camera_ray, cast_primary, gb_covered, gb_pixel
 from wsoft.raster.rasterizer import make_rasterizer
-from wsoft.reference import ray_epsilon, ray_offset, ray_origin
-from wsoft.scene.device import CULL_SKIP, Surfaces, face_surfaces, without_culling
+from wsoft.raster.shadow_rays import ray_epsilon, ray_offset, ray_origin
+from wsoft.scene.device import face_surfaces
+from wsoft.scene.surfaces import CULL_SKIP, Surfaces, without_culling
 from wsoft.scene.types import LIGHT_DISTANT, LIGHT_KIND_NAMES, LIGHT_POINT
 from wsoft.techniques.base import Quality, Technique, Tolerance, check, param
 
