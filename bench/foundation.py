@@ -303,8 +303,9 @@ def _reference_frame(case: dict, ctx: dict) -> dict:
 def _throughput(case: dict, ctx: dict) -> dict:
     from wsoft.parallel import cpu_threads
     from wsoft.lightspace.light import disk_shaped
-    from wsoft.reference import ray_epsilon, reference_pattern, shadow_rays, trace_ray_packets, trace_reference, trace_rays
-    from wsoft.scene.packets import packed_bvh
+    from wsoft.raster.shadow_rays import ray_epsilon
+    from wsoft.reference import reference_pattern, shadow_rays, trace_ray_packets, trace_reference, trace_rays
+    from wsoft.reference.packets import packed_bvh
     from wsoft.pipeline import RenderContext, frame_setup
     from wsoft.raster.camera import camera_gpu
     from wsoft.raster.gbuffer import render_gbuffer

@@ -72,7 +72,7 @@ def _device_bytes(ds) -> int:
 
     for a in ds.arrays().values():
         add(a)
-    from wsoft.scene.device import Surfaces
+    from wsoft.scene.surfaces import Surfaces
 
     for name in Surfaces.vars:
         add(getattr(ds.cutouts, name))
@@ -136,7 +136,8 @@ def _rays(scene, ds, light, w, h, samples, dev) -> dict:
     from wsoft.lightspace.light import disk_shaped, light_gpu
     from wsoft.raster.camera import camera_gpu
     from wsoft.raster.gbuffer import render_gbuffer
-    from wsoft.reference import ray_epsilon, reference_pattern, shadow_rays, trace_ray_packets, trace_rays
+    from wsoft.raster.shadow_rays import ray_epsilon
+    from wsoft.reference import reference_pattern, shadow_rays, trace_ray_packets, trace_rays
     from wsoft.pipeline import frame_setup
 
     cam = camera_gpu(frame_setup(scene, w, h).camera)

@@ -125,7 +125,8 @@ def culled(ds, view) -> np.ndarray:
     """Per triangle 1 where the real rasterizer skips it in ``view`` (an orthographic one): the
     ``CULL_SKIP`` flag, or a far face of a closed surface (the facing test of
     :mod:`wsoft.raster.rasterizer`)."""
-    from wsoft.scene.device import CULL_SKIP, view_cull
+    from wsoft.scene.device import view_cull
+    from wsoft.scene.surfaces import CULL_SKIP
 
     if view.persp:
         raise ValueError("the bound is for orthographic views")

@@ -86,7 +86,7 @@ def modules():
 
 def test_every_kernel_module_is_found(modules):
     names = set(modules)
-    for expected in ("wsoft.reference", "wsoft.scene.packets", "wsoft.raster.gbuffer", "wsoft.raster.horizon", "wsoft.accel.sat", "wsoft.techniques.essm",
+    for expected in ("wsoft.reference", "wsoft.reference.packets", "wsoft.raster.gbuffer", "wsoft.raster.horizon", "wsoft.accel.sat", "wsoft.techniques.essm",
                      "wsoft.techniques.ssm.kernels"):
         assert expected in names
     raster = {k.module.name for k in rasterizer_kernels()}  # the specialised rasterizers: one "unique" module each

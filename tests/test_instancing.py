@@ -132,7 +132,7 @@ def test_instances_outside_the_view_are_skipped_not_lost(device):
     """boxes_in_view drops only instances that cannot reach the map: the map is the same as when
     every instance is drawn, and far-away instances are skipped."""
     from wsoft.lightspace.view import boxes_in_view, fit_light_view
-    from wsoft.raster import rasterizer as R
+    from wsoft.raster import depth_map as D
 
     T = [(1, xf(t=(dx, dy, 0.2))) for dx in np.linspace(-3, 3, 5) for dy in np.linspace(-3, 3, 5)] + [(1, xf(t=(400, 0, 0)))]
     inst, flat = split(load_scene(CUTOUT), ["Fence", "Leaf"], T)
@@ -141,13 +141,13 @@ def test_instances_outside_the_view_are_skipped_not_lost(device):
     v = fit_light_view(inst.lights[0], rec, *inst.bounds, 256)
     seen, inside = boxes_in_view(v, dsa.instances.lo, dsa.instances.hi)
     assert not seen[-1] and seen.sum() >= 9 and not inside.any()
-    culled = R.rasterize(dsa, v, False).depth.numpy()
-    orig = R.boxes_in_view
+    culled = D.rasterize(dsa, v, False).depth.numpy()
+    orig = D.boxes_in_view
     try:
-        R.boxes_in_view = lambda view, lo, hi: (np.ones(len(lo), bool), np.zeros(len(lo), bool))
-        every = R.rasterize(dsa, v, False).depth.numpy()
+        D.boxes_in_view = lambda view, lo, hi: (np.ones(len(lo), bool), np.zeros(len(lo), bool))
+        every = D.rasterize(dsa, v, False).depth.numpy()
     finally:
-        R.boxes_in_view = orig
+        D.boxes_in_view = orig
     assert np.array_equal(culled, every)
 
 
@@ -182,16 +182,17 @@ def test_instanced_rasterizer_on_many_threads(monkeypatch):
     """Small CPU chunks (many private maps) give the same instanced map as one chunk."""
     from wsoft.lightspace.view import fit_light_view
     from wsoft.raster import rasterizer as R
+    from wsoft.raster.depth_map import rasterize
 
     T = [(1, xf(rot((0, 0, 1), 0.1 * k), (np.cos(k) * 2, np.sin(k) * 2, 0.3))) for k in range(40)]
     inst, flat = split(load_scene(CUTOUT), ["Fence", "Leaf"], T)
     ds, gb = gbuffer_of(inst, "cpu")
     rec = gb.pos.numpy()[gb.prim.numpy() >= 0]
     v = fit_light_view(inst.lights[0], rec, *inst.bounds, 256)
-    one = R.rasterize(ds, v, False).depth.numpy()
+    one = rasterize(ds, v, False).depth.numpy()
     monkeypatch.setattr(R, "CPU_CHUNK", 7)
     monkeypatch.setattr(R, "BIG_TRIANGLE_TEXELS", 64)
-    many = R.rasterize(ds, v, False).depth.numpy()
+    many = rasterize(ds, v, False).depth.numpy()
     assert np.array_equal(one, many)
 
 

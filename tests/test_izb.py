@@ -13,8 +13,8 @@ from wsoft.errors import ParameterError
 from wsoft.lightspace.view import LightView
 from wsoft.raster.camera import subpixel_pattern
 from wsoft.pipeline import build_graph, execute
-from wsoft.scene.device import Surfaces, surface_present, without_culling
-from wsoft.scene.packets import ray_triangle
+from wsoft.scene.surfaces import Surfaces, surface_present, without_culling
+from wsoft.scene.rays import ray_triangle
 
 
 def _ortho_view(size: int) -> LightView:
@@ -355,7 +355,8 @@ def test_none_differs_from_the_reference_only_where_their_ray_conventions_do():
     the offset of an edge) and must agree everywhere else."""
     from wsoft.bench.harness import load
     from wsoft.lightspace.light import light_gpu
-    from wsoft.reference import ray_epsilon, reference_pattern, shadow_rays
+    from wsoft.raster.shadow_rays import ray_epsilon
+    from wsoft.reference import reference_pattern, shadow_rays
 
     scene = load("tower")
     w, h = 200, 150

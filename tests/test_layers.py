@@ -129,9 +129,88 @@ def test_the_check_itself_sees_an_upward_import(tmp_path):
         fake.unlink()
 
 
+def import_graph() -> dict[str, set[str]]:
+    """Module -> the package's modules it imports (module level or inside functions; ``bench`` as
+    ``wsoft.bench``). An import names the module it reaches: ``from a.b import c`` is ``a.b.c``
+    where that is a module, else ``a.b``; the packages above a module (whose ``__init__`` runs
+    first) are not edges of their own."""
+    mods = {module_name(p): p for p in sources()}
+    graph = {m: set() for m in mods}
+    for me, path in mods.items():
+        for mod, _ in imports_of(path):
+            if mod == "bench" or mod.startswith("bench."):
+                mod = "wsoft." + mod
+            while mod and mod not in mods:
+                mod = mod.rpartition(".")[0]
+            if mod and mod != me:
+                graph[me].add(mod)
+    return graph
+
+
+def import_circles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan's algorithm, iterative)."""
+    index, low, on_stack, stack, circles = {}, {}, set(), [], []
+    for root in sorted(graph):
+        if root in index:
+            continue
+        work = [(root, iter(sorted(graph[root])))]
+        index[root] = low[root] = len(index)
+        stack.append(root)
+        on_stack.add(root)
+        while work:
+            v, edges = work[-1]
+            w = next(edges, None)
+            if w is not None:
+                if w not in index:
+                    index[w] = low[w] = len(index)
+                    stack.append(w)
+                    on_stack.add(w)
+                    work.append((w, iter(sorted(graph[w]))))
+                elif w in on_stack:
+                    low[v] = min(low[v], index[w])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[v])
+            if low[v] == index[v]:
+                comp = []
+                while True:
+                    w = stack.pop()
+                    on_stack.discard(w)
+                    comp.append(w)
+                    if w == v:
+                        break
+                if len(comp) > 1:
+                    circles.append(sorted(comp))
+    return circles
+
+
+def test_no_import_circles():
+    """No module reaches itself through the package's imports (function-level imports count)."""
+    graph = import_graph()
+    assert len(graph) > 80 and sum(map(len, graph.values())) > 300  # the walk really found the imports
+    circles = import_circles(graph)
+    assert not circles, "import circles:\n" + "\n".join(" <-> ".join(c) for c in circles)
+
+
+def test_the_check_itself_sees_an_import_circle():
+    """The circle test would catch two modules importing each other, one of them inside a function."""
+    a, b = WSOFT / "accel" / "_circle_probe_a.py", WSOFT / "accel" / "_circle_probe_b.py"
+    a.write_text("from wsoft.accel import _circle_probe_b\n")
+    b.write_text("def f():\n    from wsoft.accel._circle_probe_a import f\n")
+    try:
+        with pytest.raises(AssertionError, match="wsoft.accel._circle_probe_a <-> wsoft.accel._circle_probe_b"):
+            test_no_import_circles()
+    finally:
+        a.unlink()
+        b.unlink()
+    assert import_circles({"x": {"y"}, "y": {"z"}, "z": {"x"}, "w": {"x"}}) == [["x", "y", "z"]]
+
+
 @pytest.mark.parametrize("mod", ["wsoft.techniques.ssm.kernels", "wsoft.accel.sat", "wsoft.accel.ssm_structures", "wsoft.lightspace.samples",
                                  "wsoft.raster.rasterizer", "wsoft.techniques.essm", "wsoft.metrics", "wsoft.baking",
-                                 "wsoft.scene.mesh_points", "wsoft.bench.pareto", "wsoft.stages.bundled", "wsoft.stages.adversarial"])
+                                 "wsoft.scene.mesh_points", "wsoft.bench.pareto", "wsoft.stages.bundled", "wsoft.stages.adversarial",
+                                 "wsoft.scene.usd", "wsoft.scene.rays", "wsoft.raster.shadow_rays", "wsoft.reference.packets"])
 def test_module_imports_on_its_own(mod):
     p = subprocess.run([sys.executable, "-c", f"import {mod}"], capture_output=True, text=True, timeout=300, cwd=str(ROOT))
     assert p.returncode == 0, p.stderr

@@ -295,7 +295,7 @@ def test_no_shadow_casting_light_is_an_error():
 
 
 def test_closed_orientation():
-    from wsoft.scene.usd import closed_orientation
+    from wsoft.scene.usd_mesh import closed_orientation
 
     # a unit cube, outward counter-clockwise faces
     p = np.array([[x, y, z] for z in (0, 1) for y in (0, 1) for x in (0, 1)], float)

@@ -1,4 +1,4 @@
-"""Packet traversal of shadow rays (``wsoft.scene.packets``) against Warp's per-ray any-hit, bit for
+"""Packet traversal of shadow rays (``wsoft.reference.packets``) against Warp's per-ray any-hit, bit for
 bit, on every light kind, with cutouts, and for sample counts that leave a packet partly filled;
 the known differences (where the packet agrees with the brute force and Warp's per-ray walk
 does not); the leaf filter's conservativeness; packets that give up on fine geometry."""
@@ -11,8 +11,9 @@ import warp as wp
 from conftest import scene_path
 
 import wsoft
-from wsoft.scene.device import Surfaces, surface_present
-from wsoft.scene.packets import PACKET, pack_bvh, packet_f, ray_triangle, rays_reaching_leaf
+from wsoft.reference.packets import PACKET, pack_bvh, packet_f, rays_reaching_leaf
+from wsoft.scene.rays import ray_triangle
+from wsoft.scene.surfaces import Surfaces, surface_present
 from wsoft.stages import add_box, add_camera, add_point_light, add_quad, make_stage
 
 CASES = [
@@ -64,7 +65,8 @@ def test_explicit_ray_packets_equal_per_ray(device):
     from wsoft.lightspace.light import disk_shaped
     from wsoft.raster.camera import camera_gpu
     from wsoft.raster.gbuffer import render_gbuffer
-    from wsoft.reference import ray_epsilon, reference_pattern, shadow_rays, trace_ray_packets, trace_rays
+    from wsoft.raster.shadow_rays import ray_epsilon
+    from wsoft.reference import reference_pattern, shadow_rays, trace_ray_packets, trace_rays
     from wsoft.pipeline import RenderContext, frame_setup
     from wsoft.scene.device import upload_scene
 
@@ -97,7 +99,7 @@ def test_traversal_is_chosen_by_device_and_samples():
 def test_a_bvh_too_deep_for_packets_falls_back_to_rays_and_says_so(monkeypatch):
     """pack_bvh refuses a tree whose walk would overflow the packets' stack; the reference then
     traces ray by ray, with the reason in its counters and a warning."""
-    import wsoft.scene.packets as packets
+    import wsoft.reference.packets as packets
 
     monkeypatch.setattr(packets, "pack_bvh", lambda *a, **k: (None, {"error": "the BVH is deeper than 64 levels: packets cannot walk it"}))
     s = wsoft.load_scene(scene_path("contact.usda"))
@@ -155,7 +157,8 @@ def _pixel_rays(file: str, light_path: str, x: int, y: int):
     from wsoft.lightspace.light import disk_shaped
     from wsoft.raster.camera import camera_gpu
     from wsoft.raster.gbuffer import render_gbuffer
-    from wsoft.reference import generate_shadow_rays, ray_epsilon, reference_pattern, trace_ray_packets, trace_rays
+    from wsoft.raster.shadow_rays import ray_epsilon
+    from wsoft.reference import generate_shadow_rays, reference_pattern, trace_ray_packets, trace_rays
     from wsoft.pipeline import RenderContext, frame_setup
     from wsoft.scene.device import upload_scene
 

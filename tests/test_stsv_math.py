@@ -10,7 +10,8 @@ import pytest
 import warp as wp
 
 from wsoft.accel.stsv import points_in_volumes, sample_blocked, s_triangle, receiver_matrix, stsv_lookup, stsv_volumes
-from wsoft.scene.device import Surfaces, surface_present, upload_scene
+from wsoft.scene.device import upload_scene
+from wsoft.scene.surfaces import Surfaces, surface_present
 from wsoft.scene.types import LIGHT_DISTANT, LIGHT_RECT, LIGHT_SPHERE, Light, Material, Scene, Texture
 
 

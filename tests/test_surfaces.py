@@ -8,7 +8,8 @@ import warp as wp
 from conftest import add_camera, add_quad, add_rect_light, make_stage
 
 import wsoft
-from wsoft.scene.device import Surfaces, sample_alpha, upload_scene
+from wsoft.scene.device import upload_scene
+from wsoft.scene.surfaces import Surfaces, sample_alpha
 from wsoft.scene.types import WRAP_BLACK, WRAP_CLAMP, WRAP_MIRROR, WRAP_REPEAT, Material, Scene, Texture
 
 

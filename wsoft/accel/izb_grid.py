@@ -11,7 +11,7 @@ are gathered into sorted order, so a cell's list is contiguous in memory.
 The light pass (:func:`izb_test`, a fragment of the rasterizer factory) is run with
 *conservative* rasterization: every cell a triangle touches, so every sample whose ray the
 triangle can block is tested. The test is exact: Warp's watertight ray-triangle test
-(:func:`~wsoft.scene.packets.ray_triangle`, the one the BVH any-hit uses) on the sample's ray
+(:func:`~wsoft.scene.rays.ray_triangle`, the one the BVH any-hit uses) on the sample's ray
 toward the light's centre, alpha-tested at the hit through cutouts. A cell whose samples all lie
 nearer the light than the triangle's nearest depth over the cell is skipped. The fragment writes
 only what belongs to its cell (the flags of its own samples, its counters), so the CPU scheduler
@@ -28,8 +28,8 @@ import warp as wp
 from wsoft.lightspace.view import LightView, ViewGPU, texel_of, view_of
 from wsoft.parallel import ensure_loaded, launch_chunked
 from wsoft.raster.rasterizer import fragment
-from wsoft.scene.device import Surfaces, surface_present
-from wsoft.scene.packets import ray_triangle
+from wsoft.scene.surfaces import Surfaces, surface_present
+from wsoft.scene.rays import ray_triangle
 
 
 @wp.struct

@@ -16,7 +16,7 @@ from wsoft.lightspace.light import LightGPU, light_bound
 from wsoft.accel.stsv import planes_t, triangle_volumes
 from wsoft.lightspace.view import fit_light_view
 from wsoft.parallel import launch_chunked
-from wsoft.scene.packets import ray_triangle
+from wsoft.scene.rays import ray_triangle
 from wsoft.scene.types import LIGHT_DISK, LIGHT_RECT
 
 

@@ -26,7 +26,7 @@ and *unit* normal ``n = normalize((v1 - v0) x (v2 - v0))``:
   crossing lies between ``p`` and the light sample (the paper relies on the volume for that).
 * (4)–(5) ``s' = (S s*_h).xy / (S s*_h).z`` with ``S = [[t0t1.x, t0t2.x, t0.x], [t0t1.y, t0t2.y,
   t0.y], [0, 0, 1]]``; ``(S s*_h).z = s*_h.z``. Barycentric weights of the corners are
-  ``(z - x - y, x, y) / z``, which is what :func:`wsoft.scene.device.surface_present` takes.
+  ``(z - x - y, x, y) / z``, which is what :func:`wsoft.scene.surfaces.surface_present` takes.
 
 **The volume** (§2.2, §2.3, §6) is kept as up to five half-spaces ``a . x + b <= 0`` (rows of a
 5x4 matrix; an all-zero row is no constraint), each *provably* conservative for a light inside a
@@ -61,7 +61,7 @@ import numpy as np
 import warp as wp
 
 from wsoft.lightspace.light import LightGPU, light_gpu
-from wsoft.scene.device import Surfaces, sample_alpha
+from wsoft.scene.surfaces import Surfaces, sample_alpha
 
 planes_t = wp.types.matrix(shape=(5, 4), dtype=wp.float32)
 """A shadow volume: five half-spaces ``row . (x, y, z, 1) <= 0`` (a zero row: none)."""
@@ -135,7 +135,7 @@ def sample_texcoord(st: STriangle, h: wp.vec3) -> wp.vec2:
 def sample_blocked(cut: Surfaces, tri: int, st: STriangle, J: wp.mat33, p: wp.vec3, s: wp.vec3) -> bool:
     """Algorithm 1's ``texture_access`` for a perforated triangle: is the light sample ``s`` hidden
     from ``p`` by triangle ``tri``? The crossing (eq. 1), then the cutout's alpha at eq. 5's texture
-    coordinate against its threshold (:func:`~wsoft.scene.device.surface_present`'s rule)."""
+    coordinate against its threshold (:func:`~wsoft.scene.surfaces.surface_present`'s rule)."""
     h = sample_bary(J, p, s)
     if not crosses(h):
         return False

@@ -10,7 +10,7 @@ from wsoft.errors import ParameterError
 from wsoft.raster.camera import conform_aperture
 from wsoft.scene.render_settings import RenderSettings, data_window_pixels
 from wsoft.scene.types import Camera, Scene
-from wsoft.scene.usd import auto_camera
+from wsoft.scene.usd_lights import auto_camera
 
 
 DEFAULT_SIZE = (640, 480)

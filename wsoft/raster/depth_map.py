@@ -11,7 +11,8 @@ import warp as wp
 from wsoft.lightspace.view import DEPTH_CLEAR, LightView, boxes_in_view
 from wsoft.parallel import ensure_loaded, launch_chunked
 from wsoft.raster.rasterizer import InstanceBatch, InstanceRun, fragment, make_rasterizer
-from wsoft.scene.device import DeviceScene, face_surfaces, view_surfaces, without_culling
+from wsoft.scene.device import DeviceScene, face_surfaces, view_surfaces
+from wsoft.scene.surfaces import without_culling
 
 
 @wp.struct

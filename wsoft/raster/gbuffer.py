@@ -26,8 +26,10 @@ import warp as wp
 from wsoft.lightspace.view import ViewGPU, in_front_of_light, inside_map, map_coords, texel_of, view_of
 from wsoft.parallel import launch_chunked
 from wsoft.raster.camera import CameraGPU
-from wsoft.scene.device import Surfaces, DeviceScene, nearest_from, surface_present
-from wsoft.scene.instancing import InstancesGPU, nearest_instance_hit
+from wsoft.scene.device import DeviceScene
+from wsoft.scene.instancing import InstancesGPU
+from wsoft.scene.rays import nearest_hit
+from wsoft.scene.surfaces import Surfaces
 
 
 @wp.func
@@ -67,23 +69,11 @@ def camera_ray(cam: CameraGPU, width: int, height: int, fx: float, fy: float):
 def cast_primary(mesh: wp.uint64, cut: Surfaces, has_cutouts: int, inst: InstancesGPU, cam: CameraGPU, width: int, height: int,
                  fx: float, fy: float):
     """The camera ray through image point (``fx``, ``fy``) (:func:`camera_ray`) against the scene
-    (the soup's ``mesh``, then the instances of ``inst``, :mod:`wsoft.scene.instancing`): (found
+    (the soup's ``mesh``, then the instances of ``inst``, :func:`~wsoft.scene.rays.nearest_hit`): (found
     0/1, world point, viewer-facing normal, triangle (combined index), u, v, camera distance).
     Alpha-tested through cutouts; back faces of single-sided meshes skipped."""
     o, d, t0, t1 = camera_ray(cam, width, height, fx, fy)
-    found, travelled, face, bu, bv, n = nearest_from(mesh, 0, cut, has_cutouts, o + d * t0, d, t1 - t0, t0)
-    if inst.count > 0:
-        reach = t1 - t0
-        if found == 1:
-            reach = travelled - t0
-        ifound, it, iface, iu, iv, inrm = nearest_instance_hit(inst, cut, has_cutouts, o + d * t0, d, reach)
-        if ifound == 1:
-            found = 1
-            face = iface
-            bu = iu
-            bv = iv
-            n = inrm
-            travelled = t0 + it
+    found, travelled, face, bu, bv, n = nearest_hit(mesh, cut, has_cutouts, inst, o + d * t0, d, t1 - t0, t0)
     p = o + d * travelled
     if wp.dot(n, d) > 0.0:
         n = -n

@@ -51,7 +51,7 @@ import warp as wp
 from wsoft.lightspace.view import LightView, ViewGPU, texel_of, view_of
 from wsoft.parallel import cpu_threads, ensure_loaded, launch_chunked, run_tasks
 from wsoft.raster.triangle import clip_point, make_raster_triangle
-from wsoft.scene.device import CULL_SKIP, Surfaces
+from wsoft.scene.surfaces import CULL_SKIP, Surfaces
 
 GPU_BAND_ROWS = 64  # CUDA: rows per band (one thread per triangle and band)
 CPU_CHUNK = 32768  # CPU: triangles per launch; a worker's chunks are interleaved with the others'

@@ -12,7 +12,8 @@ import warp as wp
 from wsoft.parallel import launch_chunked
 from wsoft.lightspace.view import DEPTH_CLEAR, LightView, ViewGPU
 from wsoft.raster.depth_map import DepthMap
-from wsoft.scene.device import Surfaces, DeviceScene, surface_present
+from wsoft.scene.device import DeviceScene
+from wsoft.scene.surfaces import Surfaces, surface_present
 
 
 @wp.kernel

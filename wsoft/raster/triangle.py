@@ -7,7 +7,7 @@ interpolated depth and corner weights handed to the fragment."""
 import warp as wp
 
 from wsoft.lightspace.view import DEPTH_CLEAR, ViewGPU
-from wsoft.scene.device import Surfaces, surface_present
+from wsoft.scene.surfaces import Surfaces, surface_present
 
 SMALL_BOX_TEXELS = 16  # triangles whose texel box is this small take the flat loop (orthographic views)
 SMALL_BOX_TEXELS_PERSP = 8  # the same for perspective views, whose loop divides per covered texel

@@ -11,9 +11,9 @@ through cutout triangles. Randomness is seeded by the pattern's seed and the sam
 
 Two traversals give the same answer bit for bit (``tests/test_packets.py``; three kinds of
 exception found, all at float precision on a shared edge or a cutout's hole, where the packet
-agrees with the brute force and Warp's per-ray walk does not, :mod:`wsoft.scene.packets`):
+agrees with the brute force and Warp's per-ray walk does not, :mod:`wsoft.reference.packets`):
 ``packet`` (the default on CPU) traces a receiver's samples in packets of 32 rays through the BVH together
-(:mod:`wsoft.scene.packets`: all start at the receiver and fan out over the light), ``ray``
+(:mod:`wsoft.reference.packets`: all start at the receiver and fan out over the light), ``ray``
 traces each with Warp's ``mesh_query_ray_anyhit`` (the default on CUDA, where a thread holding
 32 rays would spill its registers, and below 8 samples, where a packet's set-up costs more than
 it saves).
@@ -29,57 +29,18 @@ import warp as wp
 
 import wsoft.parallel  # noqa: F401  (Warp configured before this package's kernels are defined)
 from wsoft.lightspace.light import LightGPU, in_front, light_point
-from wsoft.lightspace.samples import LightSamples, SamplePattern, sample_coords, sampling_begin
+from wsoft.lightspace.samples import LightSamples, SamplePattern, sample_coords
 from wsoft.parallel import launch_chunked
-from wsoft.raster.gbuffer import GBufferGPU, gb_covered, gb_pixel
+from wsoft.raster.gbuffer import GBufferGPU, gb_covered
+from wsoft.raster.shadow_rays import receiver_begin, shadow_ray_length
 from wsoft.lightspace.bitmask import popcount
 from wsoft.errors import ParameterError
-from wsoft.scene.device import DeviceScene, Surfaces, occluded, shadow_surfaces
-from wsoft.scene.instancing import InstancesGPU, occluded_instances
-from wsoft.scene.packets import PACKET, PackedBVH, packed_bvh, packet_f, trace_receiver_packet
+from wsoft.reference.packets import PACKET, PackedBVH, packed_bvh, packet_f, trace_receiver_packet
+from wsoft.scene.device import DeviceScene, shadow_surfaces
+from wsoft.scene.rays import Occluders, occluders, unoccluded
+from wsoft.scene.surfaces import Surfaces
 
 TRAVERSALS = ("auto", "packet", "ray")
-
-
-
-@wp.func
-def ray_offset(p: wp.vec3, eps: float) -> float:
-    """The offset of a shadow ray's origin: ``eps`` (a fraction of the frame's extent), at least a
-    few float32 ulps of the point's largest coordinate (far from the origin a fixed offset is lost)."""
-    m = wp.max(wp.abs(p[0]), wp.max(wp.abs(p[1]), wp.abs(p[2])))
-    return wp.max(eps, 2.0e-6 * m)
-
-
-@wp.func
-def ray_origin(p: wp.vec3, n: wp.vec3, off: float) -> wp.vec3:
-    """Shadow-ray origin: ``p`` moved ``off`` (:func:`ray_offset`) off its surface along the
-    (camera-facing) normal ``n``, to the visible side. Rays that would leave through the back
-    (``not in_front(n, d)``) are never traced: the surface's own sheet blocks them
-    (:mod:`wsoft.raster.horizon`)."""
-    return p + n * off
-
-
-@wp.func
-def receiver_begin(gb: GBufferGPU, ls: LightSamples, eps: float, i: int):
-    """A receiver's shadow rays begin: (their offset, their origin, and the light-sample stream's
-    state, first table index and rotation)."""
-    p = gb.pos[i]
-    off = ray_offset(p, eps)
-    o = ray_origin(p, gb.nrm[i], off)
-    xy = gb_pixel(gb, i)
-    state, base, rot = sampling_begin(ls, i, xy[0], xy[1])
-    return off, o, state, base, rot
-
-
-@wp.func
-def shadow_ray_length(to_light: float, dmax: float, off: float) -> float:
-    """How far a shadow ray from a receiver (its origin ``off`` off the surface) looks for a caster:
-    to the light point (``to_light`` from the surface), or only ``dmax`` (``inputs:shadow:distance``,
-    measured from the surface point) when ``dmax >= 0``."""
-    t = to_light
-    if dmax >= 0.0:
-        t = wp.min(t, dmax)
-    return wp.max(t - off, 0.0)
 
 
 @wp.func
@@ -92,10 +53,7 @@ def visible_fraction(visible: int, samples: int):
 @wp.kernel
 def trace_visibility(
     offset: int,
-    mesh: wp.uint64,
-    cut: Surfaces,
-    has_cutouts: int,
-    inst: InstancesGPU,
+    occ: Occluders,
     light: LightGPU,
     ls: LightSamples,
     gb: GBufferGPU,
@@ -121,9 +79,8 @@ def trace_visibility(
         d = wp.vec3(r[0], r[1], r[2])
         if in_front(n, d):
             tm = shadow_ray_length(r[3], dmax, off)
-            if not occluded(mesh, cut, has_cutouts, o, d, tm):
-                if not occluded_instances(inst, cut, has_cutouts, o, d, tm):
-                    visible += 1
+            if unoccluded(occ, o, d, tm):
+                visible += 1
     v, e = visible_fraction(visible, samples)
     vis[i] = v
     stderr[i] = e
@@ -209,7 +166,8 @@ def trace_reference(ds: DeviceScene, light: LightGPU, gb, pattern: SamplePattern
                     counters: dict | None = None, excluded: tuple[int, ...] = (), max_distance: float = -1.0) -> tuple[wp.array, wp.array]:
     """Visibility and its standard error per G-buffer sample (flat float32 arrays), with the
     light samples of ``pattern`` (mapped onto a disk when ``disk``); ``eps``: the rays' offset
-    (:func:`ray_epsilon`); ``traversal``: ``packet``, ``ray`` or ``auto`` (:func:`resolve_traversal`).
+    (:func:`~wsoft.raster.shadow_rays.ray_epsilon`); ``traversal``: ``packet``, ``ray`` or ``auto``
+    (:func:`resolve_traversal`).
     ``excluded``: prims (indices into the scene's prims) that cast no shadow of this light (its
     ``collection:shadowLink``): rays continue past them (:func:`~wsoft.scene.device.shadow_surfaces`).
     ``max_distance``: ``inputs:shadow:distance`` (>= 0: a ray looks for casters only that far from
@@ -218,7 +176,6 @@ def trace_reference(ds: DeviceScene, light: LightGPU, gb, pattern: SamplePattern
     packets, when the BVH is too deep for them) and ``receivers_ray_by_ray`` (receivers whose
     packets gave up: their rays fan out over fine geometry)."""
     n = gb.count
-    cut, has_cutouts = shadow_surfaces(ds, excluded)
     dmax = float(max_distance) if max_distance >= 0.0 else -1.0
     vis = wp.empty(n, dtype=float, device=ds.device)
     err = wp.empty(n, dtype=float, device=ds.device)
@@ -236,6 +193,7 @@ def trace_reference(ds: DeviceScene, light: LightGPU, gb, pattern: SamplePattern
     if counters is not None:
         counters["traversal"] = mode
     if mode == "packet":
+        cut, has_cutouts = shadow_surfaces(ds, excluded)
         given_up = wp.empty(n, dtype=wp.int32, device=ds.device)
         launch_chunked(
             trace_visibility_packets,
@@ -252,26 +210,13 @@ def trace_reference(ds: DeviceScene, light: LightGPU, gb, pattern: SamplePattern
     launch_chunked(
         trace_visibility,
         n,
-        inputs=[ds.mesh.id, cut, has_cutouts, ds.inst, light, pattern.on(ds.device, disk), gb.gpu(), eps, dmax],
+        inputs=[occluders(ds, excluded), light, pattern.on(ds.device, disk), gb.gpu(), eps, dmax],
         outputs=[vis, err],
         device=ds.device,
         min_chunk=256,
         per_thread=32,
     )
     return vis, err
-
-
-RAY_EPSILON = 2.0e-5  # shadow-ray offset as a fraction of the frame's extent
-
-
-def ray_epsilon(gb, light) -> float:
-    """Offset of shadow-ray origins along the normal: a fraction of the frame's extent (the
-    receivers in view and the light, :func:`~wsoft.lightspace.view.frame_extent`), not of the
-    scene's bounds, which a far or huge triangle can make as large as the whole frame."""
-    from wsoft.lightspace.view import frame_extent_of_bounds
-
-    b = gb.receiver_bounds()
-    return RAY_EPSILON * (frame_extent_of_bounds(*b, light) if b is not None else frame_extent_of_bounds(None, None, light))
 
 
 # -- explicit rays: the same shadow rays as arrays (for throughput comparisons with other tracers) --
@@ -308,10 +253,7 @@ def generate_shadow_rays(
 @wp.kernel
 def trace_shadow_rays(
     offset: int,
-    mesh: wp.uint64,
-    cut: Surfaces,
-    has_cutouts: int,
-    inst: InstancesGPU,
+    occ: Occluders,
     origin: wp.array[wp.vec3],
     dir: wp.array[wp.vec3],
     tmax: wp.array[float],
@@ -319,10 +261,10 @@ def trace_shadow_rays(
     hit: wp.array[wp.int32],
 ):
     r = wp.tid() + offset
-    if occluded(mesh, cut, has_cutouts, origin[r], dir[r], tmax[r]) or occluded_instances(inst, cut, has_cutouts, origin[r], dir[r], tmax[r]):
-        hit[r] = 1
-    else:
+    if unoccluded(occ, origin[r], dir[r], tmax[r]):
         hit[r] = 0
+    else:
+        hit[r] = 1
 
 
 def shadow_rays(ds: DeviceScene, light: LightGPU, gb, pattern: SamplePattern, disk: bool, eps: float):
@@ -399,5 +341,5 @@ def trace_ray_packets(ds: DeviceScene, origin: wp.array, dir: wp.array, tmax: wp
 def trace_rays(ds: DeviceScene, origin: wp.array, dir: wp.array, tmax: wp.array) -> wp.array:
     """Occlusion (1 = blocked) of explicit rays, chunked across CPU threads."""
     hit = wp.empty(origin.shape[0], dtype=wp.int32, device=ds.device)
-    launch_chunked(trace_shadow_rays, origin.shape[0], inputs=[ds.mesh.id, ds.cutouts, ds.has_cutouts, ds.inst, origin, dir, tmax], outputs=[hit], device=ds.device, min_chunk=4096)
+    launch_chunked(trace_shadow_rays, origin.shape[0], inputs=[occluders(ds), origin, dir, tmax], outputs=[hit], device=ds.device, min_chunk=4096)
     return hit

@@ -10,7 +10,7 @@ normalising the direction, so the ray parameter ``t`` is the same in both frames
 **Triangle indices.** A scene's triangles are numbered in one *combined* space: the soup's
 triangles first (``0 .. T-1``, the flat mesh's own face indices), then every prototype's
 (``T + g`` for the prototype triangle ``g``, prototypes one after another). Every per-triangle
-array of the device scene (:class:`~wsoft.scene.device.Surfaces`, albedo, baked light) spans the
+array of the device scene (:class:`~wsoft.scene.surfaces.Surfaces`, albedo, baked light) spans the
 combined space, so a G-buffer sample's ``prim`` and a cutout lookup mean the same whichever level
 the hit came from. The soup of a scene whose geometry is all instanced holds one zero-area
 triangle that no ray can hit and no map draws (its cull flag is ``CULL_SKIP``).
@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from wsoft.scene.device import Surfaces, nearest_from, occluded_from
+from wsoft.scene.surfaces import Surfaces, nearest_from, occluded_from
 
 
 @wp.struct

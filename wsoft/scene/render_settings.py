@@ -150,7 +150,7 @@ def select_settings_prim(reader, requested: str | None):
 
 
 def read_render_settings(reader, requested: str | None = None) -> tuple[RenderSettings | None, str]:
-    """The render settings of ``reader``'s stage (a :class:`~wsoft.scene.usd._StageReader`: its
+    """The render settings of ``reader``'s stage (a :class:`~wsoft.scene.usd_context.StageContext`: its
     stage, file, time code, ``err`` and ``warn``), chosen as the module says: (settings or None,
     source)."""
     from pxr import UsdRender

@@ -161,7 +161,7 @@ class Prototype:
     """Geometry shared by instances (a PointInstancer's prototype, or the prototype of instanceable
     prims), in the prototype root's own frame: the same per-triangle fields as :class:`Scene`'s
     triangle soup, indices into its own ``points``. ``tri_prim`` indexes ``Scene.prims`` (the
-    prototype's mesh prims); ``tri_closed`` as :func:`wsoft.scene.usd.closed_orientation` gives it
+    prototype's mesh prims); ``tri_closed`` as :func:`wsoft.scene.usd_mesh.closed_orientation` gives it
     in the prototype's frame."""
 
     path: str
@@ -423,20 +423,14 @@ class Scene:
     def flattened(self) -> "Scene":
         """The whole scene as one triangle soup: what ``load_scene(..., instancing=False)`` gives
         (same time, render settings and purposes). ``self`` when nothing is instanced. A scene
-        :func:`~wsoft.scene.usd.load_scene` returned loads its stage again, flat; a scene built by
-        hand (or edited, see :meth:`changed`) has its instances flattened here (:meth:`_flatten_instances`).
-        Built once."""
+        :func:`~wsoft.scene.usd.load_scene` returned carries how to load its stage again, flat (a
+        callable, ``_source``); a scene built by hand (or edited, see :meth:`changed`) has its
+        instances flattened here (:meth:`_flatten_instances`). Built once."""
         if not self.instanced:
             return self
         if "_flattened" not in self.__dict__:
-            source = self.__dict__.get("_source")
-            if source is not None:
-                from wsoft.scene.usd import load_scene
-
-                stage_or_path, time, render_settings = source
-                flat = load_scene(stage_or_path, time=time, render_settings=render_settings, instancing=False)
-            else:
-                flat = self._flatten_instances()
+            load_flat = self.__dict__.get("_source")
+            flat = load_flat() if load_flat is not None else self._flatten_instances()
             self.__dict__["_flattened"] = flat
         return self.__dict__["_flattened"]
 

@@ -77,9 +77,9 @@ from wsoft.lightspace.samples import LightSamples, sample_coords
 from wsoft.accel.stsv import in_volume, light_ball, planes_t, receiver_matrix, s_triangle, sample_blocked
 from wsoft.parallel import launch_chunked
 from wsoft.raster.gbuffer import GBufferGPU, gb_covered
-from wsoft.reference import ray_epsilon, ray_offset, ray_origin, receiver_begin
+from wsoft.raster.shadow_rays import ray_epsilon, ray_offset, ray_origin, receiver_begin
 from wsoft.scene.adjacency import silhouette_candidates
-from wsoft.scene.device import Surfaces
+from wsoft.scene.surfaces import Surfaces
 from wsoft.scene.types import LIGHT_RECT
 from wsoft.techniques._object_based import ObjectBased, ObjectBasedParams, object_based_passes
 from wsoft.techniques.base import Quality, Tolerance, check, param

@@ -16,7 +16,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from wsoft.lightspace.light import disk_shaped
-from wsoft.reference import TRAVERSALS, ray_epsilon, reference_pattern, trace_reference
+from wsoft.raster.shadow_rays import ray_epsilon
+from wsoft.reference import TRAVERSALS, reference_pattern, trace_reference
 from wsoft.scene.device import upload_scene
 from wsoft.params import check_ranges
 from wsoft.techniques.base import PassSpec, Quality, Technique, Tolerance, check, param

@@ -84,8 +84,8 @@ from wsoft.lightspace.view import fit_light_view, outside_view_warning
 from wsoft.params import check_ranges
 from wsoft.raster.camera import camera_gpu
 from wsoft.raster.rasterizer import make_rasterizer
-from wsoft.reference import ray_epsilon
-from wsoft.scene.device import without_culling
+from wsoft.raster.shadow_rays import ray_epsilon
+from wsoft.scene.surfaces import without_culling
 from wsoft.scene.types import LIGHT_DISTANT, LIGHT_KIND_NAMES, LIGHT_POINT
 from wsoft.techniques.base import PassSpec, Quality, Technique, Tolerance, check, param
 from wsoft.techniques.izb.samples import SUBSAMPLES, place_samples, resolve_samples

@@ -8,7 +8,7 @@ import warp as wp
 from wsoft.lightspace.view import ViewGPU, texel_of, view_of
 from wsoft.raster.camera import CameraGPU
 from wsoft.raster.gbuffer import camera_ray
-from wsoft.reference import ray_offset, ray_origin
+from wsoft.raster.shadow_rays import ray_offset, ray_origin
 
 
 @wp.func

@@ -14,8 +14,8 @@ from wsoft.lightspace.light import LightGPU, in_front, light_center_dir
 from wsoft.parallel import launch_chunked
 from wsoft.raster.camera import CameraGPU, subpixel_pattern
 from wsoft.raster.gbuffer import GBufferGPU, camera_ray, cast_primary, gb_covered, gb_pixel
-from wsoft.reference import ray_offset, ray_origin
-from wsoft.scene.device import Surfaces
+from wsoft.raster.shadow_rays import ray_offset, ray_origin
+from wsoft.scene.surfaces import Surfaces
 from wsoft.scene.instancing import InstancesGPU
 
 SUBSAMPLES = ("auto", "recast", "plane")  # where sub-samples lie (IZBParams.subsamples), in the kernels' order

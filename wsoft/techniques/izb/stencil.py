@@ -19,8 +19,9 @@ from wsoft.lightspace.view import ViewGPU, receiver_plane_affine, receiver_plane
 from wsoft.parallel import launch_chunked
 from wsoft.raster.camera import CameraGPU, subpixel_pattern
 from wsoft.raster.gbuffer import GBufferGPU, cast_primary, gb_covered, gb_pixel
-from wsoft.reference import ray_offset, ray_origin
-from wsoft.scene.device import CULL_SKIP, Surfaces, face_surfaces
+from wsoft.raster.shadow_rays import ray_offset, ray_origin
+from wsoft.scene.device import face_surfaces
+from wsoft.scene.surfaces import CULL_SKIP, Surfaces
 from wsoft.scene.instancing import InstancesGPU
 from wsoft.techniques.izb.footprint import pixel_footprint
 from wsoft.techniques.izb.samples import mixed_pixels, same_plane

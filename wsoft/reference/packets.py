@@ -7,23 +7,23 @@ components per axis, conservative: a node no ray can reach is skipped; one some 
 reach is visited) and each reached leaf's triangles against the packet's rays still unblocked
 whose own segment meets the leaf's box (a per-ray slab test on a slightly padded box: the
 packet's bounds reach many leaves that most of its rays miss), stopping when all are blocked.
-Alpha-tested cutouts decide at the exact hit, as :func:`~wsoft.scene.device.occluded` does.
+Alpha-tested cutouts decide at the exact hit, as :func:`~wsoft.scene.surfaces.occluded` does.
 
 The BVH is Warp's own (``wp.Mesh``'s, built once per scene): Warp has no kernel-level access to
 its nodes, so a few ``wp.func_native`` one-liners read them (:func:`bvh_root`, :func:`bvh_lower`
 ..., the layout of ``warp/native/bvh.h``: packed node halves, leaves flagged in the lower half,
 primitive ranges in ``primitive_indices``), and the ray-triangle test is Warp's own
-(``intersect_ray_tri_woop``, the one ``mesh_query_ray_anyhit`` calls), so a packet's answer is
-the per-ray answer bit for bit: the same triangles hit at the same ``t``. Three kinds of
-exception found (``tests/test_packets.py``), in all of which the packet agrees with the brute
-force over every triangle and the per-ray walk does not: a ray through the shared edge of two
-triangles hit at the same ``t``, whose boxes Warp's per-ray walk drops (city, fence_mesh: one ray
-each); with cutouts, a ray through the shared edge of two triangles of one alpha-tested card, a
-hole in the first it meets and present in the second less than 1e-5 further, which the per-ray
-walk skips when it steps past the hole (hl2_like, Sky light, 64 samples at 640 x 480: one ray in
-each of 5 pixels); and a ray past a hole that meets the next cutout on the edge of its hole,
-where the per-ray walk's query from just past the first hole lands on the present side (greece:
-one ray).
+(:func:`~wsoft.scene.rays.ray_triangle`, the ``intersect_ray_tri_woop`` that
+``mesh_query_ray_anyhit`` calls), so a packet's answer is the per-ray answer bit for bit: the same
+triangles hit at the same ``t``. Three kinds of exception found (``tests/test_packets.py``), in
+all of which the packet agrees with the brute force over every triangle and the per-ray walk does
+not: a ray through the shared edge of two triangles hit at the same ``t``, whose boxes Warp's
+per-ray walk drops (city, fence_mesh: one ray each); with cutouts, a ray through the shared edge
+of two triangles of one alpha-tested card, a hole in the first it meets and present in the second
+less than 1e-5 further, which the per-ray walk skips when it steps past the hole (hl2_like, Sky
+light, 64 samples at 640 x 480: one ray in each of 5 pixels); and a ray past a hole that meets the
+next cutout on the edge of its hole, where the per-ray walk's query from just past the first hole
+lands on the present side (greece: one ray).
 
 Warp's per-ray any-hit gives up (reports *unblocked*) when its traversal stack of 32 pending
 nodes is full. :func:`pack_bvh` walks the whole tree once with the packets' own stack of
@@ -39,7 +39,8 @@ from __future__ import annotations
 
 import warp as wp
 
-from wsoft.scene.device import Surfaces, occluded, surface_present
+from wsoft.scene.rays import ray_triangle
+from wsoft.scene.surfaces import Surfaces, occluded, surface_present
 
 PACKET = 32  # rays a packet holds (one 32-bit word of a mask)
 STACK = 64  # BVH nodes a packet's traversal keeps pending
@@ -90,18 +91,6 @@ def bvh_right(mesh: wp.uint64, node: int) -> int:
 
 @wp.func_native("return ((wp::Mesh*)mesh)->bvh.primitive_indices[slot];")
 def bvh_primitive(mesh: wp.uint64, slot: int) -> int: ...
-
-
-@wp.func_native(
-    """float t, u, v, sign;
-    wp::vec3 nrm;
-    if (wp::intersect_ray_tri_woop(o, d, a, b, c, t, u, v, sign, &nrm))
-        return wp::vec4(1.0f, t, u, v);
-    return wp::vec4(0.0f, 0.0f, 0.0f, 0.0f);"""
-)
-def ray_triangle(o: wp.vec3, d: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3) -> wp.vec4:
-    """Warp's watertight ray-triangle test: (hit, t, u, v), ``u, v`` weights of ``a, b``."""
-    ...
 
 
 @wp.func_native("return ((wp::Mesh*)mesh)->bvh.num_nodes;")
@@ -509,7 +498,7 @@ def trace_packet(
     ``tm[k]``) traced together; returns (the bits of the rays that reach their length unblocked,
     1 when the packet gave up and finished ray by ray, else 0). A ray is blocked by a triangle
     hit at ``0 <= t < tm[k]`` that is present there (cutouts), as
-    :func:`~wsoft.scene.device.occluded` has it. The pending nodes never exceed :data:`STACK`
+    :func:`~wsoft.scene.surfaces.occluded` has it. The pending nodes never exceed :data:`STACK`
     (:func:`pack_bvh` checked the tree).
 
     A packet is worth it while its rays share the nodes and triangles they reach. Where they fan

@@ -1,0 +1,176 @@
+"""USD lights with their shadow controls, and cameras -> :class:`~wsoft.scene.types.Light`, :class:`~wsoft.scene.types.Camera`.
+
+:func:`read_light` reads the lights wsoft shadows (:data:`HANDLED_LIGHTS`: rect, disk, sphere and
+distant; the others are skipped with :data:`UNHANDLED_REASONS`) from their ``inputs:`` at the
+context's time code, their frame re-orthonormalised and their sizes scaled by the transform;
+:func:`read_shadow_controls` adds the ``UsdLux.ShadowAPI`` controls (shadow linking, distance,
+colour, falloff). :func:`read_camera` reads a ``UsdGeom.Camera``; :func:`auto_camera` frames a scene
+that has none.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from wsoft.scene.types import LIGHT_DISK, LIGHT_DISTANT, LIGHT_POINT, LIGHT_RECT, LIGHT_SPHERE, Camera, Light, Scene
+from wsoft.scene.usd_context import StageContext, pxr
+
+HANDLED_LIGHTS = ("RectLight", "DiskLight", "SphereLight", "DistantLight")
+UNHANDLED_REASONS = {
+    "DomeLight": "environment (dome) lighting has no finite emitter to shadow-map; not handled",
+    "CylinderLight": "cylinder lights are not handled by any technique",
+    "GeometryLight": "mesh (geometry) lights are not handled by any technique",
+    "PortalLight": "portal lights only shape a DomeLight; not handled",
+    "PluginLight": "plugin lights have no known shape; not handled",
+}
+
+
+def read_light(ctx: StageContext, prim, type_name: str) -> Light | None:
+    """The light ``prim`` (``type_name`` one of :data:`HANDLED_LIGHTS`) in the world: a rect light
+    spans +-width/2, +-height/2 in its local XY plane, a disk or sphere light its radius (a sphere
+    treated as a point, or of radius 0, is a point light), a distant light its full ``angle`` in
+    degrees; sizes scaled by the transform, intensity by ``2^exposure``."""
+    Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = pxr()
+    M = ctx.world(prim)
+    axes = M[:3, :3]
+    scale = np.linalg.norm(axes, axis=0)
+    if np.any(scale < 1e-12) or not np.all(np.isfinite(M)):
+        raise ctx.err(prim, "light transform is singular or not finite")
+    frame = axes / scale
+    # re-orthonormalise (shear would make the frame skew)
+    u, _, vt = np.linalg.svd(frame)
+    frame = u @ vt
+    pos = M[:3, 3].copy()
+    lux = UsdLux.LightAPI(prim)
+    intensity = ctx.finite(prim, "inputs:intensity", ctx.get(lux.GetIntensityAttr(), 1.0))
+    exposure = ctx.finite(prim, "inputs:exposure", ctx.get(lux.GetExposureAttr(), 0.0))
+    if not -126.0 <= exposure <= 127.0:
+        raise ctx.err(prim, f"inputs:exposure = {exposure:g} is out of range (2^exposure must be a finite float: -126..127)")
+    intensity *= 2.0 ** exposure
+    color = tuple(float(c) for c in ctx.get(lux.GetColorAttr(), (1.0, 1.0, 1.0)))
+    common = dict(path=str(prim.GetPath()), position=pos, frame=frame, intensity=intensity, color=color)
+    if type_name == "RectLight":
+        lt = UsdLux.RectLight(prim)
+        w = ctx.size(prim, "inputs:width", ctx.get(lt.GetWidthAttr(), 1.0)) * scale[0]
+        h = ctx.size(prim, "inputs:height", ctx.get(lt.GetHeightAttr(), 1.0)) * scale[1]
+        if w == 0 and h == 0:
+            ctx.warn(prim, "RectLight has zero width and height: rendered as a point light (hard shadows)")
+            return Light(kind=LIGHT_POINT, **common)
+        if w == 0 or h == 0:
+            ctx.warn(prim, f"RectLight has zero {'width' if w == 0 else 'height'}: it emits from a line segment (no area)")
+        return Light(kind=LIGHT_RECT, half_size=(0.5 * w, 0.5 * h), **common)
+    if type_name == "DiskLight":
+        r = ctx.size(prim, "inputs:radius", ctx.get(UsdLux.DiskLight(prim).GetRadiusAttr(), 0.5)) * 0.5 * (scale[0] + scale[1])
+        if r == 0:
+            ctx.warn(prim, "DiskLight has radius 0: rendered as a point light (hard shadows)")
+        return Light(kind=LIGHT_DISK if r > 0 else LIGHT_POINT, radius=max(r, 0.0), **common)
+    if type_name == "SphereLight":
+        lt = UsdLux.SphereLight(prim)
+        r = ctx.size(prim, "inputs:radius", ctx.get(lt.GetRadiusAttr(), 0.5)) * float(np.mean(scale))
+        if bool(ctx.get(lt.GetTreatAsPointAttr(), False)) or r <= 0:
+            return Light(kind=LIGHT_POINT, **common)
+        return Light(kind=LIGHT_SPHERE, radius=r, **common)
+    angle = ctx.finite(prim, "inputs:angle", ctx.get(UsdLux.DistantLight(prim).GetAngleAttr(), 0.53))
+    if not (0.0 <= angle < 180.0):
+        raise ctx.err(prim, f"DistantLight angle {angle} must be in [0, 180) degrees")
+    return Light(kind=LIGHT_DISTANT, angle_deg=angle, **common)
+
+
+def read_shadow_controls(ctx: StageContext, prim, light: Light, casters: list[str]) -> Light:
+    """The UsdLux controls that change who casts ``light``'s shadow and how it is shaded, onto
+    the light: ``collection:shadowLink`` (membership as ``Usd.CollectionAPI`` computes it;
+    unauthored, USD's ``includeRoot = true`` includes everything) as the prims it leaves out,
+    ``inputs:shadow:distance``, ``inputs:shadow:color``, ``inputs:shadow:falloff`` and
+    ``falloffGamma``. A mesh placed by a PointInstancer casts when both the instancer and the
+    prototype mesh are members. Falloff is read but not applied: a warning when authored."""
+    Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = pxr()
+    link = UsdLux.LightAPI(prim).GetShadowLinkCollectionAPI()
+    excluded = []
+    if link:
+        query = link.ComputeMembershipQuery()
+        for i, c in enumerate(casters):
+            paths = {c.split("@")[0], c.split("@")[-1].split("[")[0]}  # the mesh, and its instancer if any
+            if not all(query.IsPathIncluded(Sdf.Path(q)) for q in paths):
+                excluded.append(i)
+    shadow = UsdLux.ShadowAPI(prim)
+    dist = ctx.get(shadow.GetShadowDistanceAttr(), -1.0)
+    dist = float(dist)
+    if math.isnan(dist):
+        raise ctx.err(prim, "inputs:shadow:distance = nan is not a number")
+    if dist < 0.0 or math.isinf(dist):
+        dist = -1.0  # USD: -1 (any negative value, or an infinite one) is no limit
+    color = tuple(float(c) for c in ctx.get(shadow.GetShadowColorAttr(), (0.0, 0.0, 0.0)))
+    if not all(math.isfinite(c) for c in color):
+        raise ctx.err(prim, f"inputs:shadow:color = {color} is not finite")
+    falloff = ctx.finite(prim, "inputs:shadow:falloff", ctx.get(shadow.GetShadowFalloffAttr(), -1.0))
+    gamma = ctx.finite(prim, "inputs:shadow:falloffGamma", ctx.get(shadow.GetShadowFalloffGammaAttr(), 1.0))
+    if falloff > 0.0:
+        ctx.warn(prim, f"inputs:shadow:falloff = {falloff:g} (falloffGamma {gamma:g}) is not applied: the shadow ends "
+                 "sharply at inputs:shadow:distance (UsdLux gives no formula for the fade)")
+    light.shadow_excluded = tuple(excluded)
+    light.shadow_distance = dist
+    light.shadow_color = color
+    light.shadow_falloff = falloff
+    light.shadow_falloff_gamma = gamma
+    return light
+
+
+def read_camera(ctx: StageContext, prim) -> Camera:
+    """The ``UsdGeom.Camera`` ``prim`` at the context's time code: its frame (scale removed),
+    projection, apertures as tangents of the half angles (orthographic: half extents) and their
+    offsets, and clipping range."""
+    Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = pxr()
+    cam = UsdGeom.Camera(prim).GetCamera(ctx.timecode)
+    M = np.array(cam.transform, dtype=np.float64).T
+    axes = M[:3, :3]
+    scale = np.linalg.norm(axes, axis=0)
+    if np.any(scale < 1e-12) or not np.all(np.isfinite(M)):
+        raise ctx.err(prim, "camera transform is singular or not finite")
+    M[:3, :3] = axes / scale
+    clip = (float(cam.clippingRange.min), float(cam.clippingRange.max))
+    if not all(math.isfinite(c) for c in clip) or not 0.0 <= clip[0] < clip[1]:
+        ctx.warn(prim, f"clippingRange {clip} is empty or inverted (need 0 <= near < far): this camera sees nothing")
+    ortho = cam.projection == Gf.Camera.Orthographic
+    ha, va = float(cam.horizontalAperture), float(cam.verticalAperture)
+    ho, vo = float(cam.horizontalApertureOffset), float(cam.verticalApertureOffset)
+    if ha <= 0 or va <= 0:
+        raise ctx.err(prim, "camera apertures must be > 0")
+    if ortho:
+        # apertures are in tenths of a scene unit
+        tan_half = (0.05 * ha, 0.05 * va)
+        offset = (0.1 * ho, 0.1 * vo)
+    else:
+        f = float(cam.focalLength)
+        if f <= 0:
+            raise ctx.err(prim, "camera focalLength must be > 0")
+        tan_half = (0.5 * ha / f, 0.5 * va / f)
+        offset = (ho / f, vo / f)
+    return Camera(path=str(prim.GetPath()), to_world=M, orthographic=ortho, tan_half=tan_half, offset=offset, clip=clip)
+
+
+def auto_camera(scene: Scene, aspect: float = 4.0 / 3.0) -> Camera:
+    """A perspective camera looking down at the scene from above and to the side (up-axis aware),
+    placed at the smallest distance at which all 8 corners of the scene's bounds are in view."""
+    lo, hi = scene.bounds
+    center = 0.5 * (lo + hi)
+    up = np.array([0.0, 0.0, 1.0]) if scene.up_axis == "Z" else np.array([0.0, 1.0, 0.0])
+    side = np.array([1.0, 0.0, 0.0])
+    fwd_h = np.cross(up, side)  # a horizontal direction
+    view_dir = -(0.55 * up + 0.6 * fwd_h + 0.35 * side)
+    view_dir /= np.linalg.norm(view_dir)
+    z = -view_dir
+    x = np.cross(up, z)
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    tan_x = math.tan(math.radians(27.0))
+    tan_y = tan_x / aspect
+    corners = np.array([[a, b, c] for a in (lo[0], hi[0]) for b in (lo[1], hi[1]) for c in (lo[2], hi[2])]) - center
+    cx, cy, cz = corners @ x, corners @ y, corners @ z
+    dist = float(np.max(np.maximum(cz + np.abs(cx) / tan_x, cz + np.abs(cy) / tan_y))) * 1.02
+    dist = max(dist, 1e-3 * scene.diagonal)
+    eye = center + z * dist
+    M = np.eye(4)
+    M[:3, 0], M[:3, 1], M[:3, 2], M[:3, 3] = x, y, z, eye
+    return Camera(path="(automatic)", to_world=M, tan_half=(tan_x, tan_y), clip=(dist * 1e-4, dist + 2 * scene.diagonal))
