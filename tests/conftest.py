@@ -1,8 +1,11 @@
-"""Shared fixtures: in-memory stages, devices, small render sizes."""
+"""Shared fixtures: in-memory stages, devices, small render sizes, the command line in-process."""
 
 from __future__ import annotations
 
+import contextlib
+import io
 import os
+import subprocess
 
 import numpy as np
 import pytest
@@ -35,6 +38,27 @@ DEVICES = _devices()
 @pytest.fixture(params=DEVICES)
 def device(request):
     return request.param
+
+
+def wsoft_cli(*args, cwd: str | None = None) -> subprocess.CompletedProcess:
+    """``wsoft ARGS`` through the command line's own ``main``, in this process (a new interpreter per
+    call costs seconds; tests of what only a fresh process shows, imports and USD's C++ output, run
+    one): its exit code and what it printed, as ``subprocess.run`` gives them."""
+    from wsoft import cli
+
+    out, err = io.StringIO(), io.StringIO()
+    here = os.getcwd()
+    try:
+        if cwd is not None:
+            os.chdir(cwd)
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            try:
+                rc = cli.main([str(a) for a in args])
+            except SystemExit as exc:  # argparse: --help, or a malformed argument (its usage line)
+                rc = exc.code if isinstance(exc.code, int) else int(exc.code is not None)
+    finally:
+        os.chdir(here)
+    return subprocess.CompletedProcess(["wsoft", *map(str, args)], rc, out.getvalue(), err.getvalue())
 
 
 def scene_path(name: str) -> str:

@@ -9,7 +9,7 @@ import sys
 
 import numpy as np
 import pytest
-from conftest import ROOT, add_box, add_quad, add_rect_light, make_stage, parallel_rect_exact, scene_path
+from conftest import ROOT, add_box, add_quad, add_rect_light, make_stage, parallel_rect_exact, scene_path, wsoft_cli
 
 import wsoft
 from wsoft.baking import fill_from_nearest, texel_coverage
@@ -363,7 +363,7 @@ def test_texel_coverage_and_the_fill_of_uncovered_texels():
 
 
 def run(*args):
-    return subprocess.run([sys.executable, "-m", "wsoft", "bake", *args], capture_output=True, text=True, cwd=ROOT, timeout=600)
+    return wsoft_cli("bake", *args, cwd=ROOT)
 
 
 @pytest.mark.parametrize("args,needle", [

@@ -39,10 +39,13 @@ def test_plain_stages_regenerate_as_committed(tmp_path):
         assert (tmp_path / "textures" / png).read_bytes() == open(SCENES + "/textures/" + png, "rb").read(), png
 
 
-def test_unknown_scene_is_refused():
-    r = subprocess.run([sys.executable, "-m", "wsoft.stages.bundled", "--out", "/nonexistent", "no_such_scene"],
-                       capture_output=True, text=True, timeout=300, cwd=ROOT)
-    assert r.returncode == 2 and "unknown scene 'no_such_scene'" in r.stderr and "Traceback" not in r.stderr
+def test_unknown_scene_is_refused(capsys):
+    from wsoft.stages.bundled import main
+
+    with pytest.raises(SystemExit) as exc:
+        main(["--out", "/nonexistent", "no_such_scene"])
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and "unknown scene 'no_such_scene'" in err and "Traceback" not in err
 
 
 @pytest.mark.parametrize("name", PLAIN)

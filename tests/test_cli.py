@@ -3,20 +3,17 @@
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 
 import numpy as np
 import pytest
-from conftest import ROOT, scene_path
+from conftest import ROOT, scene_path, wsoft_cli
 
 from wsoft.io import read_exr
 from wsoft.techniques import TECHNIQUES
 
 
 def run(*args, check=True):
-    p = subprocess.run([sys.executable, "-m", "wsoft", *args], capture_output=True, text=True, cwd=ROOT, timeout=600)
+    p = wsoft_cli(*args, cwd=ROOT)
     if check and p.returncode != 0:
         raise AssertionError(f"exit {p.returncode}\n{p.stdout}\n{p.stderr}")
     return p

@@ -182,15 +182,14 @@ def test_supports_agrees_with_plan_and_render():
 
 def test_plan_lists_a_point_light_instead_of_failing(tmp_path):
     """``wsoft plan`` on a stage with a point light lists ssm as not applicable, with the reason."""
-    import subprocess
-    import sys
+    from conftest import wsoft_cli
 
     st = make_stage()
     add_quad(st, "/World/G", (0, 0, 0), 5)
     add_point_light(st, "/World/L", (0, 0, 3))
     path = tmp_path / "point.usda"
     st.GetRootLayer().Export(str(path))
-    p = subprocess.run([sys.executable, "-m", "wsoft", "plan", str(path)], capture_output=True, text=True, timeout=300)
+    p = wsoft_cli("plan", str(path))
     assert p.returncode == 0, p.stderr
     assert "ssm: not applicable to /World/L: the light has no area" in p.stdout
     assert "hard: upload_scene -> gbuffer" in p.stdout

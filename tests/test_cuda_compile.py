@@ -1,11 +1,11 @@
 """The CUDA path without a GPU: every Warp module of the package that owns kernels is compiled for
-CUDA (PTX through the NVRTC that Warp's wheels carry) at sm_70, sm_80 and sm_90, into a temporary
-folder (the user's kernel cache is left alone). An architecture this NVRTC cannot target is
-skipped with the reason (CUDA 13's NVRTC dropped Volta, sm_70: the oldest it targets is sm_75,
-which is compiled instead). Generic kernels compile through their declared
-overloads; the rasterizer's specialised kernels (one Warp module per projection, fragment,
-conservative/alpha, listed/deferring combination) are generated first. A module added later is
-picked up by the walk over the package, with no edit here."""
+CUDA (PTX through the NVRTC that Warp's wheels carry) into a temporary folder (the user's kernel
+cache is left alone): for the newest architecture this NVRTC targets in the quick mode, and for
+sm_70, sm_75 and sm_80 in the full mode (``-m slow``). An architecture this NVRTC cannot target
+is skipped with the reason (CUDA 13's NVRTC dropped Volta, sm_70). Generic kernels compile
+through their declared overloads; the rasterizer's specialised kernels (one Warp module per
+projection, fragment, conservative/alpha, listed/deferring combination) are generated first. A
+module added later is picked up by the walk over the package, with no edit here."""
 
 from __future__ import annotations
 
@@ -19,7 +19,8 @@ import warp as wp
 
 import wsoft
 
-ARCHS = (70, 75, 80, 90)
+NEWEST = "newest"  # the newest architecture the NVRTC targets (sm_90 for CUDA 12 and 13)
+ARCHS = (NEWEST, pytest.param(70, marks=pytest.mark.slow), pytest.param(75, marks=pytest.mark.slow), pytest.param(80, marks=pytest.mark.slow))
 SKIP_PREFIXES = ("wsoft.__main__", "wsoft.bench", "wsoft.usd_scenes", "wsoft.gpu_check")
 
 
@@ -101,7 +102,9 @@ def test_every_module_compiles_for_cuda(modules, arch, tmp_path):
     from warp._src import context  # importable: the fixture checked
 
     supported = getattr(context.runtime, "nvrtc_supported_archs", None)
-    if supported is not None and arch not in supported:
+    if arch == NEWEST:
+        arch = max(supported) if supported else 90
+    elif supported is not None and arch not in supported:
         version = ".".join(map(str, context.runtime.get_nvrtc_version()))
         pytest.skip(f"this NVRTC (CUDA {version}) cannot target sm_{arch}; it targets sm_{min(supported)} and newer")
     _compile_all(modules, arch, tmp_path)
@@ -122,12 +125,13 @@ def _compile_all(modules: dict, arch: int, tmp_path) -> None:
     assert not errors, "\n".join(errors)
 
 
+@pytest.mark.slow
 def test_the_rasterizers_other_corner_sources_compile_for_cuda(modules, tmp_path):
     """Instanced work items and corners projected per triangle (short triangle lists) are the same code
     for every fragment and architecture: those specialisations for one fragment, on one arch."""
     from warp._src import context
 
-    supported = getattr(context.runtime, "nvrtc_supported_archs", None) or [max(ARCHS)]
+    supported = getattr(context.runtime, "nvrtc_supported_archs", None) or [90]
     extra = {k.module.name: k.module for k in rasterizer_kernels(OTHER_SOURCES, fragments=("depth_min",))}
     assert len(extra) == 64 and not set(extra) & set(modules)
     _compile_all(extra, max(supported), tmp_path)

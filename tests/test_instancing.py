@@ -231,22 +231,20 @@ def test_plan_says_what_keeps_instances(pair, monkeypatch):
 def test_cli_instancing_flag(tmp_path):
     """--instancing keep renders city with its instances kept; flatten and auto give one soup."""
     import json
-    import subprocess
-    import sys
+
+    from conftest import wsoft_cli
 
     stats = {}
     for mode in ("keep", "flatten", "auto"):
         out = tmp_path / f"{mode}.json"
-        r = subprocess.run([sys.executable, "-m", "wsoft", "render", "city", "-t", "hard", "--width", "48", "--height", "36",
-                            "--set", "shadow_map_size=256", "--instancing", mode, "--out", str(tmp_path / f"{mode}.exr"), "--stats", str(out)],
-                           capture_output=True, text=True, timeout=600)
+        r = wsoft_cli("render", "city", "-t", "hard", "--width", "48", "--height", "36", "--set", "shadow_map_size=256", "--instancing", mode,
+                      "--out", str(tmp_path / f"{mode}.exr"), "--stats", str(out))
         assert r.returncode == 0, r.stderr
         stats[mode] = json.loads(out.read_text())
     assert stats["keep"]["scene"]["instancing"]["mode"] == "kept" and stats["keep"]["scene"]["instancing"]["instances"] == 344
     assert stats["flatten"]["scene"]["instancing"]["mode"] == "none" and stats["auto"]["scene"]["instancing"]["mode"] == "none"
     assert stats["keep"]["scene"]["triangles"] == stats["flatten"]["scene"]["triangles"] == 1_041_866
-    r = subprocess.run([sys.executable, "-m", "wsoft", "render", "city", "-t", "hard", "--instancing", "sometimes", "--out", str(tmp_path / "x.exr")],
-                       capture_output=True, text=True, timeout=600)
+    r = wsoft_cli("render", "city", "-t", "hard", "--instancing", "sometimes", "--out", str(tmp_path / "x.exr"))
     assert r.returncode == 2 and "--instancing" in r.stderr
 
 

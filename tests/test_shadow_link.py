@@ -7,12 +7,10 @@ what ``wsoft plan`` lists, and the reference against a brute-force count of the 
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
-from conftest import add_camera, add_quad, add_rect_light, make_stage
+from conftest import add_camera, add_quad, add_rect_light, make_stage, wsoft_cli
 
 import wsoft
 from wsoft.techniques import TECHNIQUES, create
@@ -398,7 +396,7 @@ def test_plan_lists_the_shadow_controls(tmp_path):
     sh.CreateShadowFalloffAttr(0.5)
     path = tmp_path / "linked.usda"
     st.GetRootLayer().Export(str(path))
-    run = lambda *a: subprocess.run([sys.executable, "-m", "wsoft", "plan", str(path), *a], capture_output=True, text=True, timeout=300)  # noqa: E731
+    run = lambda *a: wsoft_cli("plan", str(path), *a)  # noqa: E731
     p = run("--json")
     assert p.returncode == 0, p.stderr
     plan = json.loads(p.stdout)

@@ -424,14 +424,11 @@ def test_point_light_is_rejected():
 
 def test_cli_missing_budget_map_is_one_line(tmp_path):
     """From the command line: exit code 2, one line naming the file, no traceback."""
-    import subprocess
-    import sys
-
-    from conftest import ROOT
+    from conftest import ROOT, wsoft_cli
 
     missing = str(tmp_path / "budget.exr")
-    p = subprocess.run([sys.executable, "-m", "wsoft", "render", scene_path("box_plane.usda"), "-t", "ssm", "--set", f"budget_map={missing}",
-                        "--width", "8", "--height", "8", "--device", "cpu", "--out", str(tmp_path / "o.exr")], capture_output=True, text=True, cwd=ROOT, timeout=600, check=False)
+    p = wsoft_cli("render", scene_path("box_plane.usda"), "-t", "ssm", "--set", f"budget_map={missing}", "--width", "8", "--height", "8",
+                  "--device", "cpu", "--out", str(tmp_path / "o.exr"), cwd=ROOT)
     assert p.returncode == 2 and "Traceback" not in p.stderr
     lines = [ln for ln in p.stderr.splitlines() if ln.startswith("wsoft: error")]
     assert len(lines) == 1 and missing in lines[0] and "not found" in lines[0]

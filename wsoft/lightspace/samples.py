@@ -345,8 +345,12 @@ def poisson_disk(n: int, min_distance: float, rng: np.random.Generator) -> np.nd
         misses = 0
         while k < n and misses < 200 * n:
             cand = rng.random((256, 2))
-            for c in cand:
-                if k and np.min(np.sum((pts_a[:k] - c) ** 2, axis=1)) < d2:
+            # darts too near a point placed before this batch, in one go; then one by one in order
+            # against the points this batch places (the same test, the same decisions)
+            k0 = k
+            near = (np.sum((cand[:, None, :] - pts_a[None, :k0]) ** 2, axis=2) < d2).any(axis=1) if k0 else np.zeros(len(cand), bool)
+            for c, too_near in zip(cand, near):
+                if too_near or (k > k0 and np.min(np.sum((pts_a[k0:k] - c) ** 2, axis=1)) < d2):
                     misses += 1
                     continue
                 pts_a[k] = c
