@@ -1,4 +1,4 @@
-"""ESSM (Shen, Feng & Yang) and VSSM: exactness, stability and the hard cases of the issue."""
+"""ESSM (Shen, Feng & Yang) and VSSM: exactness, stability and their hard cases."""
 
 import math
 
@@ -91,10 +91,10 @@ def _tilted_ground(occluder):
 
 
 def test_pcf_fallback_compares_at_texel_centres(device):
-    """Issue 10, item 1: the 2x2 PCF of a non-planar sub-kernel compares each texel's depth with
+    """the 2x2 PCF of a non-planar sub-kernel compares each texel's depth with
     the receiver plane at that texel's centre. At the sample point (up to half a texel away) a
     tilted, fully lit ground shadowed itself in stripes: min V 0.67 and 8.5% of the lit pixels
-    below 0.99 (the old bias 0.002 forces the fallback on every lit kernel)."""
+    below 0.99 (a bias of 0.002 forces the fallback on every lit kernel)."""
     s = _tilted_ground("side")
     ref = wsoft.render(s, "reference", width=64, height=48, device=device, samples=16)
     f = wsoft.render(s, "essm", width=64, height=48, device=device, shadow_map_size=512, bias=0.002)
@@ -104,7 +104,7 @@ def test_pcf_fallback_compares_at_texel_centres(device):
 
 
 def test_every_kernel_is_micro_subdivided(device):
-    """Issue 10, item 2 (§5.2): every kernel is cut into n x n sub-kernels and each classified.
+    """§5.2: every kernel is cut into n x n sub-kernels and each classified.
     Subdividing only kernels whose own value exceeds 1 + ε misses those whose inflated lit texels
     (a tilted receiver) and leaking occluded ones average below it: on a tilted ground under a
     wide penumbra its penumbra MAE is 0.046 against 0.027."""
@@ -119,9 +119,9 @@ def test_every_kernel_is_micro_subdivided(device):
 
 
 def test_default_bias_keeps_lit_planar_kernels_planar(device):
-    """Issue 10, item 3: e^{c bias} < 1 + ε. With the paper's μ = 20 (c = 13.9) the old bias 0.002
-    gave e^{c bias} = 1.028 > 1.02: every lit planar kernel fell back to PCF (9 per sample on
-    box_plane). The default bias is now ln(1 + ε)/(2c): no fallback there."""
+    """e^{c bias} < 1 + ε. With the paper's μ = 20 (c = 13.9) a bias of 0.002
+    gives e^{c bias} = 1.028 > 1.02: every lit planar kernel falls back to PCF (9 per sample on
+    box_plane). The default bias, ln(1 + ε)/(2c), leaves no fallback there."""
     scene = wsoft.load_scene(scene_path("box_plane.usda"))
     f = wsoft.render(scene, "essm", width=96, height=72, device=device)
     c = f.counters()
@@ -132,7 +132,7 @@ def test_default_bias_keeps_lit_planar_kernels_planar(device):
 
 
 def test_float32_sat_exponent_from_its_mantissa(device):
-    """Issue 10, item 4: a float32 SAT at the overflow exponent (74.2 at 1024²) turned small kernels
+    """a float32 SAT at the overflow exponent (74.2 at 1024²) turns small kernels
     into noise (box_plane MAE 0.021, ogre 0.77); with R from the mantissa the error is that of a
     soft exponent (MAE < 0.005 on box_plane)."""
     scene = wsoft.load_scene(scene_path("box_plane.usda"))

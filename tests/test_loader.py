@@ -389,7 +389,7 @@ def _instancer_stage(*, invisible=(3,), indices=(0, 1, 0, 1), time_samples=False
 
 
 def test_point_instancer_places_its_prototypes_where_usd_does():
-    """Issue 11, item 2: a PointInstancer's instances are loaded (flattened: one copy each), at
+    """A PointInstancer's instances are loaded (flattened: one copy each), at
     the bounds USD itself computes per instance (positions, scales, orientations, the prototypes'
     own transforms), without its invisibleIds, and the prototypes are not drawn where they are
     authored."""
@@ -456,9 +456,9 @@ def test_point_instancer_time_samples_bad_indices_and_missing_prototypes():
 
 
 def test_shadow_link_and_shadow_distance_are_applied_not_warned():
-    """UsdLux controls wsoft applies since issue 14 part 2 (a shadowLink collection that excludes
-    casters, as Usd.CollectionAPI computes membership, and a finite inputs:shadow:distance) are read
-    onto the light and no longer warned about; the defaults (everything included, -1) are silent.
+    """UsdLux controls wsoft applies (a shadowLink collection that excludes casters, as
+    Usd.CollectionAPI computes membership, and a finite inputs:shadow:distance) are read onto the
+    light, with no warning; the defaults (everything included, -1) are silent.
     Rendering them: tests/test_shadow_link.py."""
     from pxr import Sdf, UsdLux
 

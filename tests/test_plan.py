@@ -68,7 +68,7 @@ def test_device_copy_is_reused_until_changed(device):
 
 
 def test_several_techniques_share_one_graph(device):
-    """pcf and pcss used to collide on 'visibility[Light]'; now each visibility carries its technique,
+    """Each technique's visibility carries its technique (pcf and pcss do not share 'visibility[Light]'),
     the G-buffer runs once, hard and pcf share their depth map, and each frame equals its own render."""
     scene = wsoft.load_scene(scene_path("box_plane.usda"))
     kw = dict(width=48, height=36, device=device)

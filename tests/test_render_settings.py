@@ -116,7 +116,7 @@ def test_selection_order_flag_metadata_get_stage_render_settings_none(monkeypatc
     _settings(st, "/Render/B", resolution=(20, 30))
     s = wsoft.load_scene(st)
     assert s.render_settings is None and s.render_settings_source == "none"
-    assert wsoft.plan(s, ["hard"])["framing"]["resolution"] == [640, 480]  # the old defaults
+    assert wsoft.plan(s, ["hard"])["framing"]["resolution"] == [640, 480]  # the defaults without settings
     st.SetMetadata("renderSettingsPrimPath", "/Render/A")
     s = wsoft.load_scene(st)
     assert (s.render_settings.path, s.render_settings.source, s.render_settings.resolution) == ("/Render/A", "metadata", (30, 20))

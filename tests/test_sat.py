@@ -99,7 +99,7 @@ def test_uint32_full_sat_overflows_where_tiles_do_not(device):
 
 
 def test_float32_sat_loses_precision_at_4096_tile_grid_does_not(device):
-    """The issue's precision test: a 4096² ESM basis. Box sums of 3x3 kernels near the far corner
+    """Precision at 4096²: an ESM basis. Box sums of 3x3 kernels near the far corner
     from a float32 full SAT are measurably wrong against float64 (> 1% median relative error);
     the uint32 tile grid (μ = 20) stays within 2^-μ per texel of the box (relative to its area)."""
     n, mu = 4096, 20

@@ -1,4 +1,4 @@
-"""UsdLux semantics that change who casts a light's shadow (issue 14, part 2), on stages built in
+"""UsdLux semantics that change who casts a light's shadow, on stages built in
 memory: ``collection:shadowLink`` (excluded prims cast no shadow of that light, for every
 technique, and are left out of its depth maps), ``inputs:shadow:distance`` (honoured or refused
 with a one-line reason, per technique), ``inputs:shadow:color`` (tints ``R G B``, never ``V``),
@@ -93,7 +93,7 @@ def test_loader_reads_the_shadow_controls():
     assert [s.prims[i] for i in s.lights[0].shadow_excluded] == ["/World/A"]
     m = s.casting_mask(s.lights[0])
     assert m.sum() == s.triangle_count - 2 and not m[s.tri_prim == s.prims.index("/World/A")].any()
-    assert not [w for w in s.warnings if "shadowLink" in w or "shadow:distance" in w]  # applied now: no warning
+    assert not [w for w in s.warnings if "shadowLink" in w or "shadow:distance" in w]  # applied: no warning
     st = two_blockers()
     link(st, "/World/Light", include=["/World/B"], include_root=False)
     s = wsoft.load_scene(st)
@@ -241,8 +241,8 @@ def test_shadow_distance_under_a_distant_light(name):
 
 
 def test_no_link_adds_no_pass_and_no_triangle_list():
-    """The common case (nothing excluded, no distance): the same passes as before, no counters of a
-    caster list, no warnings."""
+    """The common case (nothing excluded, no distance): no caster list (no counters of one), no
+    warnings."""
     scene = wsoft.load_scene(two_blockers())
     f = render(scene, "pcss")
     assert not any("casting_triangles" in c for c in f.stats["counters"]["passes"].values())

@@ -174,7 +174,7 @@ def _rotated_plate_map(n: int, angle: float) -> np.ndarray:
 
 @pytest.mark.parametrize("angle", [0.0, 30.0])
 def test_nearest_diagonal_keeps_the_casters_depth_off_the_ground(device, angle):
-    """Issue 10, item 8: why §5.2's microrects lose to micropatches on a solid plate. In the
+    """Why §5.2's microrects lose to micropatches on a solid plate. In the
     second pass a diagonal that the first pass of the retained microrect at its -x-y corner leaves
     is merged, whatever its depth, into the one at its +x+y corner: a ground microrect next to the plate's edge takes a
     plate diagonal and with it the plate's (minimum) depth, and its extent, mostly ground, then
@@ -452,9 +452,9 @@ def test_table1_rows_and_report(tmp_path):
 
 
 def test_microrect_gather_respects_the_budget(device):
-    """Issue 10, item 6: at a coarse level a receiver reads the (b+1)² cells over its search area
-    (at most (ceil(b)+1)² micro-occluders a level, as §3/§4.2 cap them, like micropatches); the
-    old gather read one more cell each side, up to (b+3)² (kept as ``gather=wide``). Checked on
+    """at a coarse level a receiver reads the (b+1)² cells over its search area
+    (at most (ceil(b)+1)² micro-occluders a level, as §3/§4.2 cap them, like micropatches);
+    ``gather=wide`` reads one more cell each side, up to (b+3)². Checked on
     foliage (fig1_plant) and on a solid plate, where the budget gather must not under-occlude."""
     from wsoft.stages.ssm_cases import stage_file
 
@@ -478,7 +478,7 @@ def test_microrect_gather_respects_the_budget(device):
 
 
 def test_nearest_diagonal_microrects_beat_micropatches_on_a_solid_plate(device):
-    """Issue 10, item 8: on the plate turned 30° in the light's view, at b_mo = 3 and on the same
+    """on the plate turned 30° in the light's view, at b_mo = 3 and on the same
     search areas and levels, microrects with the nearest-depth diagonal beat micropatches on the
     reference's penumbra; §5.2's own merge does not (240 x 180, 256 spp: penumbra MAE 0.178
     micropatches, 0.194 paper microrects, 0.080 nearest)."""
@@ -496,10 +496,10 @@ def test_nearest_diagonal_microrects_beat_micropatches_on_a_solid_plate(device):
 
 
 def test_occluder_types_share_search_areas_and_levels(device):
-    """Issue 10, item 7: the region grown to the micro-occluders' support (§6) decides lit/umbra
+    """the region grown to the micro-occluders' support (§6) decides lit/umbra
     only; the search area itself drives the refinement and the level. Micropatch and microrect
-    runs then search the same areas (on fig1_plant at b = 3 the share of backprojecting receivers
-    was 0.51 against 0.89, now both 0.35 at 240 x 180)."""
+    runs then search the same areas (on fig1_plant at b = 3 both backproject 0.35 of the receivers at
+    240 x 180)."""
     scene = wsoft.load_scene(scene_path("fig1_plant.usdc"))
     kw = {"width": 96, "height": 72, "device": device, "budget": 3.0}
     patch = wsoft.render(scene, "ssm", occluder="micropatch", **kw).counters()
@@ -513,7 +513,7 @@ def test_occluder_types_share_search_areas_and_levels(device):
 
 
 def test_table2_denominators_are_reported(device):
-    """Issue 10, item 9: the backprojecting share over all pixels beside the share over covered
+    """the backprojecting share over all pixels beside the share over covered
     pixels, and the mean search width in texels."""
     scene = wsoft.load_scene(scene_path("fig1_plant.usdc"))
     c = wsoft.render(scene, "ssm", width=64, height=48, device=device, budget=math.inf).counters()

@@ -1,4 +1,4 @@
-"""``wsoft bench usd_pipeline --quick`` (issue 14's evidence report): its four sections, the images
+"""``wsoft bench usd_pipeline --quick`` (render settings, shadow linking and baking, end to end): its four sections, the images
 and stages it links, and that its rows say what the pipeline must do."""
 
 from __future__ import annotations
