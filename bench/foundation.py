@@ -139,7 +139,11 @@ def _raster_vs_raycast(case: dict, ctx: dict) -> dict:
 
 
 def _baseline_module(rev: str):
-    """The rasterizer module of ``rev`` from the git history of the checkout wsoft runs from, or None."""
+    """The rasterizer module of ``rev`` from the git history of the checkout wsoft runs from, or None
+    (no such history). It runs against this checkout's package: an import of a name that its
+    ``wsoft`` module does not hold takes the name from the module that defines it here
+    (:func:`_resolve_moved_imports`)."""
+    import ast
     import subprocess
     import sys
     import types
@@ -147,18 +151,118 @@ def _baseline_module(rev: str):
     import wsoft
 
     root = Path(wsoft.__file__).resolve().parents[1]
+    where = f"{rev}:{BASELINES[rev][0]}"
     try:
-        src = subprocess.run(["git", "show", f"{rev}:{BASELINES[rev][0]}"], cwd=root, capture_output=True, text=True, check=True, timeout=60).stdout
+        src = subprocess.run(["git", "show", where], cwd=root, capture_output=True, text=True, check=True, timeout=60).stdout
     except (OSError, subprocess.SubprocessError):
         return None
     name = f"wsoft_baseline_{rev}"
     path = Path(cache_dir_for_baseline()) / f"{name}.py"
-    path.write_text(src)  # a file, so that Warp can read the kernels' source
+    path.write_text(src)  # a file, so that Warp can read the kernels' source (the lines keep their numbers)
+    tree = _resolve_moved_imports(ast.parse(src, str(path)), where)
     mod = types.ModuleType(name)
     mod.__file__ = str(path)
     sys.modules[name] = mod
-    exec(compile(src, str(path), "exec", dont_inherit=True), mod.__dict__)  # not this file's __future__ annotations
+    exec(compile(tree, str(path), "exec", dont_inherit=True), mod.__dict__)  # not this file's __future__ annotations
     return mod
+
+
+def _resolve_moved_imports(tree, where: str):
+    """``tree`` (a module's AST) with each ``from wsoft.X import a, b`` (at any depth) split so that a
+    name ``wsoft.X`` does not hold (neither an attribute nor a submodule) is imported from the wsoft
+    module that holds it (:func:`_module_holding`), on the same line. ``where`` names the source in
+    errors: an ImportError names a name that no module holds."""
+    import ast
+    import importlib
+
+    def held(module: str, name: str) -> bool:
+        try:
+            mod = importlib.import_module(module)
+        except ModuleNotFoundError as exc:
+            if exc.name and (module == exc.name or module.startswith(exc.name + ".")):
+                return False  # the module itself is not there
+            raise
+        if hasattr(mod, name):
+            return True
+        try:
+            importlib.import_module(f"{module}.{name}")
+        except ModuleNotFoundError:
+            return False
+        return True
+
+    class Split(ast.NodeTransformer):
+        def visit_ImportFrom(self, node):
+            if node.level or not (node.module == "wsoft" or node.module.startswith("wsoft.")):
+                return node
+            keep, moved = [], {}
+            for alias in node.names:
+                if alias.name == "*" or held(node.module, alias.name):
+                    keep.append(alias)
+                else:
+                    moved.setdefault(_module_holding(alias.name, f"{where}: from {node.module} import {alias.name}"), []).append(alias)
+            if not moved:
+                return node
+            nodes = ([ast.ImportFrom(module=node.module, names=keep, level=0)] if keep else []) + [
+                ast.ImportFrom(module=m, names=names, level=0) for m, names in moved.items()]
+            return [ast.copy_location(n, node) for n in nodes]
+
+    return ast.fix_missing_locations(Split().visit(tree))
+
+
+def _wsoft_modules() -> list:
+    """Every importable module of the wsoft package (its ``__main__`` aside), imported, by name."""
+    import importlib
+    import pkgutil
+
+    import wsoft
+
+    out = [wsoft]
+    for info in sorted(pkgutil.walk_packages(wsoft.__path__, "wsoft."), key=lambda m: m.name):
+        if info.name.rsplit(".", 1)[-1] == "__main__":
+            continue
+        try:
+            out.append(importlib.import_module(info.name))
+        except ImportError:  # an optional dependency missing here: it cannot be the one
+            continue
+    return out
+
+
+def _module_holding(name: str, what: str) -> str:
+    """The wsoft module ``name`` is taken from: of the modules that hold it, the one that defines it
+    (its ``__module__``, else a top-level binding in its source), else any when they all hold the
+    same object. ImportError (naming ``name`` and ``what``) when none holds it or the choice is not one."""
+    import ast
+    import inspect
+
+    holders = [m for m in _wsoft_modules() if hasattr(m, name)]
+    if not holders:
+        raise ImportError(f"{what}: no wsoft module holds {name!r}", name=name)
+
+    def binds(mod) -> bool:
+        try:
+            tree = ast.parse(inspect.getsource(mod))
+        except (OSError, TypeError):
+            return False
+        def bound(t) -> bool:
+            if isinstance(t, ast.Name):
+                return t.id == name
+            if isinstance(t, ast.Starred):
+                return bound(t.value)
+            return isinstance(t, (ast.Tuple, ast.List)) and any(bound(e) for e in t.elts)
+
+        for node in tree.body:
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)) and node.name == name:
+                return True
+            targets = node.targets if isinstance(node, ast.Assign) else [node.target] if isinstance(node, ast.AnnAssign) else []
+            if any(bound(t) for t in targets):
+                return True
+        return False
+
+    defining = [m for m in holders if getattr(getattr(m, name), "__module__", None) == m.__name__] or [m for m in holders if binds(m)]
+    chosen = defining or holders
+    if len({id(getattr(m, name)) for m in chosen}) > 1:
+        raise ImportError(f"{what}: {name!r} is defined differently in " + ", ".join(m.__name__ for m in chosen), name=name)
+    return chosen[0].__name__
 
 
 def cache_dir_for_baseline() -> str:
