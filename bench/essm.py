@@ -19,8 +19,8 @@ STORAGE_VARIATIONS = {
     "mu": [{"mu": 16}, {"mu": 24}],
     "sat": [{"sat": "uint32"}, {"sat": "float32"}],
     "c": [{"c": 8.0}, {"c": 20.0}, {"c": 27.7}],  # around the optimal R = 13.9 of the μ = 20 tile grid
-    # the other readings of §5.2 and the old bias (issue 10): only flagged kernels subdivided, the
-    # fixed bias 0.002 whose e^{c bias} = 1.028 exceeds 1 + ε, and both
+    # the other reading of §5.2 and a fixed bias beside the defaults: only flagged kernels subdivided,
+    # the fixed bias 0.002 whose e^{c bias} = 1.028 exceeds 1 + ε, and both
     "reading": [{"subdivide": "flagged"}, {"bias": 0.002}, {"subdivide": "flagged", "bias": 0.002}],
     # the float32 SAT (not in the paper) at a larger exponent than its mantissa rule's 2.8
     "float32 c": [{"sat": "float32", "c": 5.55}, {"sat": "float32", "c": 8.3}],
@@ -105,16 +105,16 @@ def fidelity_section(renders: list[dict]) -> list[str]:
             and r["case"]["params"].get("shadow_map_size") == 1024]
     if not rows:
         return []
-    L = ["", "## Readings of the paper (issue 10), each beside the other one", "",
+    L = ["", "## Readings of the paper, each beside the other one", "",
          "* **§5.2 micro-subdivision**: every kernel is cut into n x n sub-kernels and each is classified (`subdivide=always`, the",
          "  default); `flagged` cuts only a kernel whose own value exceeds 1 + ε, which misses kernels whose inflated lit texels and",
          "  leaking occluded ones average below it.",
-         "* **bias and ε**: a lit planar kernel's ESM value is e^{c·bias}; the old fixed bias 0.002 gave 1.028 > 1 + ε = 1.02 at",
-         "  c = 13.9, so almost every lit kernel fell back to PCF. The default bias is now ln(1 + ε)/(2c).",
-         "* **PCF fallback**: each texel's depth is compared with the receiver plane at that texel's centre (it was the sample point,",
-         "  up to half a texel away, which striped tilted lit ground); no parameter keeps the old comparison.",
+         "* **bias and ε**: a lit planar kernel's ESM value is e^{c·bias}; a fixed bias 0.002 gives 1.028 > 1 + ε = 1.02 at",
+         "  c = 13.9, so almost every lit kernel falls back to PCF (`bias=0.002`). The default bias is ln(1 + ε)/(2c).",
+         "* **PCF fallback**: each texel's depth is compared with the receiver plane at that texel's centre, not at the sample point",
+         "  (up to half a texel away, which would stripe tilted lit ground); no parameter selects the sample-point comparison.",
          "* **float32 SAT** (not from the paper): its exponent comes from its 24-bit mantissa, R = 24 ln 2 − 2 ln N (2.8 at 1024²),",
-         "  not from its overflow bound (74.2 at 1024²), which turned small kernels into noise.",
+         "  not from its overflow bound (74.2 at 1024²), which turns small kernels into noise.",
          "* **§6.2 and §7 cannot both hold**: §6.2's μ = 20 integer tile grid fixes R = μ ln 2 = 13.9, while §7 asks for R from the",
          "  float range (ln FLT_MAX ≈ 88). wsoft keeps §6.2's storage and R = 13.9; a larger c with μ = 20 loses the precision of",
          "  the receivers *nearest the light* (small normalised depth, where e^{cz} is a few integer units), and a smaller c leaks",

@@ -134,7 +134,7 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
     L.append("also runs without its far bound and at 8 bits. On `lightmapped_bridge` its map holds only the dynamic")
     L.append("casters (character, ball), so it is measured against a reference whose occluders are those casters; there")
     L.append("the far bound *removes* the character's shadow from the riverbed under the deck (which that reference counts")
-    L.append("as occluded) — the point is the lighting: the torch under the bridge is no longer masked (image below).")
+    L.append("as occluded) — the point is the lighting: with it the torch under the bridge is not masked (image below).")
     L.append("")
     L += accuracy_table(rows)
     best = lowest_mae(rows)

@@ -1,6 +1,6 @@
 """Sweep ``foundation``: ``hard`` and low-sample ``reference`` against the cached reference on the
-bundled scenes at two resolutions, the rasterizer against one BVH ray per texel and against the
-rasterizer before the fragment factory (issue 9; from the git history of a checkout), and
+bundled scenes at two resolutions, the rasterizer against one BVH ray per texel and against
+earlier rasterizer revisions (:data:`BASELINES`, read from the git history of a checkout), and
 reference shadow-ray throughput beside Embree's (embreex) on the same rays and thread count.
 """
 
@@ -20,18 +20,19 @@ FULL_VIEWS = [
     ("city", "Sun"), ("city", "Rect"),
 ]
 QUICK_VIEWS = [("box_plane", None), ("cutout", None), ("multi_light", "Disk")]
-# earlier rasterizers timed against the current one: commit -> (its file, what it was)
+# earlier rasterizer revisions timed against this checkout's: commit -> (its file, what it is)
 BASELINES = {
     "da242d3": ("wsoft/raster/lightview.py",
-                "the single depth rasterizer with runtime mode flags, before the fragment factory (issue 9). Texels differ where a large "
-                "triangle's depth was stepped from a band's first row before (now from its line's start, whichever band: the result no "
-                "longer depends on the thread count), and where the only surfaces lie behind every receiver (deeper than the view's far "
-                "depth: the new rasterizer leaves them empty)"),
+                "the single depth rasterizer with runtime mode flags, before the fragment factory. Texels differ where it steps a "
+                "large triangle's depth from a band's first row (this checkout's rasterizer steps it from its line's start, whichever "
+                "band, so its map does not depend on the thread count), and where the only surfaces lie behind every receiver "
+                "(deeper than the view's far depth: this checkout's rasterizer leaves them empty)"),
     "19e2496": ("wsoft/raster/rasterizer.py",
-                "the factory before each point was projected once first (`project_points`) and before an orthographic view's small "
-                "triangles (boxes up to 16 texels, was 8) looped without a branch per texel (issue 11 item 3). Texels differ (Sun) "
-                "where a triangle with a 9-16 texel box now takes the flat loop, whose depth is evaluated from the box's first "
-                "texel centre rather than from its line's"),
+                "the fragment factory with every kernel projecting its triangles' corners itself and a flat loop, with a branch per "
+                "texel, over boxes up to 8 texels (this checkout's projects each point once first, `project_points`, and loops over "
+                "an orthographic view's boxes up to 16 texels without a branch per texel). Texels differ (Sun) where a triangle with "
+                "a 9-16 texel box takes this checkout's flat loop, whose depth is evaluated from the box's first texel centre rather "
+                "than from its line's"),
 }
 
 
@@ -139,7 +140,11 @@ def _raster_vs_raycast(case: dict, ctx: dict) -> dict:
 
 
 def _baseline_module(rev: str):
-    """The rasterizer module of ``rev`` from the git history of the checkout wsoft runs from, or None."""
+    """The rasterizer module of ``rev`` from the git history of the checkout wsoft runs from, or None
+    (no such history). It runs against this checkout's package: an import of a name that its
+    ``wsoft`` module does not hold takes the name from the module that defines it here
+    (:func:`_resolve_moved_imports`)."""
+    import ast
     import subprocess
     import sys
     import types
@@ -147,18 +152,118 @@ def _baseline_module(rev: str):
     import wsoft
 
     root = Path(wsoft.__file__).resolve().parents[1]
+    where = f"{rev}:{BASELINES[rev][0]}"
     try:
-        src = subprocess.run(["git", "show", f"{rev}:{BASELINES[rev][0]}"], cwd=root, capture_output=True, text=True, check=True, timeout=60).stdout
+        src = subprocess.run(["git", "show", where], cwd=root, capture_output=True, text=True, check=True, timeout=60).stdout
     except (OSError, subprocess.SubprocessError):
         return None
     name = f"wsoft_baseline_{rev}"
     path = Path(cache_dir_for_baseline()) / f"{name}.py"
-    path.write_text(src)  # a file, so that Warp can read the kernels' source
+    path.write_text(src)  # a file, so that Warp can read the kernels' source (the lines keep their numbers)
+    tree = _resolve_moved_imports(ast.parse(src, str(path)), where)
     mod = types.ModuleType(name)
     mod.__file__ = str(path)
     sys.modules[name] = mod
-    exec(compile(src, str(path), "exec", dont_inherit=True), mod.__dict__)  # not this file's __future__ annotations
+    exec(compile(tree, str(path), "exec", dont_inherit=True), mod.__dict__)  # not this file's __future__ annotations
     return mod
+
+
+def _resolve_moved_imports(tree, where: str):
+    """``tree`` (a module's AST) with each ``from wsoft.X import a, b`` (at any depth) split so that a
+    name ``wsoft.X`` does not hold (neither an attribute nor a submodule) is imported from the wsoft
+    module that holds it (:func:`_module_holding`), on the same line. ``where`` names the source in
+    errors: an ImportError names a name that no module holds."""
+    import ast
+    import importlib
+
+    def held(module: str, name: str) -> bool:
+        try:
+            mod = importlib.import_module(module)
+        except ModuleNotFoundError as exc:
+            if exc.name and (module == exc.name or module.startswith(exc.name + ".")):
+                return False  # the module itself is not there
+            raise
+        if hasattr(mod, name):
+            return True
+        try:
+            importlib.import_module(f"{module}.{name}")
+        except ModuleNotFoundError:
+            return False
+        return True
+
+    class Split(ast.NodeTransformer):
+        def visit_ImportFrom(self, node):
+            if node.level or not (node.module == "wsoft" or node.module.startswith("wsoft.")):
+                return node
+            keep, moved = [], {}
+            for alias in node.names:
+                if alias.name == "*" or held(node.module, alias.name):
+                    keep.append(alias)
+                else:
+                    moved.setdefault(_module_holding(alias.name, f"{where}: from {node.module} import {alias.name}"), []).append(alias)
+            if not moved:
+                return node
+            nodes = ([ast.ImportFrom(module=node.module, names=keep, level=0)] if keep else []) + [
+                ast.ImportFrom(module=m, names=names, level=0) for m, names in moved.items()]
+            return [ast.copy_location(n, node) for n in nodes]
+
+    return ast.fix_missing_locations(Split().visit(tree))
+
+
+def _wsoft_modules() -> list:
+    """Every importable module of the wsoft package (its ``__main__`` aside), imported, by name."""
+    import importlib
+    import pkgutil
+
+    import wsoft
+
+    out = [wsoft]
+    for info in sorted(pkgutil.walk_packages(wsoft.__path__, "wsoft."), key=lambda m: m.name):
+        if info.name.rsplit(".", 1)[-1] == "__main__":
+            continue
+        try:
+            out.append(importlib.import_module(info.name))
+        except ImportError:  # an optional dependency missing here: it cannot be the one
+            continue
+    return out
+
+
+def _module_holding(name: str, what: str) -> str:
+    """The wsoft module ``name`` is taken from: of the modules that hold it, the one that defines it
+    (its ``__module__``, else a top-level binding in its source), else any when they all hold the
+    same object. ImportError (naming ``name`` and ``what``) when none holds it or the choice is not one."""
+    import ast
+    import inspect
+
+    holders = [m for m in _wsoft_modules() if hasattr(m, name)]
+    if not holders:
+        raise ImportError(f"{what}: no wsoft module holds {name!r}", name=name)
+
+    def binds(mod) -> bool:
+        try:
+            tree = ast.parse(inspect.getsource(mod))
+        except (OSError, TypeError):
+            return False
+        def bound(t) -> bool:
+            if isinstance(t, ast.Name):
+                return t.id == name
+            if isinstance(t, ast.Starred):
+                return bound(t.value)
+            return isinstance(t, (ast.Tuple, ast.List)) and any(bound(e) for e in t.elts)
+
+        for node in tree.body:
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)) and node.name == name:
+                return True
+            targets = node.targets if isinstance(node, ast.Assign) else [node.target] if isinstance(node, ast.AnnAssign) else []
+            if any(bound(t) for t in targets):
+                return True
+        return False
+
+    defining = [m for m in holders if getattr(getattr(m, name), "__module__", None) == m.__name__] or [m for m in holders if binds(m)]
+    chosen = defining or holders
+    if len({id(getattr(m, name)) for m in chosen}) > 1:
+        raise ImportError(f"{what}: {name!r} is defined differently in " + ", ".join(m.__name__ for m in chosen), name=name)
+    return chosen[0].__name__
 
 
 def cache_dir_for_baseline() -> str:
@@ -182,20 +287,20 @@ def _raster_baseline(case: dict, ctx: dict) -> dict:
     scene = load(case["scene"])
     light = scene.find_light(case["light"]) if case["light"] else scene.lights[0]
     row = {"scene": case["scene"], "light": light.path, "device": case["device"], "size": case["size"], "baseline": case["baseline"]}
-    old = _baseline_module(case["baseline"])
-    if old is None:
+    base = _baseline_module(case["baseline"])
+    if base is None:
         return row | {"skipped": f"no git history with {case['baseline']}:{BASELINES[case['baseline']][0]} (run from a checkout)"}
     ds, view = _light_map_view(case, scene, light)
-    # the same view for both (the old module's own LightView type, the new view's geometry): the
-    # views' fitting changed since (a distant light's depth origin), the rasterizers are compared
-    oview = old.LightView(light_path=view.light_path, persp=view.persp, origin=view.origin, axes=view.axes, window=view.window,
-                          near=view.near, far=view.far, width=view.width, height=view.height)
-    new_fn = lambda: rasterize(ds, view, alpha_tested=scene.has_cutouts)  # noqa: E731
-    old_fn = lambda: old.rasterize(ds, oview, alpha_tested=scene.has_cutouts)  # noqa: E731
-    a, b = new_fn().depth.numpy(), old_fn().depth.numpy()
-    tn, to = [], []
+    # the same view for both (the baseline module's own LightView type, this checkout's view geometry):
+    # the revisions fit views differently (a distant light's depth origin), the rasterizers are compared
+    base_view = base.LightView(light_path=view.light_path, persp=view.persp, origin=view.origin, axes=view.axes, window=view.window,
+                               near=view.near, far=view.far, width=view.width, height=view.height)
+    checkout_fn = lambda: rasterize(ds, view, alpha_tested=scene.has_cutouts)  # noqa: E731
+    base_fn = lambda: base.rasterize(ds, base_view, alpha_tested=scene.has_cutouts)  # noqa: E731
+    a, b = checkout_fn().depth.numpy(), base_fn().depth.numpy()
+    tn, tb = [], []
     for _ in range(11):
-        for fn, acc in ((new_fn, tn), (old_fn, to)):
+        for fn, acc in ((checkout_fn, tn), (base_fn, tb)):
             wp.synchronize()
             t0 = time.perf_counter()
             fn()
@@ -203,13 +308,13 @@ def _raster_baseline(case: dict, ctx: dict) -> dict:
             acc.append(1e3 * (time.perf_counter() - t0))
     both = (a < DEPTH_CLEAR) & (b < DEPTH_CLEAR)
     rel = np.abs(a - b)[both] / b[both]
-    return row | {"new_ms": statistics.median(tn), "baseline_ms": statistics.median(to), "new_over_baseline": statistics.median(tn) / statistics.median(to),
-                  "new_ms_runs": tn, "baseline_ms_runs": to, "identical_texels": float(np.mean(a == b)),
+    return row | {"new_ms": statistics.median(tn), "baseline_ms": statistics.median(tb), "new_over_baseline": statistics.median(tn) / statistics.median(tb),
+                  "new_ms_runs": tn, "baseline_ms_runs": tb, "identical_texels": float(np.mean(a == b)),
                   "coverage_mismatch": int(((a < DEPTH_CLEAR) != (b < DEPTH_CLEAR)).sum()), "max_rel_diff": float(rel.max()) if rel.size else 0.0}
 
 
 def _raster_bound(case: dict, ctx: dict) -> dict:
-    """Issue 11 item 3's bound (:mod:`wsoft.bench.raster_bound`): the rasterizer, the idealised
+    """The bound on the 15x target (:mod:`wsoft.bench.raster_bound`): the rasterizer, the idealised
     depth-only kernel and the fetch-and-box kernel on the same orthographic view and thread layout,
     and one BVH ray per texel, in 9 alternating rounds after a warm-up (medians)."""
     import statistics
@@ -439,7 +544,7 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
     L = report_header("foundation", rows, md, ctx)
     L += accuracy_table(renders)
     if raster:
-        L += ["", "## Light depth map: rasterizer vs one BVH ray per texel (targets: >= 10x, issue 11 item 3 asks >= 15x; CPU time / wall >= 1.7 on 2 cores)", ""]
+        L += ["", "## Light depth map: rasterizer vs one BVH ray per texel (target: >= 15x, floor >= 10x; CPU time / wall >= 1.7 on 2 cores)", ""]
         L.append("| scene | light | device | size | triangles | raster ms | ray/texel ms | speedup | raster CPU/wall | ray CPU/wall | coverage mismatch | depth rel. err p99 |")
         L.append("|---|---|---|---|---|---|---|---|---|---|---|---|")
         for r in raster:
@@ -452,7 +557,7 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
         L.append("`pass`: the reference's tracing kernel, which generates each ray from its light sample (the stratified sample, the")
         L.append("light point, the direction) before tracing it; `rays`: the same rays written out first and traced from arrays, as")
         L.append("Embree traces them. `ray`: one ray at a time through Warp's `mesh_query_ray_anyhit`; `packet`: a receiver's rays 32")
-        L.append("at a time through the same BVH (`wsoft.scene.packets`). Target (issue 11): packet ≥ 1.0× Embree on the same rays,")
+        L.append("at a time through the same BVH (`wsoft.scene.packets`). Target: packet ≥ 1.0× Embree on the same rays,")
         L.append("1 thread and all threads. `identical`: packet and per-ray answers equal bit for bit (pass visibility and ray hits).")
         L.append("")
         L.append("| scene | light | samples | threads | rays | traced | Warp ray Mrays/s | Warp packet Mrays/s | Embree Mrays/s | packet / Embree | "
@@ -460,7 +565,7 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
         L.append("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
         for r in thr:
             if "pass_packet_mrays_s" not in r:
-                continue  # a row of the older layout (rerun the sweep)
+                continue  # a row without the packet columns (rerun the sweep)
             for kind in ("rays", "pass"):
                 e, e1 = r.get("embree_mrays_s"), r.get("embree_1t_mrays_s")
                 emb = f"{e:.2f} ({r['embree_cpu_over_wall']:.2f})" if e else str(r.get("embree", ""))
@@ -483,8 +588,8 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
     if rf:
         c0 = rf[0]["case"]
         L += ["", f"## `reference samples={c0['samples']}` at {c0['width']}×{c0['height']}: per-ray against packet traversal", ""]
-        L.append("The reference passes of a frame (every light of the stage), median of 3 after a warm-up, with `traversal=ray` (before)")
-        L.append("and `traversal=packet` (after, the CPU default); `identical`: every light's V and V_stderr equal bit for bit.")
+        L.append("The reference passes of a frame (every light of the stage), median of 3 after a warm-up, with `traversal=ray` (one")
+        L.append("ray at a time) and `traversal=packet` (the CPU default); `identical`: every light's V and V_stderr equal bit for bit.")
         L.append("")
         L.append("| scene | lights | triangles | ray ms | packet ms | speed-up | identical |")
         L.append("|---|---|---|---|---|---|---|")
@@ -511,13 +616,13 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
     base = [r for r in rows if r["case"]["kind"] == "raster_baseline"]
     if base:
         L += ["", "## The rasterizer against earlier versions of itself (same view, alternating runs in one process)", ""]
-        L.append("`before`: the rasterizer module of an earlier commit, loaded from the git history; `now`: this checkout's. Median of 11")
+        L.append("`baseline`: the rasterizer module of an earlier commit, loaded from the git history; `checkout`: this checkout's. Median of 11")
         L.append("alternating runs each, on the same view, with the sweep's thread count. The earlier versions:")
         L.append("")
         for rev in dict.fromkeys(r["baseline"] for r in base):
-            L.append(f"- `{rev}`: {BASELINES[rev][1] if rev in BASELINES else 'no longer listed in BASELINES'}.")
+            L.append(f"- `{rev}`: {BASELINES[rev][1] if rev in BASELINES else 'not in BASELINES'}.")
         L.append("")
-        L.append("| scene | light | device | size | before | before ms | now ms | now / before | identical texels | max rel. difference |")
+        L.append("| scene | light | device | size | baseline | baseline ms | checkout ms | checkout / baseline | identical texels | max rel. difference |")
         L.append("|---|---|---|---|---|---|---|---|---|---|")
         for r in base:
             if "skipped" in r:
@@ -527,7 +632,7 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
                      f"{r['new_over_baseline']:.3f} | {r['identical_texels']:.5f} | {r['max_rel_diff']:.1e} |")
     bound = [r for r in rows if r["case"]["kind"] == "raster_bound"]
     if bound:
-        L += ["", "## A bound for issue 11 item 3: an idealised rasterizer on the same view (`wsoft.bench.raster_bound`)", ""]
+        L += ["", "## A bound on the 15x target: an idealised rasterizer on the same view (`wsoft.bench.raster_bound`)", ""]
         L.append("Two stripped kernels in the rasterizer's own CPU layout (a private map per worker, interleaved chunks of triangles):")
         L.append("`fetch + box`: per triangle only the fetch of its three projected corners and its texel box, no drawing (a floor")
         L.append("under any kernel that gives a triangle a thread); `idealised draw`: depth only, every triangle the rasterizer draws")
@@ -537,7 +642,7 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
         L.append("`tests/test_raster_bound.py`). `small boxes only`: the same kernel drawing only the triangles whose box holds at most")
         L.append("`SMALL_BOX_TEXELS` texel centres (most of them). Each time: the median of 9 rounds, each running all five (the ray per")
         L.append("texel too) in an order that turns from round to round.")
-        L.append("`budget`: the ray time / 15, what item 3's 15x allows.")
+        L.append("`budget`: the ray time / 15, what the 15x target allows.")
         L.append("")
         L.append("| scene | light | size | threads | triangles (culled, covering a texel, large) | ray/texel ms | budget ms | rasterizer ms (x) | idealised draw ms (x) | small boxes only: triangles, ms (x) | fetch + box ms (x) | coverage mismatch |")
         L.append("|---|---|---|---|---|---|---|---|---|---|---|---|")
@@ -567,7 +672,7 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
         low = [f"{s} {w} {k} ({ms:.0f} ms, {u:.2f})" for s, w, k, ms, u in sorted(util) if ms > 50 and u < 1.8]
         from wsoft.parallel import cpu_threads
 
-        L += ["", f"Target (issue 11): every pass over 50 ms at CPU/wall ≥ 1.8 on {cpu_threads()} threads: "
+        L += ["", f"Target: every pass over 50 ms at CPU/wall ≥ 1.8 on {cpu_threads()} threads: "
               + ("met." if not low else "NOT met by " + "; ".join(low) + ".")]
     sizes = sorted({r["params"]["shadow_map_size"] for r in renders if r["technique"] == "hard"})
     samples = sorted({r["params"]["samples"] for r in renders if r["technique"] == "reference"})

@@ -1,4 +1,4 @@
-"""Sweep ``instancing``: issue 11 item 2's evidence — instanced USD kept instanced, against flattened.
+"""Sweep ``instancing``: instanced USD kept instanced, against flattened.
 
 Each row runs in a child process of its own (``python -m wsoft.bench.instancing CASE``), so that
 its peak resident memory (``ru_maxrss``) is its own: a stage loaded flattened or instanced
@@ -169,7 +169,7 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
     L = [line for line in report_header("instancing", rows, md, ctx)
          if not line.startswith(("Error is against", "penumbra =", "Times:", "Rows:"))]
     L.append(f"Rows: {len(rows)}; every number below is read from them.")
-    L += ["", "Issue 11 item 2: instanced USD stays instanced. `load_scene(..., instancing=True)` keeps PointInstancers and "
+    L += ["", "Instanced USD stays instanced. `load_scene(..., instancing=True)` keeps PointInstancers and "
           "instanceable prims as prototypes plus per-instance transforms; on the device each prototype is one BVH and a "
           "top-level BVH over the instances' world boxes finds the instances a ray meets (`wsoft.scene.instancing`); the "
           "light-view rasterizer draws (instance, prototype triangle) pairs of the instances whose boxes reach the view. "

@@ -1,7 +1,7 @@
 """Sweep ``izb``: the irregular z-buffer's anti-aliasing modes on ``tower`` and ``tunnel_fan`` against
 a pixel-area reference (64 sub-pixel eye samples per pixel, each ray-traced to the light's centre),
-their cost per pass beside the paper's estimate (extra cost = edge fraction x N) and the issue's
-targets, the shadow-edge stencils' conservativeness (aliased pixels missed: the exact ``bounds``
+their cost per pass beside the paper's estimate (extra cost = edge fraction x N) and two targets
+(:func:`_targets`), the shadow-edge stencils' conservativeness (aliased pixels missed: the exact ``bounds``
 stencil and the paper's ``vsm`` one), the sub-sample placements (``auto``, ``recast``, ``plane``),
 and ``hard`` at 1024²–8192² on ``tunnel_fan``.
 
@@ -200,9 +200,10 @@ SUBSAMPLE_ORDER = ("auto", "recast", "plane")
 
 
 def _targets(rows: list[dict]) -> list[str]:
-    """The issue's targets, per scene and sub-sample placement, from the interleaved ``izb_targets``
-    rows (ratios per round, then their median); the stencil's misses from the adaptive rows. Target
-    2 holds only where the two edge errors are within 10% of each other."""
+    """The targets, per scene and sub-sample placement (1: ``adaptive`` N = 4 at most 1 + 1.2 x edge
+    fraction x 4 times ``none``; 2: at least 2.5x cheaper than ``supersample`` N = 4), from the
+    interleaved ``izb_targets`` rows (ratios per round, then their median); the stencil's misses from
+    the adaptive rows. Target 2 holds only where the two edge errors are within 10% of each other."""
     rounds = "/".join(str(k) for k in sorted({r["rounds"] for r in rows if r["technique"] == "izb_targets"}))
     L = ["## Targets", "",
          "`adaptive` N = 4 with the defaults (bounds stencil), CPU time. `IZB`: the irregular z-buffer's passes "

@@ -32,8 +32,8 @@ CURVE_SEED = 1  # the reference's curve is independent of the ground truth (seed
 
 
 # stages left out of the full sweep: forest (56M instanced triangles: techniques that read the triangle
-# soup cannot flatten it; its own evidence is `wsoft bench instancing`) and issue 13's analogs, added
-# after reports/pareto.md was made and measured by their own sweep once their techniques exist
+# soup cannot flatten it; its own evidence is `wsoft bench instancing`) and the analogs of Forest et al.'s
+# scenes, measured by their own sweep (`wsoft bench stsv`)
 NOT_IN_PARETO = ("forest", "fence_perforated", "fence_mesh", "hl2_like", "factory", "greece", "wedge_overlap")
 
 
@@ -127,7 +127,7 @@ def _err(entry: dict, metric: str = "mae_penumbra") -> float:
 
 
 def size_param(technique: str) -> str | None:
-    """The parameter the sweep turned as ``technique``'s map size (None: none, or not registered now)."""
+    """The parameter the sweep turned as ``technique``'s map size (None: none, or not registered in this process)."""
     from wsoft.techniques import TECHNIQUES
 
     cls = TECHNIQUES.get(technique)

@@ -1,4 +1,4 @@
-"""A bound on what the light-view rasterizer could reach on the CPU (issue 11 item 3).
+"""A bound on what the light-view rasterizer could reach on the CPU, beside its target (15x one BVH ray per texel).
 
 Two stripped kernels, timed beside the real rasterizer (:func:`wsoft.raster.depth_map.rasterize`)
 on the same orthographic view, in the same thread layout (one private map per worker, interleaved

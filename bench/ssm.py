@@ -438,7 +438,7 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
         L.append("whose (smoothed) level is ≥ 2 in the micropatch run; `bias` = mean signed error there (negative: too dark,")
         L.append("over-occlusion). Every occluder type searches the same areas at the same levels (the region grown to the")
         L.append("micro-occluders' support decides lit / umbra only), and microrects read the (b+1)² cells over the search area")
-        L.append("(`wide gather`: one more cell each side, up to (b+3)², the old reading). `plate_rotated`, `plate_holes` and")
+        L.append("(`wide gather`: one more cell each side, up to (b+3)², beyond the budget). `plate_rotated`, `plate_holes` and")
         L.append("`plates_stacked` are the small stages of `wsoft.stages.ssm_cases`: a solid plate turned 30° in the light's view,")
         L.append("the same with a 4×4 grid of holes (where §5's bounding-box union is expected to lose), two stacked plates.")
         L.append("`nearest diagonal` is not the paper's merge (`microrect_diagonal=nearest`, see below); every other row follows §5.2.")
@@ -492,7 +492,7 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
         L.append("grows with the samples (multisampling itself), which the paper's overhead figure excludes as well.")
         L.append("`1 BLAS thread`: the same setups in a child process with `OPENBLAS_NUM_THREADS=1` (see `bench/ssm_msaa.py`), a control:")
         L.append("NumPy's OpenBLAS threads spin after a large matrix product and take the 2 cores from the Warp launches that follow;")
-        L.append("the light view's fit now projects without BLAS (`lightview.to_frame`), so the two columns differ by the machine's noise.")
+        L.append("the light view's fit projects without BLAS (`lightview.to_frame`), so the two columns differ by the machine's noise.")
         L += ["", "| setup | frame ms | G-buffer ms | ssm ms | ssm ms, 1 BLAS thread | MAE | MAE partly covered pixels | MAE depth-edge pixels |",
               "|---|---|---|---|---|---|---|---|"]
         for label, r in res.items():

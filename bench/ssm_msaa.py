@@ -4,8 +4,7 @@ Run as ``python -m wsoft.bench.ssm_msaa SCENE WIDTH HEIGHT DEVICE``: prints one 
 runs it in a child process with ``OPENBLAS_NUM_THREADS=1`` beside its in-process measurement:
 NumPy's OpenBLAS threads keep spinning for a while after a large matrix product, and on a 2-core
 machine they take the cores from the Warp launches that follow. The light view's fit over 4x the
-receivers did that until it was changed to project without BLAS (``lightview.to_frame``); the
-child process stays as a control.
+receivers projects without BLAS (``lightview.to_frame``); the child process is a control.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Sweep ``stsv``: issue 13's evidence (Forest et al. 2009, soft textured shadow volumes): ``dcs``
+"""Sweep ``stsv``: Forest et al. 2009 (soft textured shadow volumes) measured here: ``dcs``
 (depth complexity sampling) and ``pwedge`` (penumbra wedges), each with STSV for perforated
 triangles.
 
@@ -132,7 +132,7 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
     from wsoft.bench.common import report_header
 
     L = report_header("stsv", [r for r in rows if r.get("kind") != "target"], md, ctx)
-    L += ["Issue 13 (Forest et al. 2009): `dcs` (depth complexity sampling) and `pwedge` (penumbra wedges), each with soft "
+    L += ["Forest et al. 2009: `dcs` (depth complexity sampling) and `pwedge` (penumbra wedges), each with soft "
           "textured shadow volumes (STSV) for alpha-perforated triangles. Both run on this CPU: the paper's figures are a GPU's.", ""]
     by = lambda k: [r for r in rows if r.get("kind") == k]  # noqa: E731
     f11 = {(r["scene"], r["technique"]): r for r in by("fig11")}

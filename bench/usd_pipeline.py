@@ -1,4 +1,4 @@
-"""Sweep ``usd_pipeline``: evidence for issue 14 (USD pipeline integration), every number made here.
+"""Sweep ``usd_pipeline``: wsoft in a USD pipeline (render settings, shadowLink, bakes), every number made here.
 
 1. **Render settings** (UsdRender): a stage (:func:`wsoft.stages.pipeline.render_settings_stage`) the
    sweep saves (``<out>/<stem>/render_settings.usda``) with two cameras and a ``RenderSettings`` prim, named by the stage metadata
@@ -580,7 +580,7 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
          if not line.startswith(("Error is against", "penumbra =", "Times:", "Rows:"))]
     L.append(f"Rows: {len(rows)}; every number below is read from them. Images, stages and the rows' files lie beside this report "
              f"(`{ctx['stem']}/`).")
-    L += ["", "Issue 14's pipeline, end to end: a stage's own render settings choose the camera and framing; a light's shadowLink "
+    L += ["", "The USD pipeline, end to end: a stage's own render settings choose the camera and framing; a light's shadowLink "
           "decides who casts its shadow; `wsoft bake` writes visibility back into USD as primvars that usd-core composes and reads; "
           "and what a bake costs per frame.", ""]
     machine = rows[0]["machine"] if rows else {}

@@ -340,7 +340,7 @@ def diagonal_owner(ext: wp.array[wp.vec4i], dep: wp.array[float], off: int, n: i
     §5.2: the one at ``(dx - 1, dy - 1)`` when its first-pass extent contains it, else the one at
     ``(dx + 1, dy + 1)`` in the second pass, whatever the depths. With ``nearest`` (not the
     paper's), the second choice is the one of its (up to four) retained neighbours whose own depth
-    is nearest to it, ties in the paper's order: a ground microrect then no longer takes a caster's
+    is nearest to it, ties in the paper's order: a ground microrect then does not take a caster's
     diagonal (and its minimum depth) across an edge."""
     a = dx - 1
     b = dy - 1

@@ -1,6 +1,6 @@
 """Exact answers of the test scenes whose occluders are parallel to a square light and the ground:
 the visible fraction of the light from ground points, in closed form (what the ``box_plane`` and
-``cutout`` renders are measured against where the issues ask for the exact answer).
+``cutout`` renders are measured against where a test or a sweep's target asks for the exact answer).
 
 A planar occluder parallel to the light at height ``occ_z`` projects from a ground point ``p``
 onto the light's plane (height ``light_z``) as itself scaled by ``s = light_z / occ_z`` about

@@ -76,9 +76,9 @@ def frame_setup(scene: Scene, width: int | None = None, height: int | None = Non
     settings (``Scene.render_settings``), then wsoft's defaults.
 
     Size: ``width`` and ``height``; one of them alone keeps the settings' aspect (the other is
-    derived from their resolution); else the settings' ``resolution``; else 640 x 480 (either
-    alone, as before: ``width=100`` gives 100 x 480). Camera: ``camera`` (a path or a
-    :class:`Camera`), else the settings' ``camera``, else the stage's first camera, else an
+    derived from their resolution); else the settings' ``resolution``; else 640 x 480 (without
+    settings, either alone replaces its side only: ``width=100`` gives 100 x 480). Camera:
+    ``camera`` (a path or a :class:`Camera`), else the settings' ``camera``, else the stage's first camera, else an
     automatic one framing the scene. The window is conformed to the image with the settings'
     ``pixelAspectRatio`` and ``aspectRatioConformPolicy`` (without settings: square pixels and the
     horizontal field of view kept), and the settings' ``dataWindowNDC`` picks the pixels kept."""

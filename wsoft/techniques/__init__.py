@@ -116,7 +116,7 @@ def _techniques() -> dict[str, type[Technique]]:
 
 def reload_plugins() -> dict[str, type[Technique]]:
     """Look up the installed plugins again (after one was installed or removed in a running
-    process): ``TECHNIQUES`` (the same dict) then holds the bundled techniques and the plugins found now."""
+    process): ``TECHNIQUES`` (the same dict) then holds the bundled techniques and the plugins this lookup finds."""
     techniques = _techniques()
     importlib.invalidate_caches()
     bundled = {n: techniques[n] for n in bundled_names()}
