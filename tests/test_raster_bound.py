@@ -1,4 +1,4 @@
-"""The idealised rasterizer of the item-3 bound (``wsoft.bench.raster_bound``) draws the map the real
+"""The idealised rasterizer of the rasterizer's bound (``wsoft.bench.raster_bound``) draws the map the real
 rasterizer draws, and culls the same faces: the bound times the same work, done more cheaply."""
 
 from __future__ import annotations
@@ -56,5 +56,5 @@ def test_foundation_bound_row_and_report(tmp_path):
     machine = {"python": "3", "cpu": "x86_64", "threads": 2, "cores": 2}
     fnd.report([row | {"case": case, "machine": machine}], md, {"command": "wsoft bench foundation", "out_dir": str(tmp_path), "quick": False})
     text = md.read_text()
-    assert "## A bound for issue 11 item 3" in text
+    assert "## A bound on the 15x target" in text
     assert "| multi_light | Sun | 256 | " in text and f"{row['ray_ms'] / 15:.1f}" in text

@@ -1,5 +1,5 @@
-"""``wsoft bench usd_pipeline --quick`` (render settings, shadow linking and baking, end to end): its four sections, the images
-and stages it links, and that its rows say what the pipeline must do."""
+"""``wsoft bench usd_pipeline --quick`` (render settings, shadow linking and baking, end to end): its
+four sections, the images and stages it links, and that its rows say what the pipeline must do."""
 
 from __future__ import annotations
 

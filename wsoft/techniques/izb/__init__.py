@@ -173,7 +173,7 @@ class IZB(Technique):
         PassSpec("light", reads=("scene", "izb_grid"), writes=("izb_blocked",)),
         PassSpec("resolve", reads=("gbuffer", "izb_samples", "izb_grid", "izb_blocked"), writes=("visibility",)),
     )
-    quick_params = {"grid_size": 256, "shadow_map_size": 256}
+    quick_params = {"shadow_map_size": 256}
     size_param = "shadow_map_size"  # its stencil's maps (its grid's size changes only the time its exact tests take)
     quality = (
         Quality("aa", ("none", "adaptive", "supersample"), "sub-pixel samples on no pixel, on potential shadow edges, on every pixel"),
