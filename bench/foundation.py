@@ -105,7 +105,7 @@ def _gbuffer_points(scene_name, device, width=320, height=240):
 def _light_map_view(case: dict, scene, light):
     """The scene on the case's device and the light view of a depth-map case: fitted to the
     receivers a 320x240 render sees, ``case["size"]`` texels per side."""
-    from wsoft.lightspace.view import fit_light_view
+    from wsoft.lightspace.fit import fit_light_view
     from wsoft.scene.device import upload_scene
 
     ds, _ = scene.device_copy(case["device"], upload_scene)

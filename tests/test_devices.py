@@ -60,7 +60,7 @@ def test_cuda_depth_maps_match_the_cpu():
     """The rasterizer's CUDA path (bands with atomic_min) against the CPU's private targets."""
     from wsoft.raster.depth_map import rasterize
     from wsoft.scene.device import upload_scene
-    from wsoft.lightspace.view import fit_light_view
+    from wsoft.lightspace.fit import fit_light_view
 
     scene = wsoft.load_scene(scene_path("multi_light.usda"))
     for light in scene.lights:

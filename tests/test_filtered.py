@@ -7,7 +7,7 @@ import pytest
 from conftest import add_camera, add_quad, box_plane_ground_error, make_stage, scene_path
 
 import wsoft
-from wsoft.lightspace.view import fit_light_view
+from wsoft.lightspace.fit import fit_light_view
 
 SCENES = ["box_plane.usda", "contact.usda", "multi_light.usda", "cutout.usda"]
 

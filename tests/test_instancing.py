@@ -103,7 +103,7 @@ def test_depth_map_of_instances_equals_flat_map(device):
     map equals the flat map texel for texel, plain and conservative. Mirrored ones: the same texels
     written, depths within float rounding (a mirrored closed box's far faces are culled as the flat
     scene's are; culling the wrong side would move depths by the box's thickness)."""
-    from wsoft.lightspace.view import fit_light_view
+    from wsoft.lightspace.fit import fit_light_view
     from wsoft.raster.depth_map import rasterize
 
     from wsoft.lightspace.view import DEPTH_CLEAR
@@ -131,7 +131,8 @@ def test_depth_map_of_instances_equals_flat_map(device):
 def test_instances_outside_the_view_are_skipped_not_lost(device):
     """boxes_in_view drops only instances that cannot reach the map: the map is the same as when
     every instance is drawn, and far-away instances are skipped."""
-    from wsoft.lightspace.view import boxes_in_view, fit_light_view
+    from wsoft.lightspace.fit import fit_light_view
+    from wsoft.lightspace.view import boxes_in_view
     from wsoft.raster import depth_map as D
 
     T = [(1, xf(t=(dx, dy, 0.2))) for dx in np.linspace(-3, 3, 5) for dy in np.linspace(-3, 3, 5)] + [(1, xf(t=(400, 0, 0)))]
@@ -154,7 +155,7 @@ def test_instances_outside_the_view_are_skipped_not_lost(device):
 def test_all_instanced_scene_has_no_stray_soup_triangle(device):
     """A stage whose every mesh is instanced keeps a zero-area stand-in soup triangle: no ray hits
     it and no map, not even a conservative one, draws it."""
-    from wsoft.lightspace.view import fit_light_view
+    from wsoft.lightspace.fit import fit_light_view
     from wsoft.raster.depth_map import rasterize
     from wsoft.scene.device import upload_scene
 
@@ -180,7 +181,7 @@ def test_all_instanced_scene_has_no_stray_soup_triangle(device):
 
 def test_instanced_rasterizer_on_many_threads(monkeypatch):
     """Small CPU chunks (many private maps) give the same instanced map as one chunk."""
-    from wsoft.lightspace.view import fit_light_view
+    from wsoft.lightspace.fit import fit_light_view
     from wsoft.raster import rasterizer as R
     from wsoft.raster.depth_map import rasterize
 

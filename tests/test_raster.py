@@ -8,7 +8,8 @@ import warp as wp
 from conftest import scene_path
 
 import wsoft
-from wsoft.lightspace.view import DEPTH_CLEAR, fit_light_view
+from wsoft.lightspace.fit import fit_light_view
+from wsoft.lightspace.view import DEPTH_CLEAR
 from wsoft.raster.depth_map import rasterize
 from wsoft.raster.raycast import raycast_depth
 from wsoft.scene.device import upload_scene
@@ -213,7 +214,7 @@ def test_view_fit_reductions_by_row_blocks_equal_the_whole_array(monkeypatch):
     """The fit's caster and receiver reductions run in row blocks over the thread pool without
     keeping the transformed points: the same values as transforming every point and reducing (float32
     points, several blocks on several threads, and a window only some blocks' casters reach)."""
-    from wsoft.lightspace import view as V
+    from wsoft.lightspace import fit as V
 
     monkeypatch.setenv("WSOFT_THREADS", "3")
     rng = np.random.default_rng(7)

@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from wsoft.lightspace.view import DEPTH_CLEAR, fit_light_view
+from wsoft.lightspace.fit import fit_light_view
+from wsoft.lightspace.view import DEPTH_CLEAR
 
 
 @pytest.mark.parametrize("scene_name, light", [("multi_light", "Sun"), ("city", "Sun"), ("box_plane", None)])

@@ -1,7 +1,7 @@
 """Light-space bins for depth complexity sampling: which receivers a silhouette edge's wedge (or a
 perforated triangle's soft textured shadow volume) can reach, as per-cell lists of primitives.
 
-The cells are the texels of a light view fitted to the receivers (:func:`~wsoft.lightspace.view.fit_light_view`:
+The cells are the texels of a light view fitted to the receivers (:func:`~wsoft.lightspace.fit.fit_light_view`:
 a perspective frustum from a local light's centre, an orthographic box along a distant light),
 resampled to ``size x size``. Each primitive (an edge: 2 corners, a triangle: 3) gets the
 conservative rectangle of cells its shadow can reach (:func:`primitive_footprint`), and the

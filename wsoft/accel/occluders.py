@@ -14,7 +14,7 @@ import warp as wp
 from wsoft.accel.dcs_bins import build_bins, grid_view
 from wsoft.lightspace.light import LightGPU, light_bound
 from wsoft.accel.stsv import planes_t, triangle_volumes
-from wsoft.lightspace.view import fit_light_view
+from wsoft.lightspace.fit import fit_light_view
 from wsoft.parallel import launch_chunked
 from wsoft.scene.rays import ray_triangle
 from wsoft.scene.types import LIGHT_DISK, LIGHT_RECT

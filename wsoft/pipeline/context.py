@@ -17,7 +17,8 @@ import warp as wp
 from wsoft.errors import DeclarationError
 from wsoft.graph import FrameGraph, Key, Pass
 from wsoft.lightspace.light import disk_shaped, light_gpu
-from wsoft.lightspace.view import fit_light_view, outside_view_warning
+from wsoft.lightspace.fit import fit_light_view
+from wsoft.lightspace.view import outside_view_warning
 from wsoft.pipeline.framing import Framing
 from wsoft.raster.camera import camera_gpu
 from wsoft.raster.gbuffer import GBuffer, render_gbuffer

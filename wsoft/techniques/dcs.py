@@ -47,7 +47,7 @@ inconsistent winding all follow one rule), and ``V`` only asks whether the count
 3. **Binning** (:mod:`wsoft.accel.dcs_bins`). No hardware rasterizer: a light view fitted to the
    receivers (``grid_size`` cells per side) and, per potential edge, the conservative
    rectangle of cells its wedge can reach (the edge's projection widened by the light's extent at
-   the receivers' depths, as :func:`~wsoft.lightspace.view.fit_light_view` widens windows for soft
+   the receivers' depths, as :func:`~wsoft.lightspace.fit.fit_light_view` widens windows for soft
    casters); the (cell, edge) pairs are sorted into per-cell lists. Each receiver *gathers*: it
    tests only the edges listed in its own cell and writes only its own result (no atomics, no
    per-chunk count buffers: Warp's CPU atomics are not thread-safe across the thread pool, and a

@@ -80,7 +80,8 @@ import warp as wp
 
 from wsoft.accel.izb_grid import build_grid, izb_test
 from wsoft.errors import ParameterError
-from wsoft.lightspace.view import fit_light_view, outside_view_warning
+from wsoft.lightspace.fit import fit_light_view
+from wsoft.lightspace.view import outside_view_warning
 from wsoft.params import check_ranges
 from wsoft.raster.camera import camera_gpu
 from wsoft.raster.rasterizer import make_rasterizer

@@ -1,0 +1,329 @@
+"""Fitting a light view to the receivers the camera sees (:func:`fit_light_view`): a perspective
+frustum from a local light's centre (at most ±80° off its axis), an orthographic box along a
+distant light, windows grown for soft casters, depth ranges from the nearest caster to the
+farthest receiver; the receivers' bounds reduced by row blocks over the thread pool."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import warp as wp
+
+from wsoft.lightspace.view import MAX_TAN, LightView, frame_extent_of_bounds, to_frame
+from wsoft.scene.types import LIGHT_DISTANT, LIGHT_POINT, LIGHT_SPHERE, Light
+
+
+def _basis_from_axis(z: np.ndarray) -> np.ndarray:
+    z = z / np.linalg.norm(z)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    x = np.cross(helper, z)
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    return np.stack([x, y, z], axis=1)
+
+
+def _frame_bounds(p: np.ndarray, origin: np.ndarray, axes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(min, max) per axis of :func:`to_frame` of the points ``p`` (N >= 1), by row blocks over
+    the thread pool without keeping the transformed points: the same values as transforming
+    them all and reducing."""
+    from wsoft.parallel import run_row_blocks
+
+    parts = []
+
+    def block(a: int, e: int) -> None:
+        v = to_frame(p[a:e], origin, axes, threads=False)
+        parts.append((v.min(axis=0), v.max(axis=0)))
+
+    run_row_blocks(len(p), block)
+    return np.min([q[0] for q in parts], axis=0), np.max([q[1] for q in parts], axis=0)
+
+
+def _caster_growth(casters: np.ndarray, origin: np.ndarray, axes: np.ndarray, window, half_extent: float, zmin: float,
+                   zr_max: float) -> float | None:
+    """How far a local light's window (tangents l, r, b, t) must grow for soft shadows: the largest
+    ``half_extent * (1/z - 1/zr_max)`` over the casters at view depth ``zmin < z < zr_max`` whose
+    tangents lie within that distance of the window (None: no such caster). Row blocks over the
+    thread pool, as :func:`to_frame`."""
+    from wsoft.parallel import run_row_blocks
+
+    l, r, b, t = window
+    found = []
+
+    def block(a: int, e: int) -> None:
+        vc = to_frame(casters[a:e], origin, axes, threads=False)
+        vc = vc[(vc[:, 2] > zmin) & (vc[:, 2] < zr_max)]
+        if len(vc):
+            grow = half_extent * (1.0 / vc[:, 2] - 1.0 / zr_max)
+            cx, cy = vc[:, 0] / vc[:, 2], vc[:, 1] / vc[:, 2]
+            near_window = (cx >= l - grow) & (cx <= r + grow) & (cy >= b - grow) & (cy <= t + grow)
+            if near_window.any():
+                found.append(float(grow[near_window].max()))
+
+    run_row_blocks(len(casters), block)
+    return max(found) if found else None
+
+
+def _prism_depth_min(v: np.ndarray, window, default: float) -> float:
+    """Smallest view depth of the view-space points ``v`` inside an orthographic window's prism
+    (``default`` if none)."""
+    if v is None or len(v) == 0:
+        return default
+    l, r, b, t = window
+    from wsoft.parallel import run_row_blocks
+
+    found = []
+
+    def block(a: int, e: int) -> None:  # row blocks over the thread pool, as to_frame
+        w = v[a:e]
+        inside = (w[:, 0] >= l) & (w[:, 0] <= r) & (w[:, 1] >= b) & (w[:, 1] <= t)
+        if inside.any():
+            found.append(float(w[inside, 2].min()))
+
+    run_row_blocks(len(v), block)
+    return min(found + [default])
+
+
+FIT_BLOCK = 8192  # points a thread of the fit's reduction kernels walks (one row of partial results each)
+F64_BIG = wp.constant(wp.float64(1.0e300))
+
+
+@wp.kernel
+def bounds_partials(
+    offset: int,
+    n: int,
+    pts: wp.array[wp.vec3],
+    # outputs
+    part: wp.array2d[wp.float64],
+):
+    """Per block of :data:`FIT_BLOCK` points: min (3), max (3) and sum (3) of the coordinates, in float64."""
+    b = wp.tid() + offset
+    lo = wp.vec3d(F64_BIG, F64_BIG, F64_BIG)
+    hi = wp.vec3d(-F64_BIG, -F64_BIG, -F64_BIG)
+    sm = wp.vec3d(wp.float64(0.0), wp.float64(0.0), wp.float64(0.0))
+    for i in range(b * FIT_BLOCK, wp.min(b * FIT_BLOCK + FIT_BLOCK, n)):
+        p = pts[i]
+        q = wp.vec3d(wp.float64(p[0]), wp.float64(p[1]), wp.float64(p[2]))
+        lo = wp.min(lo, q)
+        hi = wp.max(hi, q)
+        sm = sm + q
+    for k in range(3):
+        part[b, k] = lo[k]
+        part[b, 3 + k] = hi[k]
+        part[b, 6 + k] = sm[k]
+
+
+@wp.kernel
+def local_fit_partials(
+    offset: int,
+    n: int,
+    pts: wp.array[wp.vec3],
+    origin: wp.vec3d,
+    axes: wp.mat33d,
+    facing: wp.vec3d,
+    use_facing: int,
+    zmin_ok: wp.float64,
+    margin: wp.float64,
+    max_tan: wp.float64,
+    # outputs
+    part: wp.array2d[wp.float64],
+):
+    """Per block of :data:`FIT_BLOCK` receivers, what a local light's fit needs (see
+    :func:`_local_fit_stats`): for ``all`` (columns 0-6) and ``front`` (7-13) the count, l, r, b, t,
+    zmin, zmax; column 14 the receivers outside the ±80° window (never those behind the plane)."""
+    b = wp.tid() + offset
+    zero = wp.float64(0.0)
+    cnt = wp.vec2d(zero, zero)
+    l = wp.vec2d(F64_BIG, F64_BIG)
+    r = wp.vec2d(-F64_BIG, -F64_BIG)
+    bo = wp.vec2d(F64_BIG, F64_BIG)
+    t = wp.vec2d(-F64_BIG, -F64_BIG)
+    zlo = wp.vec2d(F64_BIG, F64_BIG)
+    zhi = wp.vec2d(-F64_BIG, -F64_BIG)
+    outside = zero
+    for i in range(b * FIT_BLOCK, wp.min(b * FIT_BLOCK + FIT_BLOCK, n)):
+        p = pts[i]
+        d = wp.vec3d(wp.float64(p[0]), wp.float64(p[1]), wp.float64(p[2])) - origin
+        # (p - origin) @ axes, in to_frame's order
+        vx = d[0] * axes[0, 0] + d[1] * axes[1, 0] + d[2] * axes[2, 0]
+        vy = d[0] * axes[0, 1] + d[1] * axes[1, 1] + d[2] * axes[2, 1]
+        z = d[0] * axes[0, 2] + d[1] * axes[1, 2] + d[2] * axes[2, 2]
+        behind = False
+        if use_facing != 0:
+            behind = (d[0] * facing[0] + d[1] * facing[1] + d[2] * facing[2]) >= zero
+        if z > zmin_ok:
+            tx = vx / z
+            ty = vy / z
+            mz = zero
+            if margin > zero:
+                mz = margin / wp.max(z, zmin_ok)
+            if not behind and (wp.abs(tx) > max_tan or wp.abs(ty) > max_tan):
+                outside += wp.float64(1.0)
+            for k in range(2):
+                if k == 0 or not behind:
+                    cnt[k] = cnt[k] + wp.float64(1.0)
+                    l[k] = wp.min(l[k], tx - mz)
+                    r[k] = wp.max(r[k], tx + mz)
+                    bo[k] = wp.min(bo[k], ty - mz)
+                    t[k] = wp.max(t[k], ty + mz)
+                    zlo[k] = wp.min(zlo[k], z)
+                    zhi[k] = wp.max(zhi[k], z)
+        elif not behind:
+            outside += wp.float64(1.0)
+    for k in range(2):
+        part[b, 7 * k] = cnt[k]
+        part[b, 7 * k + 1] = l[k]
+        part[b, 7 * k + 2] = r[k]
+        part[b, 7 * k + 3] = bo[k]
+        part[b, 7 * k + 4] = t[k]
+        part[b, 7 * k + 5] = zlo[k]
+        part[b, 7 * k + 6] = zhi[k]
+    part[b, 14] = outside
+
+
+def _fit_points(rec: np.ndarray) -> wp.array:
+    """Receivers as a float32 vec3 array on the CPU (no copy when they already are float32)."""
+    return wp.array(np.ascontiguousarray(rec, np.float32).reshape(-1, 3), dtype=wp.vec3, device="cpu", copy=False)
+
+
+def _partials(kernel, pts: wp.array, columns: int, inputs: list) -> np.ndarray:
+    """Run a per-block reduction kernel over the thread pool (each block writes its own row)."""
+    from wsoft.parallel import launch_chunked
+
+    n = pts.shape[0]
+    blocks = max(1, (n + FIT_BLOCK - 1) // FIT_BLOCK)
+    part = wp.empty((blocks, columns), dtype=wp.float64, device="cpu")
+    launch_chunked(kernel, blocks, inputs=[n, pts] + inputs, outputs=[part], device="cpu", min_chunk=1, per_thread=2)
+    return part.numpy()
+
+
+def receiver_bounds(pts: wp.array) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(min, max, mean) of the receivers (float64), by :func:`bounds_partials`."""
+    pr = _partials(bounds_partials, pts, 9, [])
+    return pr[:, 0:3].min(axis=0), pr[:, 3:6].max(axis=0), pr[:, 6:9].sum(axis=0) / max(pts.shape[0], 1)
+
+
+def _local_fit_stats(pts: wp.array, origin: np.ndarray, axes: np.ndarray, facing: np.ndarray | None, zmin_ok: float, margin: float) -> dict:
+    """What a local light's view fit needs of the receivers (:func:`local_fit_partials` over the
+    CPU thread pool, in float64): for the receivers in front of the light's origin (``all``) and,
+    when ``facing`` (the light's emission axis) is given, those also in front of its plane
+    (``front``): their count, the window (l, r, b, t: tangents widened by ``margin`` at each one's
+    depth), depth range and how many lie beyond the ±80° window (``outside``, never counting those
+    behind the plane)."""
+    f = np.zeros(3) if facing is None else np.asarray(facing, np.float64)
+    pr = _partials(local_fit_partials, pts, 15,
+                   [wp.vec3d(*np.asarray(origin, np.float64)), wp.mat33d(*np.asarray(axes, np.float64).ravel()), wp.vec3d(*f),
+                    int(facing is not None), wp.float64(zmin_ok), wp.float64(margin), wp.float64(MAX_TAN)])
+    outside = int(pr[:, 14].sum())
+    res = {}
+    for k, key in enumerate(("all", "front")):
+        c = pr[:, 7 * k: 7 * k + 7]
+        n = int(c[:, 0].sum())
+        res[key] = {"n": n, "outside": outside}
+        if n:
+            res[key].update(l=float(c[:, 1].min()), r=float(c[:, 2].max()), b=float(c[:, 3].min()), t=float(c[:, 4].max()),
+                            zmin=float(c[:, 5].min()), zmax=float(c[:, 6].max()))
+    return res
+
+
+def fit_light_view(
+    light: Light,
+    receivers: np.ndarray,
+    scene_lo: np.ndarray,
+    scene_hi: np.ndarray,
+    size: int,
+    margin: float = 0.0,
+    margin_texels: float = 1.0,
+    casters: np.ndarray | None = None,
+) -> LightView:
+    """Fit a view of ``light`` to ``receivers`` (world points [N, 3], the camera's visible surface).
+
+    ``margin`` widens the window by a world distance at the receivers; ``margin_texels`` keeps
+    a border of texels. ``casters`` (world points, e.g. the scene's vertices) asks for a view
+    for soft shadows: the window is widened so that every caster that can block part of the
+    *whole* light from a receiver is mapped (for a local light of half-extent w, a caster at
+    depth z blocks within w (1/z - 1/z_r) of a receiver's tangent; for a distant light of cone
+    half-angle a, within (z_r - z) tan a). Perspective windows are clamped to ±80° around the
+    view axis; receivers beyond are counted in ``receivers_outside``.
+
+    Every scale in the view comes from :func:`frame_extent` (receivers and the light), not the
+    scene's bounds: a distant light's depth range starts at the nearest caster vertex inside the
+    window's prism (``casters``, else the scene's bounds' corners inside it); casters nearer
+    still (a huge triangle whose corners are far outside) keep their true, smaller depth.
+    """
+    if not 256 <= size <= 8192:
+        from wsoft.errors import ParameterError
+
+        raise ParameterError(f"shadow_map_size {size} out of range [256, 8192]")
+    rec = np.asarray(receivers).reshape(-1, 3)
+    if len(rec) == 0:
+        rec = np.stack([scene_lo, scene_hi])
+    pts = _fit_points(rec)
+    rlo, rhi, rmean = receiver_bounds(pts)
+    ext = frame_extent_of_bounds(rlo, rhi, light)
+    if light.kind == LIGHT_DISTANT:
+        axes = np.stack([light.frame[:, 0], light.frame[:, 1], -light.frame[:, 2]], axis=1)  # view along emission
+        center = 0.5 * (rlo + rhi)
+        vlo, vhi = _frame_bounds(rec, center, axes)
+        corners = np.array([[x, y, z] for x in (scene_lo[0], scene_hi[0]) for y in (scene_lo[1], scene_hi[1]) for z in (scene_lo[2], scene_hi[2])])
+        pts = casters if casters is not None else corners
+        pad = margin + 1e-4 * ext
+        l, r = vlo[0] - pad, vhi[0] + pad
+        b, t = vlo[1] - pad, vhi[1] + pad
+        zr_min, zr_max = float(vlo[2]), float(vhi[2])
+        vp = to_frame(np.asarray(pts).reshape(-1, 3), center, axes) if pts is not None and len(pts) else None
+        zc = _prism_depth_min(vp, (l, r, b, t), zr_min)
+        if casters is not None and light.angle_deg > 0:
+            tan_a = math.tan(math.radians(0.5 * light.angle_deg))
+            for _ in range(2):  # the widened prism may hold nearer casters
+                g = tan_a * max(zr_max - zc, 0.0)
+                zc = _prism_depth_min(vp, (l - g, r + g, b - g, t + g), zc)
+            g = tan_a * max(zr_max - zc, 0.0)
+            l, r, b, t = l - g, r + g, b - g, t + g
+        # the origin a little before the nearest caster: depths stay positive and their float
+        # precision is that of the caster-to-receiver distance
+        lead = 1e-3 * ext
+        origin = center + axes[:, 2] * (zc - lead)
+        near = 0.0
+        far = (zr_max - zc) + 2.0 * lead
+        persp, outside = False, 0
+    else:
+        origin = np.asarray(light.position, np.float64)
+        if light.kind in (LIGHT_SPHERE, LIGHT_POINT):
+            d = rmean - origin
+            axes = _basis_from_axis(d if np.linalg.norm(d) > 1e-9 * ext else -light.frame[:, 2])
+        else:
+            axes = np.stack([light.frame[:, 0], -light.frame[:, 1], -light.frame[:, 2]], axis=1)  # right-handed, view along −Z
+        zmin_ok = 1e-6 * ext
+        # a rect or disk light emits forward only: receivers behind its plane see nothing of it
+        # (the horizon rule darkens them), so they are neither fitted nor counted outside
+        one_sided = light.kind not in (LIGHT_SPHERE, LIGHT_POINT)
+        st = _local_fit_stats(pts, origin, axes, np.asarray(light.frame, np.float64)[:, 2] if one_sided else None, zmin_ok, margin)
+        s = st["front"] if one_sided and st["front"]["n"] else st["all"]
+        if s["n"]:
+            l, r, b, t = s["l"], s["r"], s["b"], s["t"]
+        else:
+            l, r, b, t = -1.0, 1.0, -1.0, 1.0
+        w = light.extent()
+        if casters is not None and w > 0 and s["n"]:
+            g = _caster_growth(np.asarray(casters).reshape(-1, 3), origin, axes, (l, r, b, t), w, 1e-3 * ext, s["zmax"])
+            if g is not None:
+                l, r, b, t = l - g, r + g, b - g, t + g
+        l, r = max(l, -MAX_TAN), min(r, MAX_TAN)
+        b, t = max(b, -MAX_TAN), min(t, MAX_TAN)
+        outside = s["outside"]
+        near = max(1e-4 * ext, 1e-7)
+        if s["n"]:
+            near = min(near, 0.5 * s["zmin"])
+        far = (s["zmax"] if s["n"] else ext) * 1.01 + 1e-3 * ext
+        persp = True
+    # keep a border of texels and avoid a zero-area window
+    w = max(r - l, 1e-6)
+    h = max(t - b, 1e-6)
+    ex = w * margin_texels / max(size - 2 * margin_texels, 1)
+    ey = h * margin_texels / max(size - 2 * margin_texels, 1)
+    window = (l - ex, l + w + ex, b - ey, b + h + ey)
+    return LightView(
+        light_path=light.path, persp=persp, origin=origin, axes=axes, window=window,
+        near=float(near), far=float(far), width=size, height=size, receivers_outside=outside, extent=ext,
+    )
