@@ -159,6 +159,13 @@ class BinsGPU:
     items: wp.array[wp.int32]
 
 
+@wp.func
+def receiver_items(bins: BinsGPU, x: wp.vec3) -> wp.vec2i:
+    """The range ``[first, last)`` of ``bins.items`` a receiver at ``x`` reads: its cell's list."""
+    cell = receiver_cell(bins.lv, x)
+    return wp.vec2i(bins.start[cell], bins.start[cell + 1])
+
+
 @dataclass
 class Bins:
     view: LightView

@@ -35,6 +35,17 @@ def count_crossings(bvh: wp.uint64, tri_pts: wp.array[wp.vec3], o: wp.vec3, d: w
 
 
 @wp.func
+def in_wedge(ne: wp.vec3, nn: float, ball: wp.vec4, distant: int, o: wp.vec3) -> bool:
+    """Is ``o`` inside the wedge of an edge whose plane through ``o`` has the normal ``ne``
+    (``nn = |ne|^2``): does that plane cut the light's bound (``ball``: centre and radius, a
+    distant light's cone as the ball it cuts at unit distance, ``distant``)?"""
+    hb = wp.dot(ne, wp.vec3(ball[0], ball[1], ball[2]))
+    if distant == 0:
+        hb = wp.dot(ne, wp.vec3(ball[0], ball[1], ball[2]) - o)
+    return not (nn == 0.0 or hb * hb > ball[3] * ball[3] * nn * 1.0001)
+
+
+@wp.func
 def side(x: float) -> int:
     """The sign of ``x`` as an int (0 at 0)."""
     if x > 0.0:

@@ -101,8 +101,8 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from wsoft.accel.dcs_bins import BinsGPU, receiver_cell
-from wsoft.accel.occluders import count_crossings, side
+from wsoft.accel.dcs_bins import BinsGPU, receiver_items
+from wsoft.accel.occluders import count_crossings, in_wedge, side
 from wsoft.lightspace.light import LightGPU, in_front, light_bound, light_point
 from wsoft.lightspace.samples import LightSamples, sample_coords
 from wsoft.accel.stsv import in_volume, light_ball, planes_t, receiver_matrix, s_triangle, sample_blocked
@@ -212,13 +212,12 @@ def dcs_visibility(
         for s in range(S):
             sweep[s] = wp.cross(xr - o, xs[s] - o)
         ball = light_ball(light)
-        bc = wp.vec3(ball[0], ball[1], ball[2])
         distant = int(light.kind == 3)
-        cell = receiver_cell(ebins.lv, o)
-        e0 = ebins.start[cell]
-        e1 = ebins.start[cell + 1]
+        span = receiver_items(ebins, o)
+        e0 = span[0]
+        e1 = span[1]
         wedge_tests[i] = e1 - e0
-        in_wedge = int(0)
+        holding = int(0)
         for k in range(e0, e1):
             e = ebins.items[k]
             A = edge_pts[e, 0] - o
@@ -228,18 +227,14 @@ def dcs_visibility(
                 continue
             ne = wp.cross(A, B)
             nn = wp.dot(ne, ne)
-            # is o inside the edge's wedge: does the plane o, a, b cut the light's bound?
-            hb = wp.dot(ne, bc)
-            if distant == 0:
-                hb = wp.dot(ne, bc - o)
-            if nn == 0.0 or hb * hb > ball[3] * ball[3] * nn * 1.0001:
+            if not in_wedge(ne, nn, ball, distant, o):
                 continue
             sigma = side(wp.dot(ne, edge_pts[e, 2] - o))
             if edge_faces[e] > 1:
                 sigma += side(wp.dot(ne, edge_pts[e, 3] - o))
             hr = wp.dot(ne, xr - o)
             if sigma != 0:
-                in_wedge += 1
+                holding += 1
                 for s in range(S):
                     x = xs[s]
                     hs = wp.dot(ne, x - o)
@@ -255,11 +250,11 @@ def dcs_visibility(
                                 if hs > 0.0:
                                     sg = 1
                                 cnt[s] = cnt[s] + sigma * sg
-        wedge_hits[i] = in_wedge
+        wedge_hits[i] = holding
     if has_stsv != 0:
-        cell = receiver_cell(tbins.lv, o)
-        t0 = tbins.start[cell]
-        t1 = tbins.start[cell + 1]
+        span = receiver_items(tbins, o)
+        t0 = span[0]
+        t1 = span[1]
         nt = int(0)
         for k in range(t0, t1):
             j = tbins.items[k]

@@ -20,7 +20,8 @@ from wsoft.lightspace.view import ViewGPU, bilinear_cell, normalised_depth
 from wsoft.parallel import launch_chunked
 from wsoft.raster.gbuffer import GBufferGPU, gb_mapped_receiver
 from wsoft.params import check_ranges
-from wsoft.techniques.base import PassSpec, Quality, Technique, Tolerance, check, param
+from wsoft.techniques._prefiltered import Prefiltered, normalised_bias, prefiltered_passes
+from wsoft.techniques.base import Quality, Tolerance, check, param
 
 
 @dataclass(frozen=True)
@@ -89,44 +90,31 @@ def shade_esm(
     vis[i] = wp.clamp(wp.exp(wp.min(bilinear_log(lv, lmap, m) - c * z, 0.0)), 0.0, 1.0)
 
 
-class ESM(Technique):
+class ESM(Prefiltered):
     """Exponential shadow maps with log-space filtering."""
 
     name = "esm"
-    instancing_refusal = ""  # its maps draw instances (wsoft.raster.depth_map.instance_runs)
     summary = "exponential shadow maps: exp(c d) prefiltered in log space"
     Params = ESMParams
-    passes = (
-        PassSpec("basis", reads=("light_depth",), writes=("esm_basis",)),
-        PassSpec("shadow", reads=("gbuffer", "light_depth", "esm_basis"), writes=("visibility",)),
-    )
+    map_kind, map_stage, map_params = "esm_basis", "basis", ("c", "filter", "radius")
+    passes = prefiltered_passes(map_kind, map_stage)
     quick_params = {"shadow_map_size": 256}
-    size_param = "shadow_map_size"
 
     quality = (Quality("c", (40.0, 80.0, 160.0), "a larger exponent: less light leaking near contacts, harder edges; same time"),)
     tolerance = Tolerance(mae=0.008, mae_penumbra=0.33)
     distance_refusal = "its prefiltered exp(c d) map mixes every caster's depth, so it cannot tell which lie within the distance"
 
-    def add_passes(self, ctx, light):
+    def prefilter(self, dm, device):
         p = self.params
-        gbuf = ctx.gbuffer()
-        depth = ctx.light_depth(light, size=p.shadow_map_size, soft=True)
-        basis = ctx.shared_key("esm_basis", light, p.shadow_map_size, "c", "filter", "radius")
-        out = ctx.visibility_key(light)
+        v = dm.view
+        flat = wp.empty(v.width * v.height, dtype=float, device=device)
+        launch_chunked(make_exponent, flat.shape[0], inputs=[dm.depth.reshape(-1), v.near, v.far, p.c], outputs=[flat], device=device,
+                       min_chunk=1 << 15)
+        return blur_log(flat.reshape((v.height, v.width)), p.filter, p.radius)
 
-        def build(res):
-            dm = res[depth]
-            v = dm.view
-            flat = wp.empty(v.width * v.height, dtype=float, device=ctx.device)
-            launch_chunked(make_exponent, flat.shape[0], inputs=[dm.depth.reshape(-1), v.near, v.far, p.c], outputs=[flat], device=ctx.device, min_chunk=1 << 15)
-            return {basis: blur_log(flat.reshape((v.height, v.width)), p.filter, p.radius)}
-
-        def run(res):
-            gb, dm = res[gbuf], res[depth]
-            bias = p.bias * dm.view.extent / max(dm.view.far - dm.view.near, 1e-12)
-            vis = wp.empty(gb.count, dtype=float, device=ctx.device)
-            launch_chunked(shade_esm, gb.count, inputs=[dm.view.gpu(), res[basis], gb.gpu(), p.c, bias], outputs=[vis], device=ctx.device)
-            return {out: ctx.visibility(vis)}
-
-        ctx.add_pass(str(basis), inputs=(depth,), outputs=(basis,), run=build, stage="basis", light=light)
-        return ctx.add_pass(ctx.pass_name("esm", light), inputs=(gbuf, depth, basis), outputs=(out,), run=run, stage="shadow", light=light)
+    def shade(self, gb, dm, fmap, device):
+        p = self.params
+        vis = wp.empty(gb.count, dtype=float, device=device)
+        launch_chunked(shade_esm, gb.count, inputs=[dm.view.gpu(), fmap, gb.gpu(), p.c, normalised_bias(p.bias, dm.view)], outputs=[vis],
+                       device=device)
+        return vis

@@ -68,8 +68,8 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from wsoft.accel.dcs_bins import BinsGPU, receiver_cell
-from wsoft.accel.occluders import count_crossings
+from wsoft.accel.dcs_bins import BinsGPU, receiver_items
+from wsoft.accel.occluders import count_crossings, in_wedge
 from wsoft.lightspace.bitmask import popcount
 from wsoft.lightspace.coverage import edge_coverage, light_frame
 from wsoft.lightspace.light import LightGPU, light_bound, light_point
@@ -129,9 +129,9 @@ def ls_buffer_pass(
         S = ls.count
         xs = points_t()
         have_points = int(0)
-        cell = receiver_cell(tbins.lv, o)
-        t0 = tbins.start[cell]
-        t1 = tbins.start[cell + 1]
+        span = receiver_items(tbins, o)
+        t0 = span[0]
+        t1 = span[1]
         volume_tests[i] = t1 - t0
         for k in range(t0, t1):
             j = tbins.items[k]
@@ -202,11 +202,10 @@ def pwedge_visibility(
         if tm > 0.0 and count_crossings(bvh, tri_pts, o, dc, tm) > 0:
             cov = 1.0
         ball = light_ball(light)
-        bc = wp.vec3(ball[0], ball[1], ball[2])
         distant = int(light.kind == 3)
-        cell = receiver_cell(ebins.lv, o)
-        e0 = ebins.start[cell]
-        e1 = ebins.start[cell + 1]
+        span = receiver_items(ebins, o)
+        e0 = span[0]
+        e1 = span[1]
         wedge_tests[i] = e1 - e0
         hits = int(0)
         for k in range(e0, e1):
@@ -215,11 +214,8 @@ def pwedge_visibility(
             b = edge_pts[e, 1]
             ne = wp.cross(a - o, b - o)
             nn = wp.dot(ne, ne)
-            hb = wp.dot(ne, bc)
-            if distant == 0:
-                hb = wp.dot(ne, bc - o)
-            if nn == 0.0 or hb * hb > ball[3] * ball[3] * nn * 1.0001:
-                continue  # o is outside the edge's wedge
+            if not in_wedge(ne, nn, ball, distant, o):
+                continue
             f = edge_coverage(c, u, v, ext, disk, smax, o, a, b)
             if f > 0.0:
                 hits += 1

@@ -22,7 +22,8 @@ from wsoft.lightspace.view import ViewGPU, bilinear, normalised_depth
 from wsoft.parallel import launch_chunked
 from wsoft.raster.gbuffer import GBufferGPU, gb_mapped_receiver
 from wsoft.params import check_ranges
-from wsoft.techniques.base import PassSpec, Quality, Technique, Tolerance, check, param
+from wsoft.techniques._prefiltered import Prefiltered, normalised_bias, prefiltered_passes
+from wsoft.techniques.base import Quality, Tolerance, check, param
 
 
 @dataclass(frozen=True)
@@ -80,44 +81,29 @@ def shade_vsm(
     vis[i] = wp.clamp((p - bleed) / (1.0 - bleed), 0.0, 1.0)
 
 
-class VSM(Technique):
+class VSM(Prefiltered):
     """Variance shadow maps: blurred depth moments and Chebyshev's bound."""
 
     name = "vsm"
-    instancing_refusal = ""  # its maps draw instances (wsoft.raster.depth_map.instance_runs)
     summary = "variance shadow maps: blurred (d, d^2) moments, Chebyshev bound, light-bleeding reduction"
     Params = VSMParams
-    passes = (
-        PassSpec("moments", reads=("light_depth",), writes=("vsm_moments",)),
-        PassSpec("shadow", reads=("gbuffer", "light_depth", "vsm_moments"), writes=("visibility",)),
-    )
+    map_kind, map_stage, map_params = "vsm_moments", "moments", ("filter", "radius")
+    passes = prefiltered_passes(map_kind, map_stage)
     quick_params = {"shadow_map_size": 256}
-    size_param = "shadow_map_size"
 
     quality = (Quality("radius", (1, 2, 4), "a wider prefilter: softer edges (not wider penumbrae), a little more time"),)
     tolerance = Tolerance(mae=0.0085, mae_penumbra=0.34)
     distance_refusal = "its blurred moments (mean and variance of the depths) cannot tell which casters lie within the distance"
 
-    def add_passes(self, ctx, light):
+    def prefilter(self, dm, device):
+        v = dm.view
+        flat = wp.empty(v.width * v.height, dtype=wp.vec2, device=device)
+        launch_chunked(make_moments, flat.shape[0], inputs=[dm.depth.reshape(-1), v.near, v.far], outputs=[flat], device=device, min_chunk=1 << 15)
+        return blur_moments(flat.reshape((v.height, v.width)), self.params.filter, self.params.radius)
+
+    def shade(self, gb, dm, fmap, device):
         p = self.params
-        gbuf = ctx.gbuffer()
-        depth = ctx.light_depth(light, size=p.shadow_map_size, soft=True)
-        moments = ctx.shared_key("vsm_moments", light, p.shadow_map_size, "filter", "radius")
-        out = ctx.visibility_key(light)
-
-        def build(res):
-            dm = res[depth]
-            v = dm.view
-            flat = wp.empty(v.width * v.height, dtype=wp.vec2, device=ctx.device)
-            launch_chunked(make_moments, flat.shape[0], inputs=[dm.depth.reshape(-1), v.near, v.far], outputs=[flat], device=ctx.device, min_chunk=1 << 15)
-            return {moments: blur_moments(flat.reshape((v.height, v.width)), p.filter, p.radius)}
-
-        def run(res):
-            gb, dm = res[gbuf], res[depth]
-            bias = p.bias * dm.view.extent / max(dm.view.far - dm.view.near, 1e-12)
-            vis = wp.empty(gb.count, dtype=float, device=ctx.device)
-            launch_chunked(shade_vsm, gb.count, inputs=[dm.view.gpu(), res[moments], gb.gpu(), bias, p.min_variance, p.bleed_reduction], outputs=[vis], device=ctx.device)
-            return {out: ctx.visibility(vis)}
-
-        ctx.add_pass(str(moments), inputs=(depth,), outputs=(moments,), run=build, stage="moments", light=light)
-        return ctx.add_pass(ctx.pass_name("vsm", light), inputs=(gbuf, depth, moments), outputs=(out,), run=run, stage="shadow", light=light)
+        vis = wp.empty(gb.count, dtype=float, device=device)
+        launch_chunked(shade_vsm, gb.count, inputs=[dm.view.gpu(), fmap, gb.gpu(), normalised_bias(p.bias, dm.view), p.min_variance, p.bleed_reduction],
+                       outputs=[vis], device=device)
+        return vis
