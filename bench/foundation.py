@@ -557,7 +557,7 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
         L.append("`pass`: the reference's tracing kernel, which generates each ray from its light sample (the stratified sample, the")
         L.append("light point, the direction) before tracing it; `rays`: the same rays written out first and traced from arrays, as")
         L.append("Embree traces them. `ray`: one ray at a time through Warp's `mesh_query_ray_anyhit`; `packet`: a receiver's rays 32")
-        L.append("at a time through the same BVH (`wsoft.scene.packets`). Target: packet ≥ 1.0× Embree on the same rays,")
+        L.append("at a time through the same BVH (`wsoft.reference.packets`). Target: packet ≥ 1.0× Embree on the same rays,")
         L.append("1 thread and all threads. `identical`: packet and per-ray answers equal bit for bit (pass visibility and ray hits).")
         L.append("")
         L.append("| scene | light | samples | threads | rays | traced | Warp ray Mrays/s | Warp packet Mrays/s | Embree Mrays/s | packet / Embree | "

@@ -24,7 +24,7 @@ warp.fem builds its kernels): nothing unused is compiled in.
 
 Every kernel projects (a whole mesh's points once each first, :func:`project_points`: a mesh has
 about half as many points as triangles), culls the far faces of closed surfaces (exact, from
-:class:`~wsoft.scene.device.Surfaces`), clips at a perspective view's near plane (one or two
+:class:`~wsoft.scene.surfaces.Surfaces`), clips at a perspective view's near plane (one or two
 triangles) and scan-converts (:mod:`wsoft.raster.triangle`: small boxes in one flat loop,
 branch-free for a *masked* fragment in an orthographic view; wide triangles along exact spans of
 covered texel centres). Fragments deeper than the view's far depth (behind every receiver: they

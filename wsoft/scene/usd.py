@@ -72,11 +72,11 @@ def load_scene(path_or_stage, time: float | None = None, render_settings: str | 
     if isinstance(path_or_stage, Usd.Stage):
         stage = path_or_stage
         file = stage_file(stage)
+        _check_time(time, file)
     else:
         file = os.fspath(path_or_stage)
-        _check_time(time, file)
+        _check_time(time, file)  # before the stage is opened
         stage = open_stage(file)
-    _check_time(time, file)
     scene, linked_light = read_stage(stage, file, time, render_settings, instancing=instancing)
     if linked_light is not None:
         scene, _ = read_stage(stage, file, time, render_settings)

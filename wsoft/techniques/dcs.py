@@ -6,7 +6,7 @@ For each receiver ``p`` (a G-buffer sample) and each light sample ``s`` (the sha
 the *depth complexity* ``count(s)``: how many occluding layers the shadow ray ``p -> s`` crosses.
 ``V`` (the paper's ``v_coef``) is the fraction of samples with ``count = 0``. The shadow rays are
 the reference's (:mod:`wsoft.reference`): from ``o``, ``p`` moved off its surface by
-:func:`~wsoft.reference.ray_offset`, to each light point (:func:`~wsoft.lightspace.light.light_point`,
+:func:`~wsoft.raster.shadow_rays.ray_offset`, to each light point (:func:`~wsoft.lightspace.light.light_point`,
 a distant light's at its ``far`` length); samples behind the receiver's tangent plane are blocked
 (the horizon, applied per sample as the reference does).
 
