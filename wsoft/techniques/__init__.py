@@ -158,7 +158,9 @@ def parameter_table(cls: type[Technique]) -> str:
 def markdown_table(techniques: dict[str, type[Technique]] | None = None) -> str:
     """The README's technique table, from the code: name, summary, parameters with defaults, quality
     knobs (``techniques``: default the bundled ones, the README's own)."""
-    techniques = techniques if techniques is not None else {n: c for n, c in _techniques().items() if n in bundled_names()}
+    if techniques is None:
+        bundled = set(bundled_names())
+        techniques = {n: c for n, c in _techniques().items() if n in bundled}
     rows = ["| name | what | parameters (default) | quality knobs (sweep values) |", "|---|---|---|---|"]
     for name in ["reference"] * ("reference" in techniques) + sorted(n for n in techniques if n != "reference"):
         cls = techniques[name]
