@@ -9,7 +9,6 @@ CPU in CI. The report adds what each technique does with a light inside a closed
 from __future__ import annotations
 
 import contextlib
-import io
 import json
 import os
 
@@ -37,7 +36,7 @@ def technique_args(technique: str, map_size: int = MAP) -> list[str]:
 
 def run_cli(stage: str, technique: str, out_dir: str, name: str, map_size: int = MAP) -> Result:
     """``wsoft render STAGE -t TECHNIQUE`` in-process, as a user runs it; the EXR read back."""
-    from wsoft.cli import main
+    from wsoft.cli import run_captured
     from wsoft.io import read_exr
 
     exr = os.path.join(out_dir, f"{name}-{technique}.exr")
@@ -45,12 +44,10 @@ def run_cli(stage: str, technique: str, out_dir: str, name: str, map_size: int =
     for p in (exr, stats):
         with contextlib.suppress(FileNotFoundError):
             os.remove(p)
-    err, out = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(out):
-        rc = main(["render", stage, "-t", technique, "--width", str(W), "--height", str(H), "--device", "cpu",
-                   *technique_args(technique, map_size), "--out", exr, "--stats", stats])
-    lines = [ln for ln in err.getvalue().splitlines() if ln.strip()]
-    res = Result(rc=rc, stderr=err.getvalue(), warnings=[ln[len("warning: "):] for ln in lines if ln.startswith("warning: ")])
+    rc, _, err = run_captured(["render", stage, "-t", technique, "--width", W, "--height", H, "--device", "cpu",
+                               *technique_args(technique, map_size), "--out", exr, "--stats", stats])
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    res = Result(rc=rc, stderr=err, warnings=[ln[len("warning: "):] for ln in lines if ln.startswith("warning: ")])
     errs = [ln for ln in lines if ln.startswith("wsoft: error: ")]
     res.error = errs[0][len("wsoft: error: "):] if errs else ""
     if rc == 0:

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import contextlib
-import io
 import os
 import subprocess
 
@@ -41,24 +39,20 @@ def device(request):
 
 
 def wsoft_cli(*args, cwd: str | None = None) -> subprocess.CompletedProcess:
-    """``wsoft ARGS`` through the command line's own ``main``, in this process (a new interpreter per
-    call costs seconds; tests of what only a fresh process shows, imports and USD's C++ output, run
-    one): its exit code and what it printed, as ``subprocess.run`` gives them."""
-    from wsoft import cli
+    """``wsoft ARGS`` through the command line's own ``main``, in this process
+    (:func:`wsoft.cli.run_captured`; a new interpreter per call costs seconds, and tests of what only
+    a fresh process shows, imports and USD's C++ output, run one), from ``cwd``: its exit code and
+    what it printed, as ``subprocess.run`` gives them."""
+    from wsoft.cli import run_captured
 
-    out, err = io.StringIO(), io.StringIO()
     here = os.getcwd()
     try:
         if cwd is not None:
             os.chdir(cwd)
-        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-            try:
-                rc = cli.main([str(a) for a in args])
-            except SystemExit as exc:  # argparse: --help, or a malformed argument (its usage line)
-                rc = exc.code if isinstance(exc.code, int) else int(exc.code is not None)
+        rc, out, err = run_captured(args)
     finally:
         os.chdir(here)
-    return subprocess.CompletedProcess(["wsoft", *map(str, args)], rc, out.getvalue(), err.getvalue())
+    return subprocess.CompletedProcess(["wsoft", *map(str, args)], rc, out, err)
 
 
 def scene_path(name: str) -> str:

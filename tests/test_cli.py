@@ -165,18 +165,9 @@ def test_out_of_range_value_is_one_line(tmp_path):
 
 def _main(*args):
     """The CLI in-process: (exit code, stdout, stderr)."""
-    import contextlib
-    import io
+    from wsoft.cli import run_captured
 
-    from wsoft.cli import main
-
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        try:
-            rc = main(list(args))
-        except SystemExit as exc:  # argparse
-            rc = exc.code
-    return rc, out.getvalue(), err.getvalue()
+    return run_captured(args)
 
 
 def test_output_paths_are_checked_before_rendering(tmp_path):

@@ -7,8 +7,6 @@ keeps working."""
 
 from __future__ import annotations
 
-import contextlib
-import io
 import os
 import re
 import subprocess
@@ -17,7 +15,7 @@ import warnings
 
 import pytest
 import test_contract as contract
-from conftest import ROOT, scene_path
+from conftest import ROOT, scene_path, wsoft_cli
 
 import wsoft
 from wsoft.techniques import TECHNIQUES, PluginWarning, bundled_names, names, reload_plugins
@@ -84,18 +82,13 @@ def test_the_plugin_renders_compares_and_is_planned(site):
 
 
 def test_the_command_line_lists_and_renders_the_plugin(site, tmp_path):
-    from wsoft import cli
-
-    out = io.StringIO()
-    with contextlib.redirect_stdout(out):
-        assert cli.main(["techniques"]) == 0
-    text = out.getvalue()
-    assert "tent_pcf: percentage-closer filtering with tent-weighted taps" in text and "  pass shadow: gbuffer, light_depth -> visibility" in text
+    p = wsoft_cli("techniques")
+    text = p.stdout
+    assert p.returncode == 0 and "tent_pcf: percentage-closer filtering with tent-weighted taps" in text and "  pass shadow: gbuffer, light_depth -> visibility" in text
     exr = tmp_path / "t.exr"
-    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
-        assert cli.main(["render", scene_path("box_plane.usda"), "-t", "tent_pcf", "--set", "radius=3", "--width", "32", "--height", "24",
-                         "--device", "cpu", "--out", str(exr)]) == 0
-    assert exr.stat().st_size > 0
+    p = wsoft_cli("render", scene_path("box_plane.usda"), "-t", "tent_pcf", "--set", "radius=3", "--width", "32", "--height", "24",
+                  "--device", "cpu", "--out", exr)
+    assert p.returncode == 0 and exr.stat().st_size > 0, p.stderr
 
 
 def test_the_sweeps_over_every_technique_take_the_plugin(site, tmp_path):

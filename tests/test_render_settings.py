@@ -6,8 +6,6 @@ one line naming the file and the prim, exit 2."""
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
 import subprocess
 import sys
@@ -57,15 +55,9 @@ def _box_scene(*, second_camera=True):
 
 def _main(*args):
     """The CLI in-process: (exit code, stdout, stderr)."""
-    from wsoft.cli import main
+    from wsoft.cli import run_captured
 
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        try:
-            rc = main([str(a) for a in args])
-        except SystemExit as exc:  # argparse
-            rc = exc.code
-    return rc, out.getvalue(), err.getvalue()
+    return run_captured(args)
 
 
 def _save(st, tmp_path, name="scene.usda") -> str:

@@ -530,5 +530,20 @@ def main(argv: list[str] | None = None) -> int:
         return 130
 
 
+def run_captured(argv) -> tuple[int, str, str]:
+    """``wsoft ARGV`` in this process with what it prints captured: (exit code, stdout, stderr).
+    argparse's own exits (``--help``, a malformed argument and its usage line) give their code."""
+    import contextlib
+    import io
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            rc = main([str(a) for a in argv])
+        except SystemExit as exc:
+            rc = exc.code if isinstance(exc.code, int) else int(exc.code is not None)
+    return rc, out.getvalue(), err.getvalue()
+
+
 if __name__ == "__main__":
     sys.exit(main())
