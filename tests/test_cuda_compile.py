@@ -103,11 +103,18 @@ def test_every_module_compiles_for_cuda(modules, arch, tmp_path):
 
     supported = getattr(context.runtime, "nvrtc_supported_archs", None)
     if arch == NEWEST:
-        arch = max(supported) if supported else 90
+        arch = newest_arch()
     elif supported is not None and arch not in supported:
         version = ".".join(map(str, context.runtime.get_nvrtc_version()))
         pytest.skip(f"this NVRTC (CUDA {version}) cannot target sm_{arch}; it targets sm_{min(supported)} and newer")
     _compile_all(modules, arch, tmp_path)
+
+
+def newest_arch() -> int:
+    """The newest architecture this NVRTC targets (sm_90 where Warp does not say)."""
+    from warp._src import context
+
+    return max(getattr(context.runtime, "nvrtc_supported_archs", None) or [90])
 
 
 def _compile_all(modules: dict, arch: int, tmp_path) -> None:
@@ -129,9 +136,6 @@ def _compile_all(modules: dict, arch: int, tmp_path) -> None:
 def test_the_rasterizers_other_corner_sources_compile_for_cuda(modules, tmp_path):
     """Instanced work items and corners projected per triangle (short triangle lists) are the same code
     for every fragment and architecture: those specialisations for one fragment, on one arch."""
-    from warp._src import context
-
-    supported = getattr(context.runtime, "nvrtc_supported_archs", None) or [90]
     extra = {k.module.name: k.module for k in rasterizer_kernels(OTHER_SOURCES, fragments=("depth_min",))}
     assert len(extra) == 64 and not set(extra) & set(modules)
-    _compile_all(extra, max(supported), tmp_path)
+    _compile_all(extra, newest_arch(), tmp_path)

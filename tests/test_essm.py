@@ -91,7 +91,7 @@ def _tilted_ground(occluder):
 
 
 def test_pcf_fallback_compares_at_texel_centres(device):
-    """the 2x2 PCF of a non-planar sub-kernel compares each texel's depth with
+    """The 2x2 PCF of a non-planar sub-kernel compares each texel's depth with
     the receiver plane at that texel's centre. At the sample point (up to half a texel away) a
     tilted, fully lit ground shadowed itself in stripes: min V 0.67 and 8.5% of the lit pixels
     below 0.99 (a bias of 0.002 forces the fallback on every lit kernel)."""
@@ -132,7 +132,7 @@ def test_default_bias_keeps_lit_planar_kernels_planar(device):
 
 
 def test_float32_sat_exponent_from_its_mantissa(device):
-    """a float32 SAT at the overflow exponent (74.2 at 1024²) turns small kernels
+    """A float32 SAT at the overflow exponent (74.2 at 1024²) turns small kernels
     into noise (box_plane MAE 0.021, ogre 0.77); with R from the mantissa the error is that of a
     soft exponent (MAE < 0.005 on box_plane)."""
     scene = wsoft.load_scene(scene_path("box_plane.usda"))

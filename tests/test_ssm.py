@@ -452,7 +452,7 @@ def test_table1_rows_and_report(tmp_path):
 
 
 def test_microrect_gather_respects_the_budget(device):
-    """at a coarse level a receiver reads the (b+1)² cells over its search area
+    """At a coarse level a receiver reads the (b+1)² cells over its search area
     (at most (ceil(b)+1)² micro-occluders a level, as §3/§4.2 cap them, like micropatches);
     ``gather=wide`` reads one more cell each side, up to (b+3)². Checked on
     foliage (fig1_plant) and on a solid plate, where the budget gather must not under-occlude."""
@@ -478,7 +478,7 @@ def test_microrect_gather_respects_the_budget(device):
 
 
 def test_nearest_diagonal_microrects_beat_micropatches_on_a_solid_plate(device):
-    """on the plate turned 30° in the light's view, at b_mo = 3 and on the same
+    """On the plate turned 30° in the light's view, at b_mo = 3 and on the same
     search areas and levels, microrects with the nearest-depth diagonal beat micropatches on the
     reference's penumbra; §5.2's own merge does not (240 x 180, 256 spp: penumbra MAE 0.178
     micropatches, 0.194 paper microrects, 0.080 nearest)."""
@@ -496,7 +496,7 @@ def test_nearest_diagonal_microrects_beat_micropatches_on_a_solid_plate(device):
 
 
 def test_occluder_types_share_search_areas_and_levels(device):
-    """the region grown to the micro-occluders' support (§6) decides lit/umbra
+    """The region grown to the micro-occluders' support (§6) decides lit/umbra
     only; the search area itself drives the refinement and the level. Micropatch and microrect
     runs then search the same areas (on fig1_plant at b = 3 both backproject 0.35 of the receivers at
     240 x 180)."""
@@ -513,7 +513,7 @@ def test_occluder_types_share_search_areas_and_levels(device):
 
 
 def test_table2_denominators_are_reported(device):
-    """the backprojecting share over all pixels beside the share over covered
+    """The backprojecting share over all pixels beside the share over covered
     pixels, and the mean search width in texels."""
     scene = wsoft.load_scene(scene_path("fig1_plant.usdc"))
     c = wsoft.render(scene, "ssm", width=64, height=48, device=device, budget=math.inf).counters()
