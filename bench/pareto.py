@@ -73,9 +73,8 @@ def settings(scene, light, sizes: list[int], quick: bool) -> list[tuple[str, dic
             values = q.values[:3] if quick else q.values
             out += [(name, {q.param: v, "seed": CURVE_SEED}) for v in values]
             continue
-        for size in sizes if cls.size_param else [None]:
-            for q in qs:
-                out.append((name, {cls.size_param: size, **q} if cls.size_param else dict(q)))
+        maps = [{cls.size_param: size} for size in sizes] if cls.size_param else [{}]
+        out += [(name, {**m, **q}) for m in maps for q in qs]
     return out
 
 
