@@ -240,5 +240,5 @@ def effective_depth_range(dm, mode: str, scene, device: str) -> tuple[float, flo
     empty = not math.isfinite(zmin)
     if empty:
         zmin, zmax = 0.0, 1.0
-    floor = max(1e-2 * (dm.view.far - dm.view.near), 1e-6 * max(abs(zmax), 1.0))
+    floor = max(1e-2 * (dm.view.far - dm.view.near), 1e-6 * abs(zmax), 1e-30)  # relative: a scene a billionth of a unit wide keeps its depths
     return zmin, max(zmax - zmin, floor), empty

@@ -10,7 +10,7 @@ import math
 import numpy as np
 import warp as wp
 
-from wsoft.lightspace.view import MAX_TAN, LightView, frame_extent_of_bounds, to_frame
+from wsoft.lightspace.view import MAX_TAN, LightView, far_light, frame_extent_of_bounds, to_frame
 from wsoft.scene.types import LIGHT_DISTANT, LIGHT_POINT, LIGHT_SPHERE, Light
 
 
@@ -226,6 +226,20 @@ def _local_fit_stats(pts: wp.array, origin: np.ndarray, axes: np.ndarray, facing
     return res
 
 
+def _far_light_depths(casters: np.ndarray, origin: np.ndarray, axes: np.ndarray, zr_min: float, zr_max: float, near: float,
+                      ext: float) -> tuple[float, float]:
+    """(near, far) of a far local light's view (:func:`fit_light_view`): near just before the
+    nearest of the receivers and the caster vertices when every caster vertex lies in front of
+    the light (else ``near`` as given: a triangle reaching behind the light can come arbitrarily
+    close), far a hundredth of the range past the farthest receiver."""
+    pts = np.asarray(casters).reshape(-1, 3)
+    if len(pts):
+        lo, _ = _frame_bounds(pts, origin, axes)
+        if lo[2] > 0.0:
+            near = max(near, (1.0 - 1e-3) * min(float(lo[2]), zr_min))
+    return near, zr_max + 0.01 * (zr_max - near) + 1e-3 * ext
+
+
 def fit_light_view(
     light: Light,
     receivers: np.ndarray,
@@ -235,6 +249,8 @@ def fit_light_view(
     margin: float = 0.0,
     margin_texels: float = 1.0,
     casters: np.ndarray | None = None,
+    all_casters=None,
+    side_growth: tuple[float, float, float, float] | None = None,
 ) -> LightView:
     """Fit a view of ``light`` to ``receivers`` (world points [N, 3], the camera's visible surface).
 
@@ -244,12 +260,25 @@ def fit_light_view(
     *whole* light from a receiver is mapped (for a local light of half-extent w, a caster at
     depth z blocks within w (1/z - 1/z_r) of a receiver's tangent; for a distant light of cone
     half-angle a, within (z_r - z) tan a). Perspective windows are clamped to ±80° around the
-    view axis; receivers beyond are counted in ``receivers_outside``.
+    view axis; receivers beyond are counted in ``receivers_outside``. ``side_growth`` (a local
+    light): per side of the window (l, r, b, t), how far casters beyond that edge ask it to grow,
+    found in a coarse depth map around the window (the interior of a triangle whose vertices lie
+    far outside, a ceiling just below a lamp, which the vertices miss): that side grows at least
+    as far (:meth:`~wsoft.pipeline.context.RenderContext.light_view`).
 
     Every scale in the view comes from :func:`frame_extent` (receivers and the light), not the
     scene's bounds: a distant light's depth range starts at the nearest caster vertex inside the
     window's prism (``casters``, else the scene's bounds' corners inside it); casters nearer
     still (a huge triangle whose corners are far outside) keep their true, smaller depth.
+
+    A local light beyond :data:`~wsoft.lightspace.view.LIGHT_REACH` receiver diagonals of the
+    receivers (:func:`~wsoft.lightspace.view.far_light`) gets a depth range fitted to its casters
+    and receivers: the near plane just before the nearest caster vertex when every caster vertex
+    lies in front of the light (``all_casters``, a callable giving the scene's caster points: a
+    triangle's nearest point is one of its vertices), the far plane a hundredth of the range past
+    the farthest receiver. Depths normalised over that range keep the caster-to-receiver distance
+    resolved however far the light is (from ``near ~ 0`` to a far plane kilometres away, a
+    one-unit gap is lost in float32).
     """
     if not 256 <= size <= 8192:
         from wsoft.errors import ParameterError
@@ -261,6 +290,7 @@ def fit_light_view(
     pts = _fit_points(rec)
     rlo, rhi, rmean = receiver_bounds(pts)
     ext = frame_extent_of_bounds(rlo, rhi, light)
+    growth = 0.0
     if light.kind == LIGHT_DISTANT:
         axes = np.stack([light.frame[:, 0], light.frame[:, 1], -light.frame[:, 2]], axis=1)  # view along emission
         center = 0.5 * (rlo + rhi)
@@ -309,6 +339,10 @@ def fit_light_view(
             g = _caster_growth(np.asarray(casters).reshape(-1, 3), origin, axes, (l, r, b, t), w, 1e-3 * ext, s["zmax"])
             if g is not None:
                 l, r, b, t = l - g, r + g, b - g, t + g
+                growth = g
+            if side_growth is not None:  # per side (l, r, b, t): casters beyond that edge found in a depth map
+                more = [max(x - (g or 0.0), 0.0) for x in side_growth]
+                l, r, b, t = l - more[0], r + more[1], b - more[2], t + more[3]
         l, r = max(l, -MAX_TAN), min(r, MAX_TAN)
         b, t = max(b, -MAX_TAN), min(t, MAX_TAN)
         outside = s["outside"]
@@ -316,6 +350,8 @@ def fit_light_view(
         if s["n"]:
             near = min(near, 0.5 * s["zmin"])
         far = (s["zmax"] if s["n"] else ext) * 1.01 + 1e-3 * ext
+        if s["n"] and all_casters is not None and far_light(light, rlo, rhi):
+            near, far = _far_light_depths(all_casters(), origin, axes, s["zmin"], s["zmax"], near, ext)
         persp = True
     # keep a border of texels and avoid a zero-area window
     w = max(r - l, 1e-6)
@@ -325,5 +361,5 @@ def fit_light_view(
     window = (l - ex, l + w + ex, b - ey, b + h + ey)
     return LightView(
         light_path=light.path, persp=persp, origin=origin, axes=axes, window=window,
-        near=float(near), far=float(far), width=size, height=size, receivers_outside=outside, extent=ext,
+        near=float(near), far=float(far), width=size, height=size, receivers_outside=outside, extent=ext, growth=float(growth),
     )

@@ -135,6 +135,7 @@ class LightView:
     height: int
     receivers_outside: int = 0
     extent: float = 1.0  # the frame's scale: diagonal of the receivers' bounds with the light's position (see frame_extent)
+    growth: float = 0.0  # how far a soft view's window was widened for casters beyond the receivers (window units)
 
     def gpu(self) -> ViewGPU:
         g = ViewGPU()
@@ -168,22 +169,43 @@ class LightView:
         return (x - l) / (r - l) * self.width, (y - b) / (t - b) * self.height
 
 
+LIGHT_REACH = 4.0  # a local light counts in the frame's extent up to this many receiver diagonals from the receivers' bounds
+
+
 def frame_extent(receivers: np.ndarray, light: Light | None = None) -> float:
     """The frame's scale, which every scale-dependent default (depth biases, ray offsets, near
     planes) is a fraction of: the diagonal of the bounds of the receivers the camera sees, with a
-    local light's position (its reach). Geometry out of view (a far ground, a stray huge triangle)
-    does not change it, unlike the scene's bounds."""
+    local light's position (its reach) moved to within :data:`LIGHT_REACH` receiver diagonals of
+    them. Geometry out of view (a far ground, a stray huge triangle) does not change it, unlike the
+    scene's bounds, and neither does a light's distance: a lamp kilometres away scales nothing
+    (offsets and biases proportional to its distance would step over the casters)."""
     rec = np.asarray(receivers, np.float64).reshape(-1, 3)
     if len(rec) == 0:
         return frame_extent_of_bounds(None, None, light)
     return frame_extent_of_bounds(rec.min(axis=0), rec.max(axis=0), light)
 
 
+def far_light(light: Light, lo: np.ndarray | None, hi: np.ndarray | None) -> bool:
+    """Is a local light farther than :data:`LIGHT_REACH` receiver diagonals from the receivers'
+    bounds ``lo``, ``hi`` (where :func:`frame_extent` stops following it)?"""
+    if light.kind == LIGHT_DISTANT or lo is None:
+        return False
+    lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+    reach = LIGHT_REACH * float(np.linalg.norm(hi - lo))
+    q = np.asarray(light.position, np.float64)
+    return bool(reach > 0.0 and np.any((q < lo - reach) | (q > hi + reach)))
+
+
 def frame_extent_of_bounds(lo: np.ndarray | None, hi: np.ndarray | None, light: Light | None = None) -> float:
     """:func:`frame_extent` from the receivers' bounds (``None``: no receiver)."""
     pts = [] if lo is None else [np.asarray(lo, np.float64), np.asarray(hi, np.float64)]
     if light is not None and light.kind != LIGHT_DISTANT:
-        pts.append(np.asarray(light.position, np.float64))
+        q = np.asarray(light.position, np.float64)
+        if pts:
+            reach = LIGHT_REACH * float(np.linalg.norm(pts[1] - pts[0]))
+            if reach > 0.0:
+                q = np.clip(q, pts[0] - reach, pts[1] + reach)
+        pts.append(q)
     if not pts:
         return 1.0
     box = np.stack(pts)

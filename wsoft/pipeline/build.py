@@ -16,7 +16,7 @@ import warp as wp
 from wsoft.errors import ParameterError, SceneError
 from wsoft.graph import Key, Pass, Resources
 from wsoft.pipeline.context import RenderContext, TechniqueContext
-from wsoft.pipeline.framing import frame_setup
+from wsoft.pipeline.framing import frame_setup, local_origin
 from wsoft.pipeline.loading import flatten_for, instancing_plan
 from wsoft.raster.shade import shade as shade_samples
 from wsoft.scene.types import Light, Scene
@@ -109,9 +109,16 @@ def build_graph(scene: Scene, technique, *, width: int | None = None, height: in
     instancing = instancing_plan(scene, techs, labels)
     if instancing["mode"] == "flattened" and strict:
         scene = flatten_for(scene, instancing)
-    lights = [scene.find_light(str(light))] if light else list(scene.lights)
     fr = frame_setup(scene, width, height, camera)
-    ctx = RenderContext(scene, fr.camera, fr.width, fr.height, device, pixel_samples, framing=fr)
+    origin, origin_warning = local_origin(scene, fr.camera)
+    if origin is not None:  # far from the world origin: every pass works in a frame centred on what the camera sees
+        scene = scene.translated(-origin)
+        cam = fr.camera
+        m = np.array(cam.to_world, np.float64)
+        m[:3, 3] -= origin
+        fr = dataclasses.replace(fr, camera=dataclasses.replace(cam, to_world=m))
+    lights = [scene.find_light(str(light))] if light else list(scene.lights)
+    ctx = RenderContext(scene, fr.camera, fr.width, fr.height, device, pixel_samples, framing=fr, origin=origin, origin_warning=origin_warning)
     built = Built(ctx, labels, techs, {}, {}, {}, {})
     built.instancing = instancing
     for tech, label in zip(techs, labels):

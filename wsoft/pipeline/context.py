@@ -8,6 +8,9 @@ Providers register their own passes once, so techniques that need the same depth
 
 from __future__ import annotations
 
+import dataclasses
+import functools
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -18,7 +21,7 @@ from wsoft.errors import DeclarationError
 from wsoft.graph import FrameGraph, Key, Pass
 from wsoft.lightspace.light import disk_shaped, light_gpu
 from wsoft.lightspace.fit import fit_light_view
-from wsoft.lightspace.view import outside_view_warning
+from wsoft.lightspace.view import DEPTH_CLEAR, far_light, outside_view_warning
 from wsoft.pipeline.framing import Framing
 from wsoft.raster.camera import camera_gpu
 from wsoft.raster.gbuffer import GBuffer, render_gbuffer
@@ -47,12 +50,27 @@ class Visibility:
         return out
 
 
+FAR_DEPTH_LIMIT = 1e-4
+"""The coarsest float32 depth spacing at a far local light's far plane, as a fraction of the frame's
+extent, that its shadow maps take without a warning (the default depth biases are 1e-4 of the
+extent: past it they cannot separate a caster from its receiver)."""
+
+
+def _bounds_of(points: np.ndarray):
+    """(lo, hi) of world points [N, 3] (None, None for none)."""
+    if len(points) == 0:
+        return None, None
+    return points.min(axis=0).astype(np.float64), points.max(axis=0).astype(np.float64)
+
+
 class RenderContext:
     """What techniques build their passes with; providers register the shared passes once."""
 
     def __init__(self, scene: Scene, camera: Camera, width: int, height: int, device: str, pixel_samples: int = 1,
-                 framing: Framing | None = None):
+                 framing: Framing | None = None, origin: np.ndarray | None = None, origin_warning: str = ""):
         self.scene = scene
+        self.origin = origin  # world position of the frame's origin (None: world space; see wsoft.pipeline.framing.local_origin)
+        self.origin_warning = origin_warning
         self.camera = camera
         self.width = width
         self.height = height
@@ -101,10 +119,16 @@ class RenderContext:
         alpha = self.scene.has_cutouts
         cam = camera_gpu(self.camera)
 
+        name = "gbuffer_alpha" if alpha else "gbuffer"
+
         def run(res):
+            if self.origin is not None:
+                self.counters["frame"]["local_origin"] = [float(x) for x in self.origin]
+            if self.origin_warning:
+                self.warn(name, self.origin_warning)
             return {GBUFFER: render_gbuffer(res[sk], cam, self.width, self.height, self.pixel_samples, alpha)}
 
-        return self.add(Pass("gbuffer_alpha" if alpha else "gbuffer", (sk,), (GBUFFER,), run, kind="gbuffer"))
+        return self.add(Pass(name, (sk,), (GBUFFER,), run, kind="gbuffer"))
 
     def gbuffer_channels(self) -> Key:
         """Resource ``gbuffer_channels``: per-pixel P, N, Z, A (host float32 [H, W]) and the
@@ -124,6 +148,8 @@ class RenderContext:
                 nrm = np.take_along_axis(gb.host("nrm"), first[..., None], axis=0)[0]
                 dist = np.take_along_axis(gb.host("dist"), first, axis=0)[0]
             ch: dict[str, np.ndarray] = {}
+            if self.origin is not None:  # back to world space, on covered pixels only
+                pos = np.where(hit.any(axis=0)[..., None], pos.astype(np.float64) + self.origin, 0.0)
             for i, axis in enumerate("XYZ"):  # the G-buffer writes zeros on background samples
                 ch[f"P.{axis}"] = np.ascontiguousarray(pos[..., i], dtype=np.float32)
                 ch[f"N.{axis}"] = np.ascontiguousarray(nrm[..., i], dtype=np.float32)
@@ -141,19 +167,82 @@ class RenderContext:
         key = Key("light_view", self.label(light), variant=f"@{size}" + ("+soft" if soft else ""))
         name = f"fit_{key}"
 
+        probe = soft and light.kind != LIGHT_DISTANT and light.extent() > 0.0
+        sk = self.scene_arrays() if probe else None
+
         def run(res):
             gb: GBuffer = res[gk]
             prim = gb.prim.numpy()
             rec = gb.pos.numpy()[prim >= 0]
             lo, hi = self.scene.bounds
             distant = light.kind == LIGHT_DISTANT  # its depth range starts at the nearest caster over the receivers
-            view = fit_light_view(light, rec, lo, hi, size, casters=self.scene.caster_points if soft or distant else None)
+            fit = functools.partial(fit_light_view, light, rec, lo, hi, size, casters=self.scene.caster_points if soft or distant else None,
+                                    all_casters=lambda: self.scene.caster_points)
+            view = fit()
+            if probe:
+                view = self._grown_for_casters(res[sk], light, view, fit, name)
             self.pass_counters(name)["receivers_outside"] = view.receivers_outside
+            if view.persp and far_light(light, *_bounds_of(rec)):
+                spacing = float(np.spacing(np.float32(view.far)))
+                if spacing > FAR_DEPTH_LIMIT * view.extent:
+                    self.warn(name, f"light {light.path} is {view.far:.3g} from the receivers: float32 depths there are {spacing:.3g} apart, "
+                              f"{spacing / view.extent:.2g} of the frame's extent (more than {FAR_DEPTH_LIMIT:g}): its shadow-map depths "
+                              "and biases lose precision (shadows may thin or vanish); a DistantLight models a light this far")
             if view.receivers_outside:
                 self.warn(name, outside_view_warning(light, f"{view.receivers_outside} of {len(rec)} visible samples"))
             return {key: view}
 
-        return self.add(Pass(name, (gk,), (key,), run, kind="light_map", light=self.label(light)))
+        return self.add(Pass(name, (gk,) if sk is None else (gk, sk), (key,), run, kind="light_map", light=self.label(light)))
+
+    PROBE_SIZE = 64  # texels per side of the coarse map that finds casters a soft view's window must grow for
+
+    def _grown_for_casters(self, ds, light: Light, view, fit, name: str):
+        """A soft view of a local light grown until its window holds every caster that can block
+        part of the light from a receiver, the interiors of triangles whose vertices lie far
+        outside included (a ceiling just below a lamp, which :func:`fit_light_view`'s vertex test
+        misses): a coarse conservative depth map (:data:`PROBE_SIZE` texels a side) of the window
+        widened by its own size on every side (within ±80°) finds, per side, the casters beyond that
+        edge that can block part of the light from the farthest receiver (a caster at depth z
+        within w (1/z - 1/z_far) of the edge); a side grows for them (``fit(side_growth=...)``) when
+        they ask for more than two coarse texels beyond the growth the vertices gave, until no side
+        does (at most four times). ``grown_for_casters`` in the pass's counters: how many times."""
+        from wsoft.lightspace.view import MAX_TAN
+
+        casting = self.scene.casting_triangles(light)
+        w = light.extent()
+        grown = 0
+        need = np.zeros(4)
+        n = self.PROBE_SIZE
+        for _ in range(4):
+            l, r, b, t = view.window
+            pl, pr = max(l - (r - l), -MAX_TAN), min(r + (r - l), MAX_TAN)
+            pb, pt = max(b - (t - b), -MAX_TAN), min(t + (t - b), MAX_TAN)
+            coarse = dataclasses.replace(view, width=n, height=n, window=(pl, pr, pb, pt))
+            d = rasterize(ds, coarse, alpha_tested=False, conservative=True, triangles=casting).depth.numpy()
+            tx, ty = (pr - pl) / n, (pt - pb) / n
+            x0 = pl + tx * np.arange(n)  # texel edges (rows from the bottom)
+            y0 = pb + ty * np.arange(n)
+            z = np.where((d > 0.0) & (d < view.far), d, np.inf)
+            reach = w * (1.0 / z - 1.0 / view.far)  # how far from it a caster at depth z blocks part of the light
+            gx, gy = np.meshgrid(x0, y0)
+            beyond = (l - (gx + tx), gx - r, b - (gy + ty), gy - t)  # distance of the texel's near side past each edge
+            inside_y = (gy + ty >= b) & (gy <= t)
+            inside_x = (gx + tx >= l) & (gx <= r)
+            more = False
+            for k, (dist, across) in enumerate(zip(beyond, (inside_y, inside_y, inside_x, inside_x))):
+                hit = (dist > 0.0) & across & (reach >= dist)
+                g = float(reach[hit].max()) if hit.any() else 0.0
+                if g > max(view.growth, need[k]) + 2.0 * max(tx, ty):
+                    need[k], more = g, True
+            if not more:
+                break
+            wider = fit(side_growth=tuple(float(x) for x in need))
+            if wider.window == view.window:
+                break
+            view, grown = wider, grown + 1
+        if grown:
+            self.pass_counters(name)["grown_for_casters"] = grown
+        return view
 
     def light_depth(self, light: Light, size: int, conservative: bool = False, soft: bool = False, inner: bool = False,
                     opaque: bool = False, faces: str = "all") -> Key:

@@ -4,7 +4,10 @@ defaults (:func:`frame_setup`)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
 
 from wsoft.errors import ParameterError
 from wsoft.raster.camera import conform_aperture
@@ -120,6 +123,73 @@ def frame_setup(scene: Scene, width: int | None = None, height: int | None = Non
             crop = None
     return Framing(conform_aperture(cam, width, height, par, policy), width, height, crop, par, policy, cam_source, size_source,
                    rs, scene.render_settings_source)
+
+
+LOCAL_FRAME_RATIO = 64.0
+"""A render moves to a frame local to what it sees when the geometry in view lies farther from the
+world origin than this many times its own extent (there float32 coordinates are too coarse for
+ray offsets and depths)."""
+
+FLOAT32_LIMIT = 2.0 ** -7
+"""The coarsest float32 spacing of the loaded coordinates in view, as a fraction of their extent,
+that a render accepts without a warning: the loader rounds points to float32 in world space, so
+the geometry itself is quantised to that spacing (a scene 12 units across: 1e6 from the origin,
+spacing 0.06, passes; 2e6, spacing 0.125, warns)."""
+
+
+SMALLEST_EXTENT = 1e-10
+"""The smallest scene (its bounds' diagonal, in scene units) whose shadows are verified: at 1e-10
+units every technique matches the reference (``wsoft bench adversarial``, ``tiny_scene``); a render
+of a smaller one warns."""
+
+
+def local_origin(scene: Scene, camera: Camera) -> tuple[np.ndarray | None, str]:
+    """Where a render of ``scene`` through ``camera`` puts its origin, and a warning ('' for none).
+
+    None when the scene's bounds lie within :data:`LOCAL_FRAME_RATIO` diagonals of the world
+    origin (the render stays in world space). Else the centre of the caster vertices the camera
+    sees (inside its window grown by half, in front of it; the camera's position when none is),
+    rounded to float32, when that centre lies farther from the world origin than
+    :data:`LOCAL_FRAME_RATIO` times their extent: every pass then works on the scene moved by
+    minus that origin (:meth:`Scene.translated`), and the ``P`` channel is moved back. The warning
+    says when the float32 spacing of the world coordinates there exceeds :data:`FLOAT32_LIMIT` of
+    the extent in view (the loaded points are quantised to it)."""
+    lo, hi = scene.bounds
+    far = float(max(np.abs(lo).max(), np.abs(hi).max()))
+    if not math.isfinite(far) or far <= LOCAL_FRAME_RATIO * scene.diagonal:
+        across = float(np.linalg.norm(hi - lo))
+        small = "" if across >= SMALLEST_EXTENT or across == 0.0 else (
+            f"the scene is {across:.3g} units across, below {SMALLEST_EXTENT:g}: shadows there are not verified "
+            "(every technique agrees with the reference down to 1e-10 units); scale the stage up (metersPerUnit keeps its size)")
+        return None, small
+    pts = np.asarray(scene.caster_points, np.float64)
+    eye = np.asarray(camera.to_world, np.float64)[:3, 3]
+    R = np.asarray(camera.to_world, np.float64)[:3, :3]
+    R = R / np.maximum(np.linalg.norm(R, axis=0), 1e-300)
+    v = (pts - eye) @ R
+    tx, ty = 1.5 * camera.tan_half[0], 1.5 * camera.tan_half[1]
+    if camera.orthographic:
+        seen = (np.abs(v[:, 0] - camera.offset[0]) <= tx) & (np.abs(v[:, 1] - camera.offset[1]) <= ty)
+    else:
+        z = -v[:, 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            seen = (z > 0) & (np.abs(v[:, 0] / z - camera.offset[0]) <= tx) & (np.abs(v[:, 1] / z - camera.offset[1]) <= ty)
+    if seen.any():
+        vlo, vhi = pts[seen].min(axis=0), pts[seen].max(axis=0)
+        centre, ext = 0.5 * (vlo + vhi), float(np.linalg.norm(vhi - vlo))
+    else:
+        centre, ext = eye, 0.0
+    ext = ext if ext > 0.0 else scene.diagonal
+    reach = float(np.abs(centre).max())
+    if reach <= LOCAL_FRAME_RATIO * ext:
+        return None, ""
+    warning = ""
+    spacing = float(np.spacing(np.float32(reach)))
+    if spacing > FLOAT32_LIMIT * ext:
+        warning = (f"the geometry in view lies {reach:.3g} from the world origin: float32 coordinates there are {spacing:.3g} apart, "
+                   f"{spacing / ext:.2g} of its extent {ext:.3g} (more than {FLOAT32_LIMIT:.2g}): shapes and shadows are quantised "
+                   "to that spacing; move the stage nearer the origin")
+    return centre.astype(np.float32).astype(np.float64), warning
 
 
 def check_sizes(width: int | None, height: int | None, pixel_samples: int) -> None:

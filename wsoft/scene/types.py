@@ -377,6 +377,39 @@ class Scene:
         sub.changed()
         return sub
 
+    def translated(self, offset) -> "Scene":
+        """The scene moved by ``offset`` (world units, float64 [3]): points, lights, cameras and
+        instances' placements, computed in float64 and rounded once to float32 (an ``offset`` that
+        is float32-representable and near the points moves them exactly). How a render works in a
+        frame local to what it sees (:func:`wsoft.pipeline.framing.local_origin`). Built once per
+        offset and kept on the scene."""
+        from dataclasses import replace
+
+        d = np.asarray(offset, np.float64).reshape(3)
+        cache = self.__dict__.setdefault("_translated", {})
+        key = tuple(float(x) for x in d)
+        if key in cache:
+            return cache[key]
+
+        def move_light(l: Light) -> Light:
+            return replace(l, position=np.asarray(l.position, np.float64) + d)
+
+        def move_camera(c: Camera) -> Camera:
+            m = np.array(c.to_world, np.float64)
+            m[:3, 3] += d
+            return replace(c, to_world=m)
+
+        inst = self.instances
+        if inst is not None:
+            xf = np.array(inst.xform, np.float64)
+            xf[:, :3, 3] += d
+            inst = replace(inst, xform=xf)
+        moved = replace(self, points=(self.points.astype(np.float64) + d).astype(np.float32), lights=[move_light(l) for l in self.lights],
+                        unshadowed_lights=[move_light(l) for l in self.unshadowed_lights], cameras=[move_camera(c) for c in self.cameras],
+                        instances=inst, warnings=list(self.warnings))
+        cache[key] = moved
+        return moved
+
     def casting_mask(self, light: Light) -> np.ndarray | None:
         """Which triangles cast ``light``'s shadow (bool ``[T]``): those of prims its
         ``collection:shadowLink`` includes. None when every triangle does (no exclusion: the common
@@ -415,7 +448,7 @@ class Scene:
     def changed(self) -> None:
         """Forget device copies and derived values after the arrays were edited in place (and the
         stage :meth:`flattened` would load again: it flattens the edited arrays instead)."""
-        for k in ("_device_cache", "bounds", "caster_points", "_dynamic_subset", "_casting", "_flattened", "_source", "_adjacency"):
+        for k in ("_device_cache", "bounds", "caster_points", "_dynamic_subset", "_casting", "_flattened", "_source", "_adjacency", "_translated"):
             self.__dict__.pop(k, None)
         if self.instances is not None:
             self.instances.__dict__.pop("world_bounds", None)
