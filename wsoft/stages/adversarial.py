@@ -15,6 +15,7 @@ command line in-process, exactly as a user runs them (``wsoft render STAGE -t TE
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 from dataclasses import dataclass, field
 from typing import Callable
@@ -427,6 +428,64 @@ def b_dome_only(folder):
     return _save(st, folder, "dome_only")
 
 
+# -- precision: far from the origin, a far light, a tiny scene, a lamp above a room's ceiling
+
+
+def _moved(offset=(0.0, 0.0, 0.0), scale: float = 1.0, sphere_at: float | None = None):
+    """The base moved by ``offset`` and scaled by ``scale`` (the camera's clipping range too);
+    ``sphere_at``: a sphere light of the sun's angular radius (0.53°) at that height instead."""
+    from wsoft.stages.builders import add_sphere_light
+
+    st = make_stage()
+    o = np.asarray(offset, np.float64)
+    at = lambda p: tuple(o + scale * np.asarray(p, np.float64))  # noqa: E731
+    add_quad(st, "/World/Ground", at((0, 0, 0)), 5 * scale)
+    add_quad(st, "/World/Occluder", at((0, 0, 1)), 1 * scale)
+    if sphere_at is None:
+        add_rect_light(st, "/World/Light", at((0, 0, 3)), scale, scale)
+    else:
+        add_sphere_light(st, "/World/Light", at((0, 0, sphere_at)), scale * sphere_at * math.tan(math.radians(0.53)))
+    add_camera(st, "/World/Cam", at((0, -6, 5)), at((0, 0, 0)), clip=(0.01 * scale, 1000.0 * scale))
+    return st
+
+
+def b_far_origin_xy(folder):
+    """The base a million units from the origin in x and y (float32 spacing there: 0.06)."""
+    return _save(_moved((1e6, 1e6, 0.0)), folder, "far_origin_xy")
+
+
+def b_far_origin_z(folder):
+    return _save(_moved((0.0, 0.0, 1e6)), folder, "far_origin_z")
+
+
+def b_tiny_scene(folder):
+    """The base a ten-billionth of its size."""
+    return _save(_moved(scale=1e-10), folder, "tiny_scene")
+
+
+def b_far_light_100(folder):
+    """A sun-sized (0.53°) sphere light 100 units above the base's occluder."""
+    return _save(_moved(sphere_at=100.0), folder, "far_light_100")
+
+
+def b_far_light_1e4(folder):
+    """The same angular size 10,000 units up: the same shadow."""
+    return _save(_moved(sphere_at=1e4), folder, "far_light_1e4")
+
+
+def b_room_ceiling(folder):
+    """The base inside a closed, double-sided room (±2, z -0.5 to 2.5) whose ceiling lies half a
+    unit below the rect light, the camera inside: everything it sees is in shadow."""
+    from pxr import UsdGeom
+
+    st = _base()
+    st.RemovePrim("/World/Cam")
+    room = add_box(st, "/World/Room", (-2, -2, -0.5), (2, 2, 2.5))
+    UsdGeom.Mesh(room.GetPrim()).CreateDoubleSidedAttr(True)
+    add_camera(st, "/World/Cam", (0, -1.5, 1), (0, 0, 0))
+    return _save(st, folder, "room_ceiling")
+
+
 # --------------------------------------------------------------------------- expectations
 
 
@@ -482,6 +541,21 @@ def same_as(other: str):
         return _same_v(ch, frames[other], other)
 
     check.__doc__ = f"The same V as the stage {other!r} on the same pixels."
+    check.wants = other
+    return check
+
+
+def close_to(other: str, tol: float):
+    """Mean |V - V_other| at most ``tol`` on the pixels both cover (a moved or rescaled copy of a
+    stage: the same shadow up to float rounding and the reference's noise)."""
+
+    def check(ch, base, technique="", frames=None) -> str | None:
+        o = frames[other]
+        both = _covered(ch) & (o["A"] > 0)
+        d = np.abs(ch["V"] - o["V"])[both]
+        return None if both.sum() > 100 and d.mean() <= tol else f"mean |V - V({other})| {d.mean():.3g} on {both.sum()} pixels, want <= {tol:g}"
+
+    check.__doc__ = f"Within {tol:g} of the stage {other!r} (mean over the pixels both cover)."
     check.wants = other
     return check
 
@@ -551,8 +625,17 @@ CASES: list[Case] = [
     Case("broken_syntax", b_broken_syntax, "error", ("broken_syntax.usda:5:3", "parse error")),
     Case("empty", b_empty, "error", ("no shadow-casting light",)),
     Case("dome_only", b_dome_only, "error", ("/World/Dome",)),
+    # precision
+    Case("far_origin_xy", b_far_origin_xy, check=close_to("base", 0.005), silent_hazard=True,
+         note="the base 1e6 from the origin in x and y"),
+    Case("far_origin_z", b_far_origin_z, check=close_to("base", 0.005), silent_hazard=True, note="the base 1e6 up in z"),
+    Case("tiny_scene", b_tiny_scene, check=close_to("base", 0.005), silent_hazard=True, note="the base scaled by 1e-10"),
+    Case("far_light_1e4", b_far_light_1e4, check=close_to("far_light_100", 0.006), silent_hazard=True,
+         note="a 0.53° sphere light 1e4 up: the shadow it casts from 100 up"),
+    Case("room_ceiling", b_room_ceiling, check=all_dark, silent_hazard=True,
+         note="camera inside a closed double-sided room, the lamp half a unit above its ceiling"),
 ]
-BASES = {"base": b_base, "base_sun": b_base_sun}
+BASES = {"base": b_base, "base_sun": b_base_sun, "far_light_100": b_far_light_100}
 
 
 @dataclass
@@ -606,6 +689,12 @@ def judge(case: Case, technique: str, res: Result, frame_of: Callable[[str], dic
 KNOWN: dict[tuple[str, str], str] = {
     ("sphere", "essm"): "self-shadowing on a curved receiver's lit top (min V 0.75 at 256² and 1024² maps): ESSM fidelity",
     ("sphere", "vssm"): "self-shadowing on a curved receiver's lit top (min V 0.83 at 256², 0.17 at 1024²): VSSM's filtered estimate",
+    ("room_ceiling", "essm"): "the walls' feet lit (mean V 0.068, at 256² and 1024²): the receivers lie hidden under the ceiling, past the "
+                              "effective depth range the map's pyramid gives (depth_range=bounds: 0.023; a range reaching the farthest "
+                              "receiver: 0.022, but greece's MAE 0.0425 -> 0.0472)",
+    ("room_ceiling", "salzman"): "the floor lit (mean V 0.83): its far bound, the nearest surface behind the casters, is the occluder "
+                                 "under the ceiling, and a receiver behind two casters escapes the shadow (the paper's one layer; "
+                                 "0.000 without that occluder)",
 }
 
 
