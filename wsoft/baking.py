@@ -311,13 +311,14 @@ def bake(scene, technique, *, light: str | None = None, frames=None, out: str | 
     """Bake ``technique``'s visibility of the stage ``scene`` into a new ``Sdf.Layer`` of ``over``\\ s
     (see the module's documentation) and return it.
 
-    ``scene``: a USD file, an open ``Usd.Stage`` or a :class:`~wsoft.scene.types.Scene` loaded from
-    a file. ``technique``: a name with its parameters as keywords (``samples=1024``), a
+    ``scene``: a USD file, an open ``Usd.Stage`` or a :class:`~wsoft.scene.types.Scene` (whose
+    stage is read again: the open stage it was loaded from, with its load rules and population
+    mask, else its file). ``technique``: a name with its parameters as keywords (``samples=1024``), a
     ``(name, params)`` pair or a Technique. ``light``: one light's path or name (default: every
     shadow-casting light the technique supports). ``frames``: ``"a:b"``, ``"a:b:step"`` or a
     sequence of time codes, within the stage's time range, written as time samples; None: the time a
-    render uses (the stage's start time code when it authors a range, else the default time),
-    written as default values. ``out``: the layer's file (``.usda``, ``.usdc`` or ``.usd``; saved);
+    render uses (the stage's start time code when it authors a range, else its earliest time
+    sample, else the default time), written as default values. ``out``: the layer's file (``.usda``, ``.usdc`` or ``.usd``; saved);
     None: an anonymous layer. ``texture_size``: also bake ``N x N`` textures over each mesh's
     ``st`` into ``texture_dir`` (default: the layer's folder; required without ``out``), named
     ``<mesh path>_<light>.exr`` (``..._<light>.<frame>.exr`` per frame). ``crease_angle``: degrees
@@ -353,8 +354,11 @@ def bake(scene, technique, *, light: str | None = None, frames=None, out: str | 
     dev = resolve_device(device)
 
     # the stage
+    loaded_from, load_time = scene.__dict__.get("_loaded_from", (None, None)) if isinstance(scene, Scene) else (None, None)
     if isinstance(scene, Usd.Stage):
         stage, file = scene, stage_file(scene)
+    elif isinstance(loaded_from, Usd.Stage):  # a Scene of an open stage: that stage (its load rules and population mask)
+        stage, file = loaded_from, scene.path
     elif isinstance(scene, Scene) and not os.path.isfile(scene.path):  # loaded from a stage in memory
         found = Sdf.Layer.Find(scene.path)
         if not found:
@@ -367,7 +371,7 @@ def bake(scene, technique, *, light: str | None = None, frames=None, out: str | 
         warn_list += diagnostic_lines(delegate.TakeUncoalescedDiagnostics(), file)
     times = _frames(stage, frames, file)
     if times is None and isinstance(scene, Scene):
-        times_load = [scene.time]
+        times_load = [load_time if loaded_from is not None else scene.time]  # the Scene's own load
     else:
         times_load = times if times is not None else [None]
 

@@ -184,7 +184,8 @@ def cmd_plan(args) -> int:
     if args.json:
         print(json.dumps(p, indent=2))
         return 0
-    print(f"scene {p['scene']}: {p['triangles']} triangles, up {p['up_axis']}, {p['meters_per_unit']:g} m/unit")
+    print(f"scene {p['scene']}: {p['triangles']} triangles, up {p['up_axis']}, {p['meters_per_unit']:g} m/unit"
+          + (f", time code {p['time']:g}" if p["time"] is not None else ""))
     fr = p["framing"]
     print(f"render settings: {fr['render_settings']} (from {fr['render_settings_source']})" if fr["render_settings"] else
           "render settings: none (no --render-settings, no renderSettingsPrimPath metadata, none from GetStageRenderSettings)")
@@ -438,7 +439,8 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--render-settings", metavar="PRIM", help=_RS_HELP)
     r.add_argument("--light", help="light path or name for V (default: every shadow-casting light; V = the first)")
     r.add_argument("--instancing", choices=("auto", "keep", "flatten"), default="auto", help=_INST_HELP)
-    r.add_argument("--time", type=float, help="USD time code (default: the stage's start time)")
+    r.add_argument("--time", type=float, help="USD time code (default: the stage's start time code; without a time range, "
+                   "its earliest time sample)")
     r.add_argument("--device", help="cpu or cuda:N (default: cuda:0 when available, else cpu)")
     r.add_argument("--pixel-samples", type=int, default=1, help="G-buffer samples per pixel")
     r.add_argument("--out", help="output EXR (default: the productName of the render settings' product with a "
@@ -493,7 +495,7 @@ def main(argv: list[str] | None = None) -> int:
     k.add_argument("--set", action="append", metavar="KEY=VALUE", help="technique parameter (repeatable)")
     k.add_argument("--light", help="light path or name (default: every shadow-casting light the technique supports)")
     k.add_argument("--frames", metavar="A:B[:STEP]", help="time codes A to B inclusive (step 1, or STEP), or one time code A, within the "
-                   "stage's range: time samples (default: the stage's start time, written as default values)")
+                   "stage's range: time samples (default: the time render uses, written as default values)")
     k.add_argument("--out", required=True, help="the layer to write (.usda, .usdc or .usd)")
     k.add_argument("--texture-size", type=int, metavar="N", help="also bake an N x N texture per mesh with st and light")
     k.add_argument("--texture-dir", help="where the textures go (default: the layer's folder)")

@@ -55,7 +55,8 @@ def render(
     :func:`frame_setup`; the settings' pixel aspect, conform policy and data window apply whatever
     was given). ``render_settings``: the ``RenderSettings`` prim to use (None: the stage's own, see
     :mod:`wsoft.scene.render_settings`); a :class:`Scene` loaded with other settings is loaded
-    again from its file, since their ``includedPurposes`` may change its geometry.
+    again, since their ``includedPurposes`` may change its geometry: from the ``Usd.Stage`` it was
+    loaded from (its load rules and population mask kept), else from its file.
     ``light``: a light path or name (default: every shadow-casting light; ``V`` = the first a
     technique supports). A light a technique does not support is skipped with a warning.
     ``progress``: called as ``progress(done, total, pass_name)`` before each pass of the graph and

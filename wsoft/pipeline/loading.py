@@ -34,7 +34,9 @@ def load_stage(path, *, time: float | None = None, render_settings: str | None =
 
 def with_render_settings(scene, render_settings: str | None, time_code: float | None = None) -> Scene:
     """``scene`` (a :class:`Scene` or what :func:`load_scene` opens) loaded with the render
-    settings ``render_settings`` (None: as it is, or the stage's own)."""
+    settings ``render_settings`` (None: as it is, or the stage's own). A :class:`Scene` loaded
+    with other settings is loaded again from what it was loaded from: the open ``Usd.Stage``
+    itself (its load rules and population mask kept), else its file."""
     if not isinstance(scene, Scene):
         return load_stage(scene, time=time_code, render_settings=render_settings)
     if render_settings is None:
@@ -42,7 +44,10 @@ def with_render_settings(scene, render_settings: str | None, time_code: float | 
     have = scene.render_settings.path if scene.render_settings is not None else None
     if have == str(render_settings):
         return scene
-    if os.path.isfile(scene.path):  # the settings' includedPurposes may change the geometry
+    source, time = scene.__dict__.get("_loaded_from", (None, scene.time))
+    if source is not None and (not isinstance(source, str) or os.path.isfile(source)):  # the settings' includedPurposes may change the geometry
+        return load_scene(source, time=time, render_settings=str(render_settings))  # an open stage as it is (load rules, mask)
+    if os.path.isfile(scene.path):
         return load_scene(scene.path, time=scene.time, render_settings=str(render_settings))
     raise ParameterError(f"this scene was loaded with render settings {have or '(none)'} and has no file to load again; "
                          f"pass render_settings={str(render_settings)!r} to load_scene", file=scene.path)

@@ -43,8 +43,9 @@ def shadow_controls(scene: Scene, light: Light) -> dict:
 
 def plan(scene: Scene, techniques: list[str] | None = None, *, width: int | None = None, height: int | None = None, light=None,
          camera=None) -> dict:
-    """What would run: shadow-casting lights (with their UsdLux shadow controls,
-    :func:`shadow_controls`), skipped lights, cutout materials, the purposes loaded, the framing
+    """What would run: the time code the scene was loaded at (``time``; None: the default time),
+    shadow-casting lights (with their UsdLux shadow controls, :func:`shadow_controls`), skipped
+    lights, cutout materials, the purposes loaded, the framing
     (``framing``: which render settings prim and camera, where each came from, the resolution,
     conform policy and data window; see :meth:`Framing.describe`), and per technique the passes
     (with their kinds) or why it is not applicable to a light."""
@@ -53,6 +54,7 @@ def plan(scene: Scene, techniques: list[str] | None = None, *, width: int | None
     out = {
         "scene": scene.path,
         "triangles": scene.total_triangles,
+        "time": scene.time,
         "instancing": instancing_plan(scene, [], []),
         "up_axis": scene.up_axis,
         "meters_per_unit": scene.meters_per_unit,

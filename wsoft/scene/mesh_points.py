@@ -27,6 +27,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from wsoft.scene.polygons import triangulate
+
 CREASE_ANGLE = 30.0
 """Degrees: faces around a vertex closer than this share its normal (a smooth vertex); farther ones
 make a crease (faceVarying values)."""
@@ -62,9 +64,10 @@ class MeshSurface:
     face_centroid: np.ndarray
     """[F, 3] float64 mean of each face's corners."""
     tri_corners: np.ndarray
-    """[T, 3] int64: corners of the fan triangles of the valid faces (face order, then fan order)."""
+    """[T, 3] int64: corners of the triangles of the valid faces that are not holes (face order;
+    :func:`~wsoft.scene.polygons.triangulate`, as the loader triangulates them)."""
     tri_face: np.ndarray
-    """[T] int64: the face of each fan triangle."""
+    """[T] int64: the face of each triangle."""
     st: np.ndarray | None
     """[C, 2] float32 ``st`` per corner, or None without (or with an unusable) ``st``."""
     warnings: list[str]
@@ -213,13 +216,14 @@ def read_mesh_surface(prim, time_code, world_points: np.ndarray, world: np.ndarr
         crease[valid & vn_zero[cv]] = True
     interpolation = "faceVarying" if crease[valid].any() else "vertex"
 
-    # fan triangles of the valid faces (for texels)
+    # triangles of the valid faces that are not holes (for texels), as the loader triangulates them
     fvalid = face_ok & (face_w > 0)
-    ntri = np.where(fvalid, counts - 2, 0)
-    tri_face = np.repeat(np.arange(F), ntri)
-    k = np.arange(ntri.sum()) - np.repeat(np.cumsum(ntri) - ntri, ntri)
-    c0 = starts[tri_face]
-    tri_corners = np.stack([c0, c0 + k + 1, c0 + k + 2], axis=1) if len(tri_face) else np.zeros((0, 3), np.int64)
+    holes = mesh.GetHoleIndicesAttr().Get(time_code)
+    if holes is not None and len(holes):
+        h = np.asarray(holes, np.int64)
+        fvalid[h[(h >= 0) & (h < F)]] = False
+    tri = triangulate(P, counts, cv, keep=fvalid)
+    tri_corners, tri_face = tri.corners, tri.faces
 
     st = None
     spv = UsdGeom.PrimvarsAPI(prim).GetPrimvar("st")

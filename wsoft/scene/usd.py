@@ -29,8 +29,12 @@ __all__ = ["diagnostic_lines", "load_scene", "open_stage", "stage_file"]
 def load_scene(path_or_stage, time: float | None = None, render_settings: str | None = None, instancing: bool = False) -> Scene:
     """Load a USD stage (a file path or an open ``Usd.Stage``) at ``time``.
 
-    ``time=None`` uses the stage's start time code when it has an authored time range,
-    else the default time. ``render_settings``: the path of the ``RenderSettings`` prim to use;
+    ``time=None`` uses the stage's start time code when it has an authored time range, else the
+    earliest time sample authored on the stage (a warning names it: a stage whose values are only
+    time samples has none at the default time), else the default time; ``Scene.time`` is the
+    time code loaded (None: the default time). A ``Usd.Stage`` keeps its load rules and population
+    mask: the scene holds the stage, and loads it again from it (other render settings,
+    :meth:`Scene.flattened <wsoft.scene.types.Scene.flattened>`, :func:`wsoft.bake`), never from its file. ``render_settings``: the path of the ``RenderSettings`` prim to use;
     None picks the stage's own (metadata ``renderSettingsPrimPath``, else
     ``UsdRender.Settings.GetStageRenderSettings``; see :mod:`wsoft.scene.render_settings`). The
     settings' ``includedPurposes`` decide which purposes are loaded (without settings:
@@ -83,8 +87,12 @@ def load_scene(path_or_stage, time: float | None = None, render_settings: str | 
         scene.warnings.append(f"{file}: {linked_light}: collection:shadowLink leaves out casters and the stage has "
                               "instances: loaded flat (instancing off; per-instance shadow linking is not kept instanced)")
     scene.warnings[:0] = diagnostic_lines(delegate.TakeUncoalescedDiagnostics(), file)
+    # what the scene was loaded from (the open stage itself, with its load rules, population mask
+    # and session layer, or the file) and at which time argument: how a load with other render
+    # settings (wsoft.pipeline.with_render_settings), Scene.flattened and wsoft.bake read it again
+    source = stage if isinstance(path_or_stage, Usd.Stage) else file
+    scene.__dict__["_loaded_from"] = (source, time)
     if instancing:  # how Scene.flattened loads the stage again, flat
-        source = stage if isinstance(path_or_stage, Usd.Stage) else file
         scene.__dict__["_source"] = functools.partial(load_scene, source, time=time, render_settings=render_settings, instancing=False)
     return scene
 

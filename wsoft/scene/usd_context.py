@@ -27,23 +27,47 @@ def pxr():
     return Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade
 
 
+def earliest_time_sample(stage) -> float | None:
+    """The earliest time sample of any authored attribute of ``stage`` (in stage time: layer
+    offsets and value clips applied), None when it has none. Every prim is visited once (instances'
+    prototypes once each), and only when one of the stage's layers holds time samples at all."""
+    Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = pxr()
+    if not any(layer.ListAllTimeSamples() for layer in stage.GetUsedLayers()):
+        return None
+    best = None
+    for root in [stage.GetPseudoRoot(), *stage.GetPrototypes()]:
+        for prim in Usd.PrimRange(root):
+            for attr in prim.GetAuthoredAttributes():
+                bracket = attr.GetBracketingTimeSamples(-math.inf)  # (first, first); () without samples
+                if bracket and (best is None or bracket[0] < best):
+                    best = bracket[0]
+    return None if best is None else float(best)
+
+
 class StageContext:
     """``stage`` read at ``time`` (None: the start time code when the stage authors a time range,
-    else the default time) with the render settings ``render_settings`` (a prim path; None: the
+    else its earliest time sample (:func:`earliest_time_sample`, with a warning naming it), else
+    the default time) with the render settings ``render_settings`` (a prim path; None: the
     stage's own)."""
 
     def __init__(self, stage, file: str, time: float | None, render_settings: str | None = None):
         Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = pxr()
         self.stage = stage
         self.file = file
-        if time is None:
-            self.timecode = Usd.TimeCode(stage.GetStartTimeCode()) if stage.HasAuthoredTimeCodeRange() else Usd.TimeCode.Default()
-        else:
+        self.warnings: list[str] = []
+        if time is not None:
             self.timecode = Usd.TimeCode(float(time))
+        elif stage.HasAuthoredTimeCodeRange():
+            self.timecode = Usd.TimeCode(stage.GetStartTimeCode())
+        elif (first := earliest_time_sample(stage)) is not None:
+            self.timecode = Usd.TimeCode(first)
+            self.warn(None, f"time samples but no time range (startTimeCode, endTimeCode): loaded at time code {first:g}, "
+                      "the earliest time sample (--time, or time=, picks another)")
+        else:
+            self.timecode = Usd.TimeCode.Default()
         self.time = None if self.timecode.IsDefault() else float(self.timecode.GetValue())
         self.xf = UsdGeom.XformCache(self.timecode)
         self.world_override = None  # (prototype root prim, its world matrix) while reading a prototype in its own frame
-        self.warnings: list[str] = []
         self.dynamic_cache: dict[str, bool] = {}
         self.dynamic_stop = None  # a prim is_dynamic does not walk up past (an instance prim, while reading its prototype)
         self.render_settings, self.render_settings_source = read_render_settings(self, render_settings)

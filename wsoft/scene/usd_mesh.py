@@ -1,8 +1,8 @@
 """USD meshes with their materials and alpha textures -> :class:`~wsoft.scene.soup.MeshPart`.
 
 :class:`MeshReader` reads a ``UsdGeom.Mesh`` at the context's time code (:mod:`wsoft.scene.usd_context`):
-its faces triangulated, its points placed in the world, its texture coordinates and
-``primvars:wsoft:bakedLight`` per corner, and per triangle the material bound to the mesh or its
+its faces triangulated (:mod:`wsoft.scene.polygons`; the faces of ``holeIndices`` left out), its
+points placed in the world, its texture coordinates and ``primvars:wsoft:bakedLight`` per corner, and per triangle the material bound to the mesh or its
 ``GeomSubset`` faces. Materials (``UsdPreviewSurface``: diffuse colour, opacity, opacityThreshold, an
 opacity texture through ``UsdUVTexture``, or a prim's ``displayColor`` without one) and textures are
 read once each and kept in :attr:`MeshReader.materials` and :attr:`MeshReader.textures`.
@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from wsoft.scene.polygons import Triangles, triangulate
 from wsoft.scene.soup import MeshPart
 from wsoft.scene.types import WRAP_NAMES, Material, Texture
 from wsoft.scene.usd_context import StageContext, pxr
@@ -27,11 +28,15 @@ class MeshReader:
         self.material_index: dict[str, int] = {"": 0}
         self.textures: list[Texture] = []
         self.texture_index: dict[tuple, int] = {}
+        self.prototype_triangles: dict[str, Triangles] = {}  # a PointInstancer prototype's mesh path -> its triangles
 
     def read_mesh(self, prim) -> MeshPart | None:
-        """The mesh ``prim`` triangulated (fan triangulation, ``orientation`` respected, the winding
-        flipped under a mirroring transform) in the world (or the frame of the context's
-        ``world_override``), zero-area triangles dropped; None (with a warning) when nothing is left."""
+        """The mesh ``prim`` triangulated (:func:`~wsoft.scene.polygons.triangulate`: a fan from each
+        face's first corner, concave faces ear-clipped; the faces of ``holeIndices`` left out;
+        ``orientation`` respected, the winding flipped under a mirroring transform) in the world (or
+        the frame of the context's ``world_override``), zero-area triangles dropped; None (with a
+        warning) when nothing is left. Faces that cross themselves, non-planar concave faces and
+        out-of-range hole indices are warned once per mesh."""
         Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = pxr()
         mesh = UsdGeom.Mesh(prim)
         points = self.ctx.get(mesh.GetPointsAttr())
@@ -57,13 +62,14 @@ class MeshReader:
         if np.any(counts < 3):
             self.ctx.warn(prim, f"{int(np.sum(counts < 3))} faces with fewer than 3 vertices ignored")
 
-        # fan triangulation: face f with n vertices -> (v0, vi, vi+1), i = 1..n-2
-        starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-        ntri_face = np.maximum(counts - 2, 0)
-        face_of_tri = np.repeat(np.arange(len(counts)), ntri_face)
-        k = np.arange(ntri_face.sum()) - np.repeat(np.cumsum(ntri_face) - ntri_face, ntri_face)
-        c0 = starts[face_of_tri]
-        corners = np.stack([c0, c0 + k + 1, c0 + k + 2], axis=1)  # face-vertex (corner) indices
+        # a prototype a PointInstancer places many times is triangulated (and warned about) once
+        key = str(prim.GetPath()) if self.ctx.world_override is not None else None
+        tri = self.prototype_triangles.get(key) if key is not None else None
+        if tri is None:
+            tri = self.triangulate(prim, mesh, p, counts, idx)
+            if key is not None:
+                self.prototype_triangles[key] = tri
+        corners, face_of_tri = tri.corners, tri.faces
         orient = self.ctx.get(mesh.GetOrientationAttr(), UsdGeom.Tokens.rightHanded)
         if orient == UsdGeom.Tokens.leftHanded:
             corners = corners[:, [0, 2, 1]]
@@ -102,6 +108,28 @@ class MeshReader:
         baked = self.read_primvar(prim, corners, face_of_tri, tris, "wsoft:bakedLight", 3)
         return MeshPart(points=pw, triangles=tris.astype(np.int32), material=mat, uv=uv, double_sided=ds, closed=closed_orientation(pw, tris),
                         dynamic=self.ctx.is_dynamic(prim, mesh), baked=baked, faces=face_of_tri)
+
+    def triangulate(self, prim, mesh, p, counts, idx) -> Triangles:
+        """The triangles of the faces that are not holes (``holeIndices``; out-of-range ones warned
+        and ignored): a fan from each face's first corner where that is one, else ear clipping on
+        the face's best-fit plane (:func:`~wsoft.scene.polygons.triangulate`); faces that cross
+        themselves and non-planar concave faces warned, one line each per mesh."""
+        drawn = counts >= 3
+        holes = self.ctx.get(mesh.GetHoleIndicesAttr())
+        if holes is not None and len(holes):
+            h = np.asarray(holes, dtype=np.int64)
+            out_of_range = (h < 0) | (h >= len(counts))
+            if out_of_range.any():
+                self.ctx.warn(prim, f"holeIndices: {int(out_of_range.sum())} of {len(h)} indices out of range for {len(counts)} faces "
+                              f"(first: {int(h[out_of_range][0])}); ignored")
+            drawn[h[~out_of_range]] = False
+        tri = triangulate(p, counts, idx, keep=drawn)
+        if tri.non_planar:
+            self.ctx.warn(prim, f"{tri.non_planar} concave faces are not planar (up to {tri.off_plane:.3g} off their best-fit plane): "
+                          "triangulated on that plane")
+        if tri.self_intersecting:
+            self.ctx.warn(prim, f"{tri.self_intersecting} faces cross themselves: triangulated as a fan from their first corner")
+        return tri
 
     def read_st(self, prim, mesh, corners, face_of_tri, tris, name: str = "st"):
         out = self.read_primvar(prim, corners, face_of_tri, tris, name, 2)

@@ -428,6 +428,69 @@ def b_dome_only(folder):
     return _save(st, folder, "dome_only")
 
 
+# -- mesh topology and time samples (holeIndices, concave faces, samples without a time range)
+
+
+def b_hole_face(folder):
+    """The base with the occluder's only face listed in its ``holeIndices``: nothing casts."""
+    st = _base()
+    from pxr import UsdGeom
+
+    UsdGeom.Mesh(st.GetPrimAtPath("/World/Occluder")).CreateHoleIndicesAttr([0])
+    return _save(st, folder, "hole_face")
+
+
+# a pentagon notched from above, its reflex corner (index 3) below the diagonal from corner 0: the
+# fan from corner 0 covers part of the notch; the triangles that split it correctly, in the order
+# and winding the loader's ear clipping gives them
+_PENTAGON = [(-1, -1, 1), (1, -1, 1), (1, 1, 1), (0, -0.6, 1), (-1, 1, 1)]
+_PENTAGON_SPLIT = [1, 2, 3, 0, 1, 3, 0, 3, 4]
+
+
+def _pentagon_stage(counts, indices):
+    st = _base()
+    st.RemovePrim("/World/Occluder")
+    add_mesh(st, "/World/Occluder", (_PENTAGON, counts, indices), double_sided=True, minimal=True)
+    return st
+
+
+def b_concave_pentagon(folder):
+    """The occluder a concave pentagon, one face."""
+    return _save(_pentagon_stage([5], [0, 1, 2, 3, 4]), folder, "concave_pentagon")
+
+
+def b_concave_pentagon_split(folder):
+    """The same pentagon authored as the three triangles that split it."""
+    return _save(_pentagon_stage([3, 3, 3], _PENTAGON_SPLIT), folder, "concave_pentagon_split")
+
+
+def b_base_dynamic(folder):
+    """The base with its occluder marked ``wsoft:dynamic``: what an animated occluder compares with
+    (salzman maps only dynamic casters once there are any)."""
+    from pxr import Sdf
+
+    st = _base()
+    st.GetPrimAtPath("/World/Occluder").CreateAttribute("wsoft:dynamic", Sdf.ValueTypeNames.Bool).Set(True)
+    return _save(st, folder, "base_dynamic")
+
+
+def b_time_samples_only(folder):
+    """The base with the light's and the occluder's translates authored only as time samples (at
+    12, the base's places; at 24, elsewhere) and no time range."""
+    from pxr import Gf, UsdGeom
+
+    st = _base()
+    (op,) = UsdGeom.Xformable(st.GetPrimAtPath("/World/Light")).GetOrderedXformOps()
+    op.GetAttr().ClearDefault()
+    op.Set(Gf.Vec3d(0, 0, 3), 12.0)
+    op.Set(Gf.Vec3d(2, 0, 4), 24.0)
+    occ = st.GetPrimAtPath("/World/Occluder")
+    pts = occ.GetAttribute("points")
+    pts.Set([Gf.Vec3f(p[0], p[1], 0.0) for p in pts.Get()])
+    op = UsdGeom.Xformable(occ).AddTranslateOp()
+    op.Set(Gf.Vec3d(0, 0, 1), 12.0)
+    op.Set(Gf.Vec3d(1, 0, 2), 24.0)
+    return _save(st, folder, "time_samples_only")
 # -- precision: far from the origin, a far light, a tiny scene, a lamp above a room's ceiling
 
 
@@ -625,6 +688,13 @@ CASES: list[Case] = [
     Case("broken_syntax", b_broken_syntax, "error", ("broken_syntax.usda:5:3", "parse error")),
     Case("empty", b_empty, "error", ("no shadow-casting light",)),
     Case("dome_only", b_dome_only, "error", ("/World/Dome",)),
+    # -- mesh topology and time samples (holeIndices, concave faces, samples without a time range)
+    Case("hole_face", b_hole_face, check=all_lit, silent_hazard=True, note="the occluder's only face is a hole (holeIndices): nothing casts"),
+    Case("concave_pentagon_split", b_concave_pentagon_split, note="a concave pentagon occluder authored as the three triangles that split it"),
+    Case("concave_pentagon", b_concave_pentagon, check=same_as("concave_pentagon_split"), silent_hazard=True,
+         note="the same pentagon as one face (its first corner does not see all of it: not a fan)"),
+    Case("time_samples_only", b_time_samples_only, message=("loaded at time code 12",), check=same_as_base, base="base_dynamic",
+         silent_hazard=True, note="light and occluder translates only time-sampled, no time range: the earliest sample"),
     # precision
     Case("far_origin_xy", b_far_origin_xy, check=close_to("base", 0.005), silent_hazard=True,
          note="the base 1e6 from the origin in x and y"),
@@ -635,7 +705,7 @@ CASES: list[Case] = [
     Case("room_ceiling", b_room_ceiling, check=all_dark, silent_hazard=True,
          note="camera inside a closed double-sided room, the lamp half a unit above its ceiling"),
 ]
-BASES = {"base": b_base, "base_sun": b_base_sun, "far_light_100": b_far_light_100}
+BASES = {"base": b_base, "base_sun": b_base_sun, "base_dynamic": b_base_dynamic, "far_light_100": b_far_light_100}
 
 
 @dataclass
