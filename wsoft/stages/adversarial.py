@@ -491,6 +491,8 @@ def b_time_samples_only(folder):
     op.Set(Gf.Vec3d(0, 0, 1), 12.0)
     op.Set(Gf.Vec3d(1, 0, 2), 24.0)
     return _save(st, folder, "time_samples_only")
+
+
 # -- precision: far from the origin, a far light, a tiny scene, a lamp above a room's ceiling
 
 
