@@ -125,6 +125,21 @@ def occluded_from(mesh: wp.uint64, tri0: int, cut: Surfaces, has_cutouts: int, o
 
 
 @wp.func
+def triangle_normal(mesh: wp.uint64, face: int) -> wp.vec3:
+    """The unit geometric normal of triangle ``face`` of ``mesh`` from its corners, the edges scaled
+    to unit size first: Warp's own hit normal squares coordinates and underflows to zero on
+    triangles 1e-12 units across."""
+    m = wp.mesh_get(mesh)
+    a = m.points[m.indices[3 * face + 0]]
+    e1 = m.points[m.indices[3 * face + 1]] - a
+    e2 = m.points[m.indices[3 * face + 2]] - a
+    big = wp.max(wp.max(wp.max(wp.abs(e1[0]), wp.abs(e1[1])), wp.max(wp.abs(e1[2]), wp.abs(e2[0]))), wp.max(wp.abs(e2[1]), wp.abs(e2[2])))
+    if big <= 0.0:
+        return wp.vec3(0.0)
+    return wp.normalize(wp.cross(e1 / big, e2 / big))
+
+
+@wp.func
 def nearest_from(mesh: wp.uint64, tri0: int, cut: Surfaces, has_cutouts: int, start: wp.vec3, dir: wp.vec3, remaining: float,
                  travelled: float):
     """The nearest surface an eye ray meets in ``mesh`` (face ``f`` is the triangle ``tri0 + f`` of
@@ -153,6 +168,8 @@ def nearest_from(mesh: wp.uint64, tri0: int, cut: Surfaces, has_cutouts: int, st
                     bu = q.u
                     bv = q.v
                     n = q.normal
+                    if wp.length_sq(n) == 0.0:
+                        n = triangle_normal(mesh, q.face)
                     travelled += q.t
                 else:
                     step = q.t + 1.0e-5 * (1.0 + q.t)
