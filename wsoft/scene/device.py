@@ -150,6 +150,7 @@ def upload_scene(scene: Scene, device: str) -> DeviceScene:
     cut.tex_h = arr([t.data.shape[0] for t in scene.textures], wp.int32)
     cut.tex_wrap_s = arr([t.wrap_s for t in scene.textures], wp.int32)
     cut.tex_wrap_t = arr([t.wrap_t for t in scene.textures], wp.int32)
+    cut.tex_border = arr([t.border for t in scene.textures], wp.float32)
     cut.tex_data = wp.array(tex_data.astype(np.float32), dtype=wp.float32, device=device)
     albedo = np.array([m.albedo for m in scene.materials], np.float32)[comb["material"]]
     baked = comb["baked"]

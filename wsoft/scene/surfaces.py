@@ -32,12 +32,14 @@ class Surfaces:
     tex_h: wp.array[wp.int32]
     tex_wrap_s: wp.array[wp.int32]
     tex_wrap_t: wp.array[wp.int32]
-    tex_data: wp.array[wp.float32]  # all textures, rows bottom-up
+    tex_border: wp.array[wp.float32]  # [X] the value outside the image under the black wrap (the texture's bias)
+    tex_data: wp.array[wp.float32]  # all textures, rows bottom-up: each UsdUVTexture's output, scale and bias applied
 
 
 @wp.func
 def wrap_coord(i: int, n: int, mode: int) -> int:
-    """Texel index under a UsdUVTexture wrap mode (0 repeat, 1 mirror, 2 clamp, 3 black: -1)."""
+    """Texel index under a UsdUVTexture wrap mode (0 repeat, 1 mirror, 2 clamp, 3 black: -1 outside;
+    ``useMetadata`` is resolved to one of them at load, :mod:`wsoft.scene.usd_texture`)."""
     if mode == 0:
         r = i % n
         if r < 0:
@@ -65,7 +67,7 @@ def texel_value(cut: Surfaces, t: int, x: int, y: int) -> float:
     xi = wrap_coord(x, w, cut.tex_wrap_s[t])
     yi = wrap_coord(y, h, cut.tex_wrap_t[t])
     if xi < 0 or yi < 0:
-        return 0.0
+        return cut.tex_border[t]
     return cut.tex_data[cut.tex_offset[t] + yi * w + xi]
 
 

@@ -28,17 +28,39 @@ WRAP_REPEAT = 0
 WRAP_MIRROR = 1
 WRAP_CLAMP = 2
 WRAP_BLACK = 3
-WRAP_NAMES = {"repeat": WRAP_REPEAT, "mirror": WRAP_MIRROR, "clamp": WRAP_CLAMP, "black": WRAP_BLACK, "useMetadata": WRAP_REPEAT}
+WRAP_NAMES = {"repeat": WRAP_REPEAT, "mirror": WRAP_MIRROR, "clamp": WRAP_CLAMP, "black": WRAP_BLACK}  # UsdUVTexture's wrapS/wrapT tokens
 
 
 @dataclass
 class Texture:
-    """A single-channel (alpha) texture, rows stored bottom-up so st=(0,0) is element [0, 0]."""
+    """A single-channel texture: the output (r, g, b or a) of the ``UsdUVTexture`` a cutout's opacity
+    reads, its ``scale`` and ``bias`` applied (:mod:`wsoft.scene.usd_texture`); rows stored bottom-up
+    so st=(0,0) is element [0, 0]."""
 
     asset: str
-    data: np.ndarray  # shape [h, w], float32 in [0, 1]
+    data: np.ndarray  # shape [h, w], float32 (in [0, 1] unless scale or bias take it out)
     wrap_s: int = WRAP_REPEAT
     wrap_t: int = WRAP_REPEAT
+    border: float = 0.0  # the value outside the image under WRAP_BLACK: transparent black, scaled and biased (the bias)
+
+
+@dataclass(frozen=True)
+class StMap:
+    """Where a cutout texture's st comes from on a mesh: the primvar ``primvar`` (a
+    ``UsdPrimvarReader_float2``'s ``varname``; ``fallback`` on a mesh without it; None: ``fallback``
+    everywhere, an unconnected ``st``) mapped by the affine ``matrix`` (the ``UsdTransform2d`` nodes
+    between reader and texture, composed: st = ``matrix[:, :2] @ uv + matrix[:, 2]``, 2 x 3 rows).
+    Applied on the host per triangle corner at load (:meth:`wsoft.scene.usd_mesh.MeshReader.texture_coords`),
+    which is exact: the device interpolates st linearly over a triangle."""
+
+    primvar: str | None
+    fallback: tuple[float, float] = (0.0, 0.0)
+    matrix: tuple[tuple[float, float, float], tuple[float, float, float]] = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0))
+    reader: str = ""  # the reader node's path (messages name it)
+
+    @property
+    def identity(self) -> bool:
+        return self.matrix == ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0))
 
 
 @dataclass
@@ -50,6 +72,10 @@ class Material:
     opacity: float = 1.0  # constant opacity (used when texture is None)
     opacity_threshold: float = 0.0  # > 0 makes the material a cutout (UsdPreviewSurface rule)
     texture: int = -1  # index into Scene.textures of the opacity texture, -1 = constant
+    st: StMap | None = None  # where the opacity texture's st comes from (None: no texture, or the mesh's ``st`` as it is)
+    udim: dict[int, int] | None = None  # a UDIM file's tiles: tile (1001-1100) -> texture index (-1: unreadable, the fallback)
+    fallback: float = 1.0  # the UsdUVTexture's fallback for the channel read: the opacity where a texture cannot be read
+    tile: int = 0  # a UDIM material's tile this material stands for (0: not a tile; -1: st outside every tile)
 
     @property
     def is_cutout(self) -> bool:
@@ -169,7 +195,7 @@ class Prototype:
     triangles: np.ndarray  # [T, 3] int32
     tri_prim: np.ndarray  # [T] int32 -> Scene.prims
     tri_material: np.ndarray  # [T] int32 -> Scene.materials
-    tri_uv: np.ndarray  # [T, 3, 2] float32
+    tri_uv: np.ndarray  # [T, 3, 2] float32 st per corner (as Scene.tri_uv)
     tri_double_sided: np.ndarray  # [T] bool
     tri_closed: np.ndarray  # [T] int8
     tri_face: np.ndarray  # [T] int32
@@ -275,7 +301,7 @@ class Scene:
     triangles: np.ndarray  # [T, 3] int32, counter-clockwise seen from the front
     tri_prim: np.ndarray  # [T] int32 -> prims
     tri_material: np.ndarray  # [T] int32 -> materials
-    tri_uv: np.ndarray  # [T, 3, 2] float32 texture coordinates (0 where the mesh has none)
+    tri_uv: np.ndarray  # [T, 3, 2] float32 st per corner: where the material's opacity texture is read (its st network applied), else the mesh's st (0 without)
     tri_double_sided: np.ndarray  # [T] bool
     prims: list[str] = field(default_factory=list)
     tri_face: np.ndarray | None = None  # [T] int32: the face of its prim (faceVertexCounts order) a triangle comes from
@@ -352,7 +378,11 @@ class Scene:
             for p, n in zip(self.instances.prototypes, per):
                 if n and p.triangle_count:
                     counts += n * np.bincount(p.tri_material, minlength=len(self.materials)).astype(np.int64)[: len(counts)]
-        return {m.path: int(counts[i]) for i, m in enumerate(self.materials) if m.is_cutout and counts[i] > 0}
+        out: dict[str, int] = {}
+        for i, m in enumerate(self.materials):  # a UDIM material's tiles are materials of one path
+            if m.is_cutout and counts[i] > 0:
+                out[m.path] = out.get(m.path, 0) + int(counts[i])
+        return out
 
     @property
     def has_cutouts(self) -> bool:

@@ -2,21 +2,27 @@
 
 :class:`MeshReader` reads a ``UsdGeom.Mesh`` at the context's time code (:mod:`wsoft.scene.usd_context`):
 its faces triangulated (:mod:`wsoft.scene.polygons`; the faces of ``holeIndices`` left out), its
-points placed in the world, its texture coordinates and ``primvars:wsoft:bakedLight`` per corner, and per triangle the material bound to the mesh or its
-``GeomSubset`` faces. Materials (``UsdPreviewSurface``: diffuse colour, opacity, opacityThreshold, an
-opacity texture through ``UsdUVTexture``, or a prim's ``displayColor`` without one) and textures are
-read once each and kept in :attr:`MeshReader.materials` and :attr:`MeshReader.textures`.
+points placed in the world, per triangle the material bound to the mesh or its ``GeomSubset``
+faces, and per corner ``primvars:wsoft:bakedLight`` and the texture coordinates the triangle's
+material samples its opacity texture at (the primvar its network reads, through its
+``UsdTransform2d`` nodes, :meth:`MeshReader.texture_coords`). Materials (``UsdPreviewSurface``:
+diffuse colour, opacity, opacityThreshold, an opacity texture network,
+:mod:`wsoft.scene.usd_texture`, or a prim's ``displayColor`` without one) and textures are read once
+each and kept in :attr:`MeshReader.materials` and :attr:`MeshReader.textures`.
 :func:`closed_orientation` tells a closed surface (whose far faces the light view may skip).
 """
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from wsoft.scene.polygons import Triangles, triangulate
 from wsoft.scene.soup import MeshPart
-from wsoft.scene.types import WRAP_NAMES, Material, Texture
+from wsoft.scene.types import Material, Texture
 from wsoft.scene.usd_context import StageContext, pxr
+from wsoft.scene.usd_texture import OpacityNetwork
 
 
 class MeshReader:
@@ -26,8 +32,9 @@ class MeshReader:
         self.ctx = ctx
         self.materials: list[Material] = [Material(path="(default)")]
         self.material_index: dict[str, int] = {"": 0}
-        self.textures: list[Texture] = []
-        self.texture_index: dict[tuple, int] = {}
+        self.network = OpacityNetwork(ctx)
+        self.textures: list[Texture] = self.network.textures
+        self.tile_index: dict[tuple[int, int], int] = {}  # (UDIM material, tile) -> the tile's material
         self.prototype_triangles: dict[str, Triangles] = {}  # a PointInstancer prototype's mesh path -> its triangles
 
     def read_mesh(self, prim) -> MeshPart | None:
@@ -98,8 +105,8 @@ class MeshReader:
             if not keep.any():
                 return None
             tris, corners, face_of_tri = tris[keep], corners[keep], face_of_tri[keep]
-        uv = self.read_st(prim, mesh, corners, face_of_tri, tris)
         mat = self.bind_materials(prim, mesh, len(counts), face_of_tri)
+        uv, mat = self.texture_coords(prim, corners, face_of_tri, tris, mat)
         ds = bool(self.ctx.get(mesh.GetDoubleSidedAttr(), False))  # UsdGeom's uniform doubleSided (the eye view's back-face culling)
         stray = prim.GetAttribute("primvars:doubleSided")
         if stray and stray.HasAuthoredValue():
@@ -131,9 +138,83 @@ class MeshReader:
             self.ctx.warn(prim, f"{tri.self_intersecting} faces cross themselves: triangulated as a fan from their first corner")
         return tri
 
-    def read_st(self, prim, mesh, corners, face_of_tri, tris, name: str = "st"):
-        out = self.read_primvar(prim, corners, face_of_tri, tris, name, 2)
-        return np.zeros((len(tris), 3, 2), np.float32) if out is None else out
+    def texture_coords(self, prim, corners, face_of_tri, tris, mat):
+        """Per triangle corner, the st its material's opacity texture is sampled at, [T, 3, 2]
+        float32, and the triangles' materials. A triangle whose material reads a texture gets the
+        primvar that material's network names (:class:`~wsoft.scene.types.StMap`: the
+        ``UsdPrimvarReader_float2``'s ``varname``, its ``fallback`` where the mesh lacks it) mapped
+        by its ``UsdTransform2d`` nodes, here on the host (exact: the map is affine); a triangle of
+        a UDIM material gets the material of its tile, its st shifted into the tile
+        (:meth:`udim_tiles`). Other triangles keep the ``st`` primvar (0 without one)."""
+        read: dict[str, np.ndarray | None] = {}
+
+        def primvar(name: str):
+            if name not in read:
+                read[name] = self.read_primvar(prim, corners, face_of_tri, tris, name, 2)
+            return read[name]
+
+        st = primvar("st")
+        uv = np.zeros((len(tris), 3, 2), np.float32) if st is None else st
+        used = np.unique(mat)
+        if all(self.materials[m].st is None or self.materials[m].st.primvar == "st" and self.materials[m].st.identity
+               and self.materials[m].udim is None and st is not None for m in used):
+            return uv, mat  # every triangle's st as the mesh holds it
+        uv, mat = uv.copy(), mat.copy()
+        for m in used:
+            material = self.materials[m]
+            stmap = material.st
+            if stmap is None:
+                continue
+            sel = mat == m
+            src = primvar(stmap.primvar) if stmap.primvar else None
+            if src is None:
+                if stmap.primvar:
+                    self.ctx.warn(prim, f"has no primvars:{stmap.primvar} (read by {stmap.reader}); {material.path} reads the reader's "
+                                  f"fallback st = ({stmap.fallback[0]:g}, {stmap.fallback[1]:g}) there")
+                base = np.broadcast_to(np.asarray(stmap.fallback, np.float32), (int(sel.sum()), 3, 2))
+            else:
+                base = src[sel]
+            if not stmap.identity or src is None:
+                a = np.asarray(stmap.matrix, np.float64)
+                base = (base.astype(np.float64) @ a[:, :2].T + a[:, 2]).astype(np.float32)
+            uv[sel] = base
+            if material.udim is not None:
+                self.udim_tiles(prim, int(m), sel, uv, mat)
+        return uv, mat
+
+    def udim_tiles(self, prim, m: int, sel, uv, mat) -> None:
+        """Give the triangles ``sel`` of the UDIM material ``m`` the material of the tile their st
+        centroid lies in (tile 1001 + u + 10 v for st in [u, u + 1) x [v, v + 1), u and v in 0..9)
+        and shift their st into it (``uv`` and ``mat`` in place). Triangles spanning tiles read their
+        centroid's tile, clamped at its edge; those in no tile, the texture's fallback (warnings)."""
+        material = self.materials[m]
+        t = uv[sel].astype(np.float64)
+        cell = np.floor(t.mean(axis=1))  # [n, 2]
+        inside = np.all((cell >= 0) & (cell <= 9), axis=1)
+        tile = np.where(inside, 1001 + cell[:, 0] + 10 * cell[:, 1], -1).astype(np.int64)
+        local = t - np.where(inside[:, None], cell, 0.0)[:, None, :]
+        eps = 1e-6
+        spans = inside & np.any((local < -eps) | (local > 1 + eps), axis=(1, 2))
+        if spans.any():
+            self.ctx.warn(prim, f"{int(spans.sum())} triangles span UDIM tiles of {material.path}; each reads the tile of its centroid, "
+                          "clamped at its edge")
+        if not inside.all():
+            self.ctx.warn(prim, f"{int((~inside).sum())} triangles of {material.path} have st outside the UDIM tiles 1001-1100; "
+                          f"they take the texture's fallback {material.fallback:g}")
+        missing = sorted({int(k) for k in np.unique(tile[inside]) if int(k) not in material.udim})
+        if missing:
+            self.ctx.warn(prim, f"UDIM tiles {', '.join(map(str, missing[:5]))}{' ...' if len(missing) > 5 else ''} of {material.path} "
+                          f"have no file; their triangles take the texture's fallback {material.fallback:g}")
+        uv[sel] = local.astype(np.float32)
+        idx = np.flatnonzero(sel)
+        for k in np.unique(tile):
+            key = (m, int(k))
+            if key not in self.tile_index:
+                tex = material.udim.get(int(k), -1)
+                self.tile_index[key] = len(self.materials)
+                self.materials.append(replace(material, texture=tex, opacity=1.0 if tex >= 0 else material.fallback, st=None, udim=None,
+                                              tile=int(k)))
+            mat[idx[tile == k]] = self.tile_index[key]
 
     def read_primvar(self, prim, corners, face_of_tri, tris, name: str, width: int):
         """A primvar's values at each triangle corner, shape [T, 3, width]; None when absent."""
@@ -144,7 +225,12 @@ class MeshReader:
         vals = pv.ComputeFlattened(self.ctx.timecode)
         if vals is None or len(vals) == 0:
             return None
-        v = np.asarray(vals, dtype=np.float32).reshape(-1, width)
+        v = np.asarray(vals, dtype=np.float32)
+        if v.ndim == 1 and len(v) == width:  # one value of a non-array type
+            v = v[None]
+        if v.ndim != 2 or v.shape[1] != width:
+            self.ctx.warn(prim, f"primvars:{name} is {pv.GetTypeName()}, not {width} numbers per element; ignored")
+            return None
         interp = pv.GetInterpolation()
         try:
             if interp == UsdGeom.Tokens.faceVarying:
@@ -209,102 +295,18 @@ class MeshReader:
         shader = material.ComputeSurfaceSource()[0]
         if not shader:
             return mat
-        sid = shader.GetIdAttr().Get() if shader.GetIdAttr() else None
+        sid = shader.GetShaderId()
         if sid != "UsdPreviewSurface":
-            self.ctx.warn(material.GetPrim(), f"surface shader {sid!r} is not UsdPreviewSurface; treated as opaque grey")
+            self.ctx.warn(material.GetPrim(), f"surface shader {shader.GetPath()} ({sid or 'no info:id'}) is not UsdPreviewSurface; "
+                          "treated as opaque grey")
             return mat
         diffuse = shader.GetInput("diffuseColor")
         if diffuse and not diffuse.HasConnectedSource():
             v = diffuse.Get(self.ctx.timecode)
             if v is not None:
                 mat.albedo = tuple(float(x) for x in v)
-        thr = shader.GetInput("opacityThreshold")
-        mat.opacity_threshold = float(thr.Get(self.ctx.timecode) or 0.0) if thr else 0.0
-        op = shader.GetInput("opacity")
-        if not op:
-            return mat
-        if op.HasConnectedSource():
-            src, out_name, _ = op.GetConnectedSource()
-            tex_shader = UsdShade.Shader(src.GetPrim())
-            tid = tex_shader.GetIdAttr().Get() if tex_shader and tex_shader.GetIdAttr() else None
-            if tid != "UsdUVTexture":
-                self.ctx.warn(material.GetPrim(), f"opacity is connected to {tid!r}, not a UsdUVTexture; treated as opaque")
-                return mat
-            if mat.opacity_threshold <= 0.0:
-                self.ctx.warn(material.GetPrim(), "textured opacity without opacityThreshold (translucency) is not modelled; opaque")
-                return mat
-            mat.texture = self.read_texture(tex_shader, str(out_name), material.GetPrim())
-        else:
-            v = op.Get(self.ctx.timecode)
-            mat.opacity = float(v) if v is not None else 1.0
-            if mat.opacity < 1.0 and mat.opacity_threshold <= 0.0:
-                self.ctx.warn(material.GetPrim(), f"constant opacity {mat.opacity:g} (translucency): opaque for every technique but salzman (its transparency component)")
+        self.network.read(shader, mat)
         return mat
-
-    def read_texture(self, tex_shader, channel: str, mat_prim) -> int:
-        Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = pxr()
-        file_in = tex_shader.GetInput("file")
-        asset = file_in.Get(self.ctx.timecode) if file_in else None
-        if asset is None:
-            self.ctx.warn(tex_shader.GetPrim(), "UsdUVTexture has no file; surface is opaque")
-            return -1
-        resolved = asset.resolvedPath or ""
-        wraps = []
-        for nm in ("wrapS", "wrapT"):
-            w = tex_shader.GetInput(nm)
-            wv = str(w.Get(self.ctx.timecode)) if w and w.Get(self.ctx.timecode) is not None else "useMetadata"
-            wraps.append(WRAP_NAMES.get(wv, 0))
-        key = (resolved or asset.path, channel, tuple(wraps))
-        if key in self.texture_index:
-            return self.texture_index[key]
-        data = _read_asset(resolved) if resolved else None  # through USD's asset resolver: files inside a .usdz too
-        if data is None:
-            self.ctx.warn(tex_shader.GetPrim(), f"texture {asset.path!r} not found; surface is opaque")
-            return -1
-        try:
-            import io
-
-            from PIL import Image
-
-            with Image.open(io.BytesIO(data)) as im:
-                im.load()  # a truncated file fails here, not later
-                rgba = _rgba01(im)
-        except Exception as exc:
-            self.ctx.warn(tex_shader.GetPrim(), f"texture {asset.path!r} cannot be read ({' '.join(str(exc).split())}); surface is opaque")
-            return -1
-        ch = {"r": 0, "g": 1, "b": 2, "a": 3}.get(channel, 3)
-        data = np.ascontiguousarray(rgba[::-1, :, ch])  # bottom-up rows: st (0,0) = lower-left
-        self.textures.append(Texture(asset=asset.path, data=data, wrap_s=wraps[0], wrap_t=wraps[1]))
-        self.texture_index[key] = len(self.textures) - 1
-        return len(self.textures) - 1
-
-
-def _read_asset(resolved: str) -> bytes | None:
-    """The bytes of a resolved asset path (a file, or a file inside a package such as
-    ``scene.usdz[textures/a.png]``), read through USD's asset resolver; None when absent."""
-    from pxr import Ar
-
-    try:
-        asset = Ar.GetResolver().OpenAsset(Ar.ResolvedPath(resolved))
-    except Exception:
-        return None
-    if asset is None:
-        return None
-    buf = asset.GetBuffer()
-    return None if buf is None else bytes(buf)
-
-
-def _rgba01(im) -> np.ndarray:
-    """An image's RGBA in [0, 1], whatever its bit depth (8- and 16-bit, palette, grey, float)."""
-    if im.mode in ("I;16", "I;16B", "I;16L", "I"):
-        a = np.asarray(im, dtype=np.float64)
-        top = 65535.0 if im.mode.startswith("I;16") or a.max(initial=0) > 255 else 255.0
-        g = np.clip(a / top, 0.0, 1.0).astype(np.float32)
-        return np.stack([g, g, g, np.ones_like(g)], axis=-1)
-    if im.mode == "F":
-        g = np.clip(np.asarray(im, dtype=np.float32), 0.0, 1.0)
-        return np.stack([g, g, g, np.ones_like(g)], axis=-1)
-    return np.asarray(im.convert("RGBA"), dtype=np.float32) / 255.0
 
 
 def closed_orientation(points: np.ndarray, tris: np.ndarray) -> int:

@@ -551,6 +551,97 @@ def b_room_ceiling(folder):
     return _save(st, folder, "room_ceiling")
 
 
+# -- texture networks: the UsdPreviewSurface nodes between a cutout's texture and its mesh (wsoft.scene.usd_texture)
+
+
+def _cut_node(st, name: str):
+    from pxr import UsdShade
+
+    return UsdShade.Shader(st.GetPrimAtPath(f"/World/Looks/Cut/{name}"))
+
+
+def _clamped(st):
+    from pxr import Sdf
+
+    for nm in ("wrapS", "wrapT"):
+        _cut_node(st, "Alpha").CreateInput(nm, Sdf.ValueTypeNames.Token).Set("clamp")
+
+
+def b_cutout_clamp(folder):
+    """The 8-bit checker cutout with wrapS = wrapT = clamp (what the scale/bias and UDIM cases equal)."""
+    st = _base()
+    _cutout_occluder(st, _png(folder, "checker8_clamp.png", _checker(), "RGBA"))
+    _clamped(st)
+    return _save(st, folder, "cutout_clamp")
+
+
+def b_cutout_varname_uv(folder):
+    """The checker cutout with its coordinates in a primvar ``uv`` (no ``st``), read by varname."""
+    from pxr import Sdf, UsdGeom
+
+    st = _base()
+    _cutout_occluder(st, _png(folder, "checker8_uv.png", _checker(), "RGBA"))
+    occ = UsdGeom.PrimvarsAPI(st.GetPrimAtPath("/World/Occluder"))
+    occ.RemovePrimvar("st")
+    occ.CreatePrimvar("uv", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex).Set([(0, 0), (1, 0), (1, 1), (0, 1)])
+    _cut_node(st, "St").GetInput("varname").Set("uv")
+    return _save(st, folder, "cutout_varname_uv")
+
+
+def b_cutout_transform2d(folder):
+    """A UsdTransform2d (scale 0.5) between reader and texture, over a 16 x 16 texture holding the
+    checker in its lower-left quarter (transparent elsewhere): the checker cutout, texel for texel."""
+    from pxr import Sdf, UsdShade
+
+    big = np.zeros((16, 16))
+    big[8:, :8] = _checker()  # image rows run top-down: the lower-left quarter
+    st = _base()
+    _cutout_occluder(st, _png(folder, "checker16_quarter.png", big, "RGBA"))
+    xf = UsdShade.Shader.Define(st, "/World/Looks/Cut/Transform")
+    xf.CreateIdAttr("UsdTransform2d")
+    xf.CreateInput("in", Sdf.ValueTypeNames.Float2).ConnectToSource(_cut_node(st, "St").ConnectableAPI(), "result")
+    xf.CreateInput("scale", Sdf.ValueTypeNames.Float2).Set((0.5, 0.5))
+    _cut_node(st, "Alpha").GetInput("st").ConnectToSource(xf.ConnectableAPI(), "result")
+    return _save(st, folder, "cutout_transform2d")
+
+
+def b_cutout_scale_bias(folder):
+    """The inverted checker read with scale -1, bias 1 on a (clamped): the clamped checker cutout."""
+    from pxr import Sdf
+
+    st = _base()
+    _cutout_occluder(st, _png(folder, "checker8_inverted.png", 1 - _checker(), "RGBA"))
+    _clamped(st)
+    _cut_node(st, "Alpha").CreateInput("scale", Sdf.ValueTypeNames.Float4).Set((1.0, 1.0, 1.0, -1.0))
+    _cut_node(st, "Alpha").CreateInput("bias", Sdf.ValueTypeNames.Float4).Set((0.0, 0.0, 0.0, 1.0))
+    return _save(st, folder, "cutout_scale_bias")
+
+
+def b_cutout_udim(folder):
+    """``udim.<UDIM>.png`` with the occluder's st in tile 1002 ([1, 2] x [0, 1]): tile 1002 is the
+    checker, tile 1001 opaque; the clamped checker cutout (UDIM tiles are clamped at their edges)."""
+    from pxr import Sdf, UsdGeom
+
+    _png(folder, "udim.1001.png", np.ones((8, 8)), "RGBA")
+    _png(folder, "udim.1002.png", _checker(), "RGBA")
+    st = _base()
+    _cutout_occluder(st, "udim.<UDIM>.png")
+    pv = UsdGeom.PrimvarsAPI(st.GetPrimAtPath("/World/Occluder")).GetPrimvar("st")
+    pv.Set([(1, 0), (2, 0), (2, 1), (1, 1)])
+    _cut_node(st, "Alpha").GetInput("file").Set(Sdf.AssetPath("udim.<UDIM>.png"))
+    return _save(st, folder, "cutout_udim")
+
+
+def b_cutout_exr(folder):
+    """The checker as an OpenEXR texture (float32 RGBA): the 8-bit checker cutout."""
+    import OpenEXR
+
+    a = np.ascontiguousarray(_checker(), np.float32)
+    with OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}, {c: a for c in "RGBA"}) as f:
+        f.write(os.path.join(folder, "checker.exr"))
+    return _cutout_stage(folder, "cutout_exr", "checker.exr")
+
+
 # --------------------------------------------------------------------------- expectations
 
 
@@ -706,6 +797,16 @@ CASES: list[Case] = [
          note="a 0.53° sphere light 1e4 up: the shadow it casts from 100 up"),
     Case("room_ceiling", b_room_ceiling, check=all_dark, silent_hazard=True,
          note="camera inside a closed double-sided room, the lamp half a unit above its ceiling"),
+    # texture networks: the UsdPreviewSurface nodes between a cutout's texture and its mesh
+    Case("cutout_clamp", b_cutout_clamp, note="8-bit cutout texture, wrapS = wrapT = clamp"),
+    Case("cutout_varname_uv", b_cutout_varname_uv, check=same_as("cutout_8bit"), silent_hazard=True,
+         note="texture coordinates in primvar uv, read by varname (no st)"),
+    Case("cutout_transform2d", b_cutout_transform2d, check=same_as("cutout_8bit"), silent_hazard=True,
+         note="UsdTransform2d (scale 0.5) onto the lower-left quarter of a 16x16 texture"),
+    Case("cutout_scale_bias", b_cutout_scale_bias, check=same_as("cutout_clamp"), silent_hazard=True,
+         note="inverted texture read with scale -1, bias 1"),
+    Case("cutout_udim", b_cutout_udim, check=same_as("cutout_clamp"), silent_hazard=True, note="UDIM texture, st in tile 1002"),
+    Case("cutout_exr", b_cutout_exr, check=same_as("cutout_8bit"), silent_hazard=True, note="OpenEXR cutout texture"),
 ]
 BASES = {"base": b_base, "base_sun": b_base_sun, "base_dynamic": b_base_dynamic, "far_light_100": b_far_light_100}
 
