@@ -51,7 +51,7 @@ def raycast_texels(
         if alpha == 0 or surface_present(cut, q.face, q.u, q.v, 1.0 - q.u - q.v):
             out = travelled + q.t  # |d . az| = 1, so the ray parameter is the view depth
             break
-        step = q.t + 1.0e-5 * (1.0 + q.t)
+        step = q.t + 1.0e-5 * (cut.step + q.t)
         start = start + d * step
         travelled += step
     depth[i] = out

@@ -134,6 +134,7 @@ def upload_scene(scene: Scene, device: str) -> DeviceScene:
     cut = Surfaces()
     cut.tri_cut = arr(tri_cut.astype(np.int32), wp.int32)
     cut.double_sided = arr(comb["ds"].astype(np.int32), wp.int32)
+    cut.step = float(min(1.0, scene.diagonal))  # a scene smaller than a unit steps past a cutout's hole in its own units
     cull = comb["closed"].astype(np.int32)
     # a cutout lets the inside of a closed surface be seen: no culling for prims that have cutouts
     if np.any(tri_cut >= 0):

@@ -34,6 +34,7 @@ class Surfaces:
     tex_wrap_t: wp.array[wp.int32]
     tex_border: wp.array[wp.float32]  # [X] the value outside the image under the black wrap (the texture's bias)
     tex_data: wp.array[wp.float32]  # all textures, rows bottom-up: each UsdUVTexture's output, scale and bias applied
+    step: float  # a step past a surface an alpha test lets through is 1e-5 of this plus the distance (min(1, the scene's diagonal))
 
 
 @wp.func
@@ -118,7 +119,7 @@ def occluded_from(mesh: wp.uint64, tri0: int, cut: Surfaces, has_cutouts: int, o
             elif surface_present(cut, tri0 + q.face, q.u, q.v, 1.0 - q.u - q.v):  # warp: p = p0*u + p1*v + p2*(1-u-v)
                 blocked = True
             else:
-                step = q.t + 1.0e-5 * (1.0 + q.t)
+                step = q.t + 1.0e-5 * (cut.step + q.t)
                 o = o + dir * step
                 remaining = remaining - step
     if remaining > 0.0 and not blocked:
@@ -174,7 +175,7 @@ def nearest_from(mesh: wp.uint64, tri0: int, cut: Surfaces, has_cutouts: int, st
                         n = triangle_normal(mesh, q.face)
                     travelled += q.t
                 else:
-                    step = q.t + 1.0e-5 * (1.0 + q.t)
+                    step = q.t + 1.0e-5 * (cut.step + q.t)
                     o = o + dir * step
                     travelled += step
                     remaining -= step

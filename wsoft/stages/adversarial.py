@@ -528,6 +528,13 @@ def b_tiny_scene(folder):
     return _save(_moved(scale=1e-10), folder, "tiny_scene")
 
 
+def b_tiny_cutout(folder):
+    """The base scaled by 1e-10 with cutout_8bit's checker occluder."""
+    st = _moved(scale=1e-10)
+    _cutout_occluder(st, _png(folder, "checker8.png", _checker(), "RGBA"))
+    return _save(st, folder, "tiny_cutout")
+
+
 def b_far_light_100(folder):
     """A sun-sized (0.53°) sphere light 100 units above the base's occluder."""
     return _save(_moved(sphere_at=100.0), folder, "far_light_100")
@@ -708,6 +715,9 @@ def close_to(other: str, tol: float):
     def check(ch, base, technique="", frames=None) -> str | None:
         o = frames[other]
         both = _covered(ch) & (o["A"] > 0)
+        either = int((_covered(ch) | (o["A"] > 0)).sum())
+        if either - both.sum() > 0.01 * either:
+            return f"covers {int(_covered(ch).sum())} pixels, {other} {int((o['A'] > 0).sum())} ({either - int(both.sum())} differ)"
         d = np.abs(ch["V"] - o["V"])[both]
         return None if both.sum() > 100 and d.mean() <= tol else f"mean |V - V({other})| {d.mean():.3g} on {both.sum()} pixels, want <= {tol:g}"
 
@@ -793,6 +803,8 @@ CASES: list[Case] = [
          note="the base 1e6 from the origin in x and y"),
     Case("far_origin_z", b_far_origin_z, check=close_to("base", 0.005), silent_hazard=True, note="the base 1e6 up in z"),
     Case("tiny_scene", b_tiny_scene, check=close_to("base", 0.005), silent_hazard=True, note="the base scaled by 1e-10"),
+    Case("tiny_cutout", b_tiny_cutout, check=close_to("cutout_8bit", 0.005), silent_hazard=True,
+         note="cutout_8bit scaled by 1e-10 (the step past a cutout's hole is relative)"),
     Case("far_light_1e4", b_far_light_1e4, check=close_to("far_light_100", 0.006), silent_hazard=True,
          note="a 0.53° sphere light 1e4 up: the shadow it casts from 100 up"),
     Case("room_ceiling", b_room_ceiling, check=all_dark, silent_hazard=True,
