@@ -207,6 +207,13 @@ def cmd_plan(args) -> int:
     print("shadow-casting lights:" + ("" if p["lights"] else " (none)"))
     for l in p["lights"]:
         print(f"  {l['path']:<32} {l['kind']:<8} {l['size']}")
+        em = l["emits"]
+        toward = f"({', '.join(f'{c:.3g}' for c in em['direction'])})" if "direction" in em else ""
+        if em["side"] == "front":
+            print(f"      emits: from its front only, toward {toward}; {em['points_behind']} of {em['points']} mesh points lie behind "
+                  f"its plane" + (" (they get none of its light: V = 0)" if em["points_behind"] else ""))
+        else:
+            print(f"      emits: {em['side']}" + (f" {toward}" if toward else ""))
         sh = l["shadow"]
         lk = sh["link"]
         print(f"      collection:shadowLink: {lk['excluded_prims']} of {lk['prims']} prims excluded"

@@ -20,7 +20,9 @@ where ``c`` is hidden (inside: ``R`` is uncovered). Edges whose projection misse
 :func:`edge_coverage` computes ``|R| / |light|`` exactly for a rect (the rectangle clipped by the
 three half-planes that bound ``R``, Sutherland-Hodgman, shoelace area) and for a disk (the disk's
 bounding square clipped the same way, then the exact area of disk ∩ polygon as a sum of
-disk ∩ triangle(centre, edge) terms: triangle and circular-sector pieces). The edge is first
+disk ∩ triangle(centre, edge) terms: triangle and circular-sector pieces; an ellipse, an
+elliptical disk light's or an ellipsoidal sphere light's silhouette, in coordinates scaled along
+its principal axes to the unit disk, an affine map that keeps the ratio). The edge is first
 clipped to the slab between the receiver and the light's plane (``s``, the fraction of the way
 there, in ``[0, 1]``; a distant light has no far side): parts behind the receiver or beyond the
 light block nothing. Projected points are kept homogeneous: a point level with the receiver
@@ -37,7 +39,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from wsoft.lightspace.light import LightGPU, light_gpu, silhouette_disk
+from wsoft.lightspace.light import LightGPU, is_round, light_gpu, silhouette_disk, silhouette_ellipse
 
 poly_t = wp.types.matrix(shape=(8, 2), dtype=wp.float32)  # a convex polygon: a rectangle clipped by at most 3 lines
 INFINITE = wp.constant(1.0e30)
@@ -51,17 +53,20 @@ def cross2(a: wp.vec2, b: wp.vec2) -> float:
 @wp.func
 def light_frame(L: LightGPU, p: wp.vec3):
     """The light as seen from ``p``: (its centre, unit axes ``u``, ``v`` of its plane, half extents
-    (a rect's half width and height; a disk's radius twice), 1 for a disk / 0 for a rect, and how
+    (a rect's half width and height; a disk's two semi-axes, equal when round), 1 for a disk / 0 for a rect, and how
     far past its plane (as a multiple of the way there) a caster can be: 1, or :data:`INFINITE`
     for a distant light, whose plane is put at unit distance from ``p``)."""
     if L.kind == 0:
         return L.position, L.ax, L.ay, L.half_size, int(0), 1.0
-    if L.kind == 1:
-        return L.position, L.ax, L.ay, wp.vec2(L.radius, L.radius), int(1), 1.0
+    if L.kind == 1:  # an elliptical disk: its two semi-axes
+        return L.position, L.ax, L.ay, wp.vec2(L.radius * L.aspect[0], L.radius * L.aspect[1]), int(1), 1.0
     if L.kind == 3:
         t = wp.sqrt(wp.max(1.0 - L.cos_max * L.cos_max, 0.0)) / wp.max(L.cos_max, 1.0e-6)
         return p + L.az, L.ax, L.ay, wp.vec2(t, t), int(1), INFINITE
-    # sphere: its silhouette disk seen from p (as light_point); a point light: a disk of radius 0
+    # sphere: its silhouette disk (an ellipsoid's ellipse) seen from p (as light_point); a point light: a disk of radius 0
+    if L.kind == 2 and not is_round(L):
+        ce, u, v, e = silhouette_ellipse(L, p)
+        return ce, u, v, e, int(1), 1.0
     c, tx, ty, rad = silhouette_disk(L, p)
     if L.kind != 2:
         c = L.position
@@ -239,10 +244,16 @@ def edge_coverage(c: wp.vec3, u: wp.vec3, v: wp.vec3, ext: wp.vec2, disk: int, s
     cu = wp.dot(co, u)
     cv = wp.dot(co, v)
     scale = wp.max(ext[0], ext[1])
+    # a disk's axes scaled apart: an ellipse becomes the unit disk (an affine map keeps the area ratio)
+    su = scale
+    sv = scale
+    if disk != 0:
+        su = ext[0]
+        sv = ext[1]
     # homogeneous light-plane coordinates about the centre: (q . u - s c_u, q . v - s c_v, s)
-    ha = wp.vec3((wp.dot(qa, u) - s0 * cu) / scale, (wp.dot(qa, v) - s0 * cv) / scale, s0)
-    hb = wp.vec3((wp.dot(qb, u) - s1 * cu) / scale, (wp.dot(qb, v) - s1 * cv) / scale, s1)
-    e2 = ext / scale
+    ha = wp.vec3((wp.dot(qa, u) - s0 * cu) / su, (wp.dot(qa, v) - s0 * cv) / sv, s0)
+    hb = wp.vec3((wp.dot(qb, u) - s1 * cu) / su, (wp.dot(qb, v) - s1 * cv) / sv, s1)
+    e2 = wp.vec2(ext[0] / su, ext[1] / sv)
     area = beyond_edge_area(ha, hb, e2, disk)
     full = 4.0 * e2[0] * e2[1]
     if disk != 0:

@@ -130,7 +130,8 @@ def local_fit_partials(
 ):
     """Per block of :data:`FIT_BLOCK` receivers, what a local light's fit needs (see
     :func:`_local_fit_stats`): for ``all`` (columns 0-6) and ``front`` (7-13) the count, l, r, b, t,
-    zmin, zmax; column 14 the receivers outside the ±80° window (never those behind the plane)."""
+    zmin, zmax; column 14 the receivers outside the ±80° window (never those behind the plane),
+    column 15 those behind the plane."""
     b = wp.tid() + offset
     zero = wp.float64(0.0)
     cnt = wp.vec2d(zero, zero)
@@ -141,6 +142,7 @@ def local_fit_partials(
     zlo = wp.vec2d(F64_BIG, F64_BIG)
     zhi = wp.vec2d(-F64_BIG, -F64_BIG)
     outside = zero
+    behind_count = zero
     for i in range(b * FIT_BLOCK, wp.min(b * FIT_BLOCK + FIT_BLOCK, n)):
         p = pts[i]
         d = wp.vec3d(wp.float64(p[0]), wp.float64(p[1]), wp.float64(p[2])) - origin
@@ -151,6 +153,8 @@ def local_fit_partials(
         behind = False
         if use_facing != 0:
             behind = (d[0] * facing[0] + d[1] * facing[1] + d[2] * facing[2]) >= zero
+            if behind:
+                behind_count += wp.float64(1.0)
         if z > zmin_ok:
             tx = vx / z
             ty = vy / z
@@ -179,6 +183,7 @@ def local_fit_partials(
         part[b, 7 * k + 5] = zlo[k]
         part[b, 7 * k + 6] = zhi[k]
     part[b, 14] = outside
+    part[b, 15] = behind_count
 
 
 def _fit_points(rec: np.ndarray) -> wp.array:
@@ -209,13 +214,13 @@ def _local_fit_stats(pts: wp.array, origin: np.ndarray, axes: np.ndarray, facing
     when ``facing`` (the light's emission axis) is given, those also in front of its plane
     (``front``): their count, the window (l, r, b, t: tangents widened by ``margin`` at each one's
     depth), depth range and how many lie beyond the ±80° window (``outside``, never counting those
-    behind the plane)."""
+    behind the plane) and how many lie behind the plane (``behind``)."""
     f = np.zeros(3) if facing is None else np.asarray(facing, np.float64)
-    pr = _partials(local_fit_partials, pts, 15,
+    pr = _partials(local_fit_partials, pts, 16,
                    [wp.vec3d(*np.asarray(origin, np.float64)), wp.mat33d(*np.asarray(axes, np.float64).ravel()), wp.vec3d(*f),
                     int(facing is not None), wp.float64(zmin_ok), wp.float64(margin), wp.float64(MAX_TAN)])
     outside = int(pr[:, 14].sum())
-    res = {}
+    res = {"behind": int(pr[:, 15].sum())}
     for k, key in enumerate(("all", "front")):
         c = pr[:, 7 * k: 7 * k + 7]
         n = int(c[:, 0].sum())
@@ -260,11 +265,13 @@ def fit_light_view(
     *whole* light from a receiver is mapped (for a local light of half-extent w, a caster at
     depth z blocks within w (1/z - 1/z_r) of a receiver's tangent; for a distant light of cone
     half-angle a, within (z_r - z) tan a). Perspective windows are clamped to ±80° around the
-    view axis; receivers beyond are counted in ``receivers_outside``. ``side_growth`` (a local
-    light): per side of the window (l, r, b, t), how far casters beyond that edge ask it to grow,
-    found in a coarse depth map around the window (the interior of a triangle whose vertices lie
-    far outside, a ceiling just below a lamp, which the vertices miss): that side grows at least
-    as far (:meth:`~wsoft.pipeline.context.RenderContext.light_view`).
+    view axis; receivers beyond are counted in ``receivers_outside``. A rect or disk light's view is
+    fitted to the receivers in front of its emitting plane; those behind it (which get none of its
+    light, :mod:`wsoft.raster.horizon`) are counted in ``receivers_behind``, never as outside.
+    ``side_growth`` (a local light): per side of the window (l, r, b, t), how far casters beyond
+    that edge ask it to grow, found in a coarse depth map around the window (the interior of a
+    triangle whose vertices lie far outside, a ceiling just below a lamp, which the vertices miss):
+    that side grows at least as far (:meth:`~wsoft.pipeline.context.RenderContext.light_view`).
 
     Every scale in the view comes from :func:`frame_extent` (receivers and the light), not the
     scene's bounds: a distant light's depth range starts at the nearest caster vertex inside the
@@ -316,7 +323,7 @@ def fit_light_view(
         origin = center + axes[:, 2] * (zc - lead)
         near = 0.0
         far = (zr_max - zc) + 2.0 * lead
-        persp, outside = False, 0
+        persp, outside, behind = False, 0, 0
     else:
         origin = np.asarray(light.position, np.float64)
         if light.kind in (LIGHT_SPHERE, LIGHT_POINT):
@@ -326,7 +333,7 @@ def fit_light_view(
             axes = np.stack([light.frame[:, 0], -light.frame[:, 1], -light.frame[:, 2]], axis=1)  # right-handed, view along −Z
         zmin_ok = 1e-6 * ext
         # a rect or disk light emits forward only: receivers behind its plane see nothing of it
-        # (the horizon rule darkens them), so they are neither fitted nor counted outside
+        # (the horizon rule darkens them), so they are neither fitted nor counted outside, only counted
         one_sided = light.kind not in (LIGHT_SPHERE, LIGHT_POINT)
         st = _local_fit_stats(pts, origin, axes, np.asarray(light.frame, np.float64)[:, 2] if one_sided else None, zmin_ok, margin)
         s = st["front"] if one_sided and st["front"]["n"] else st["all"]
@@ -346,6 +353,7 @@ def fit_light_view(
         l, r = max(l, -MAX_TAN), min(r, MAX_TAN)
         b, t = max(b, -MAX_TAN), min(t, MAX_TAN)
         outside = s["outside"]
+        behind = st["behind"]
         near = max(1e-4 * ext, 1e-7)
         if s["n"]:
             near = min(near, 0.5 * s["zmin"])
@@ -361,5 +369,6 @@ def fit_light_view(
     window = (l - ex, l + w + ex, b - ey, b + h + ey)
     return LightView(
         light_path=light.path, persp=persp, origin=origin, axes=axes, window=window,
-        near=float(near), far=float(far), width=size, height=size, receivers_outside=outside, extent=ext, growth=float(growth),
+        near=float(near), far=float(far), width=size, height=size, receivers_outside=outside, receivers_behind=behind, extent=ext,
+        growth=float(growth),
     )

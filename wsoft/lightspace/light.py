@@ -9,7 +9,7 @@ import numpy as np
 import warp as wp
 
 from wsoft.lightspace.view import ViewGPU
-from wsoft.scene.types import LIGHT_DISTANT, LIGHT_RECT, Light
+from wsoft.scene.types import LIGHT_DISK, LIGHT_DISTANT, LIGHT_RECT, Light
 
 
 @wp.struct
@@ -23,6 +23,7 @@ class LightGPU:
     radius: float  # disk / sphere radius
     cos_max: float  # distant: cosine of the cone half angle
     far: float  # distant: length of shadow rays (4 scene diagonals, at most 1e30)
+    aspect: wp.vec3  # disk / sphere: semi-axes along ax, ay, az over radius (the largest); (1, 1, 1) when round
 
 
 def light_gpu(light: Light, scene_diagonal: float) -> LightGPU:
@@ -36,7 +37,14 @@ def light_gpu(light: Light, scene_diagonal: float) -> LightGPU:
     g.radius = float(light.radius)
     g.cos_max = float(math.cos(math.radians(0.5 * light.angle_deg)))
     g.far = float(min(4.0 * scene_diagonal, 1.0e30))  # reaches every caster; finite in float32 arithmetic
+    g.aspect = wp.vec3(*light.aspect)
     return g
+
+
+@wp.func
+def is_round(L: LightGPU) -> bool:
+    """Are a disk's or sphere's semi-axes all ``L.radius``?"""
+    return L.aspect[0] == 1.0 and L.aspect[1] == 1.0 and L.aspect[2] == 1.0
 
 
 @wp.func
@@ -64,19 +72,59 @@ def silhouette_disk(L: LightGPU, p: wp.vec3):
 
 
 @wp.func
+def silhouette_ellipse(L: LightGPU, p: wp.vec3):
+    """An ellipsoidal sphere light (semi-axes ``L.radius * L.aspect`` along ``ax``, ``ay``, ``az``)
+    seen from ``p``: the ellipse its silhouette spans, the section of the ellipsoid by the plane of
+    the curve where the cone of its tangents from ``p`` touches it (centre, unit principal axes
+    ``u``, ``v``, semi-axes). It is the affine image of :func:`silhouette_disk` of the unit ball
+    under the map that makes the ellipsoid of it, so light coordinates uniform on the unit disk are
+    uniform on it. From inside the ellipsoid (or on it), the light's centre with semi-axes 0."""
+    s = L.aspect * L.radius
+    q = p - L.position
+    pu = wp.vec3(wp.dot(q, L.ax) / s[0], wp.dot(q, L.ay) / s[1], wp.dot(q, L.az) / s[2])  # p in the unit ball's space
+    d2 = wp.dot(pu, pu)
+    if d2 <= 1.0002:
+        return L.position, L.ax, L.ay, wp.vec2(0.0, 0.0)
+    n = pu / wp.sqrt(d2)
+    helper = wp.vec3(1.0, 0.0, 0.0)
+    if wp.abs(n[0]) > 0.9:
+        helper = wp.vec3(0.0, 1.0, 0.0)
+    tx = wp.normalize(wp.cross(helper, n))
+    ty = wp.cross(n, tx)
+    rad = wp.sqrt(1.0 - 1.0 / d2)
+    cu = pu / d2  # the unit silhouette disk's centre
+    centre = L.position + L.ax * (cu[0] * s[0]) + L.ay * (cu[1] * s[1]) + L.az * (cu[2] * s[2])
+    # conjugate semi-diameters of the ellipse, then its principal axes
+    P = (L.ax * (tx[0] * s[0]) + L.ay * (tx[1] * s[1]) + L.az * (tx[2] * s[2])) * rad
+    Q = (L.ax * (ty[0] * s[0]) + L.ay * (ty[1] * s[1]) + L.az * (ty[2] * s[2])) * rad
+    phi = 0.5 * wp.atan2(2.0 * wp.dot(P, Q), wp.dot(P, P) - wp.dot(Q, Q))
+    U = P * wp.cos(phi) + Q * wp.sin(phi)
+    V = Q * wp.cos(phi) - P * wp.sin(phi)
+    eu = wp.length(U)
+    ev = wp.length(V)
+    return centre, U / wp.max(eu, 1.0e-30), V / wp.max(ev, 1.0e-30), wp.vec2(eu, ev)
+
+
+@wp.func
 def light_point(L: LightGPU, p: wp.vec3, c: wp.vec2) -> wp.vec4:
     """A shadow ray from ``p`` toward the point of light coordinates ``c`` (``[-1, 1]^2`` on a rect
     light, the unit disk on the others, :mod:`wsoft.lightspace.samples`): unit direction (xyz)
-    and length (w). A sphere light is its silhouette disk seen from ``p``; a distant light's
-    disk is its cone (uniform in solid angle); a point light ignores ``c``."""
+    and length (w). A disk light's coordinates are scaled by its two semi-axes (an ellipse); a
+    sphere light is its silhouette disk seen from ``p`` (an ellipsoid's silhouette ellipse,
+    :func:`silhouette_ellipse`); a distant light's disk is its cone (uniform in solid angle); a
+    point light ignores ``c``."""
     target = L.position
     if L.kind == 0:  # rect
         target = L.position + L.ax * (c[0] * L.half_size[0]) + L.ay * (c[1] * L.half_size[1])
-    elif L.kind == 1:  # disk
-        target = L.position + (L.ax * c[0] + L.ay * c[1]) * L.radius
-    elif L.kind == 2:  # sphere: the silhouette disk seen from p
-        centre, tx, ty, rad = silhouette_disk(L, p)
-        target = centre + (tx * c[0] + ty * c[1]) * rad
+    elif L.kind == 1:  # disk: an ellipse of semi-axes radius * aspect (a round one: aspect 1, the same bits)
+        target = L.position + (L.ax * (c[0] * L.aspect[0]) + L.ay * (c[1] * L.aspect[1])) * L.radius
+    elif L.kind == 2:  # sphere: the silhouette disk (ellipse) seen from p
+        if is_round(L):
+            centre, tx, ty, rad = silhouette_disk(L, p)
+            target = centre + (tx * c[0] + ty * c[1]) * rad
+        else:
+            ce, u, v, e = silhouette_ellipse(L, p)
+            target = ce + u * (c[0] * e[0]) + v * (c[1] * e[1])
     elif L.kind == 3:  # distant: uniform in the cone's solid angle
         rho2 = c[0] * c[0] + c[1] * c[1]
         cos_t = 1.0 - rho2 * (1.0 - L.cos_max)
@@ -142,6 +190,9 @@ class LightKernel:
 
 
 def light_kernel(light: Light) -> LightKernel:
+    """The light's half extents along a light view's x and y (a rect or disk light's view is
+    aligned with its X and Y: an elliptical disk's two semi-axes); a sphere light's radius, which
+    of an ellipsoid is its bounding sphere's (:attr:`~wsoft.techniques.Technique.ellipsoid_caveat`)."""
     k = LightKernel()
     if light.kind == LIGHT_RECT:
         k.disk = 0
@@ -150,6 +201,9 @@ def light_kernel(light: Light) -> LightKernel:
         k.disk = 1
         t = math.tan(math.radians(0.5 * light.angle_deg))
         k.half = wp.vec2(t, t)
+    elif light.kind == LIGHT_DISK and light.elliptical:
+        k.disk = 1
+        k.half = wp.vec2(*light.semi_axes)
     else:
         k.disk = 1
         k.half = wp.vec2(light.radius, light.radius)
@@ -195,6 +249,27 @@ def in_front(n: wp.vec3, d: wp.vec3) -> bool:
     only the part of a light in front of its tangent plane: behind it, the surface's own sheet is in
     the way (the one rule of :mod:`wsoft.raster.horizon`, the reference and every technique)."""
     return wp.dot(n, d) > 0.0
+
+
+@wp.func
+def emits_along(L: LightGPU, d: wp.vec3) -> bool:
+    """Does light leave the light back along ``-d``, for ``d`` (any length) pointing from a
+    receiver to a point of the light (or to its centre)? A rect or disk light emits from its front
+    only: the receiver must lie on the side its −Z axis points to, ``dot(p - q, -az) > 0`` for the
+    light point ``q``, i.e. ``dot(d, az) > 0`` (the same for every point of its plane). Sphere,
+    point and distant lights emit all around."""
+    if L.kind == 0 or L.kind == 1:
+        return wp.dot(d, L.az) > 0.0
+    return True
+
+
+@wp.func
+def lit_along(L: LightGPU, n: wp.vec3, d: wp.vec3) -> bool:
+    """Can light from the light along the shadow ray direction ``d`` reach a receiver of normal
+    ``n``: ``d`` leaves the receiver's visible side (:func:`in_front`) and the light emits back
+    along it (:func:`emits_along`)? The reference's, ``dcs``'s and ``izb``'s test per ray and the
+    front fraction's per sample."""
+    return in_front(n, d) and emits_along(L, d)
 
 
 @wp.func

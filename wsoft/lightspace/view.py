@@ -134,6 +134,7 @@ class LightView:
     width: int
     height: int
     receivers_outside: int = 0
+    receivers_behind: int = 0  # receivers behind a rect or disk light's emitting plane (neither fitted nor outside)
     extent: float = 1.0  # the frame's scale: diagonal of the receivers' bounds with the light's position (see frame_extent)
     growth: float = 0.0  # how far a soft view's window was widened for casters beyond the receivers (window units)
 

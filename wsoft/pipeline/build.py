@@ -19,7 +19,7 @@ from wsoft.pipeline.context import RenderContext, TechniqueContext
 from wsoft.pipeline.framing import frame_setup, local_origin
 from wsoft.pipeline.loading import flatten_for, instancing_plan
 from wsoft.raster.shade import shade as shade_samples
-from wsoft.scene.types import Light, Scene
+from wsoft.scene.types import LIGHT_SPHERE, Light, Scene
 
 
 def technique_labels(techs: list) -> list[str]:
@@ -150,13 +150,25 @@ def supported_lights(tech, scene: Scene, lights: list[Light]) -> tuple[list[Ligh
 
 def visibility_of(ctx: RenderContext, tctx: TechniqueContext, light: Light) -> Key:
     """Register a technique's passes for ``light``; the key of its per-sample visibility, capped by
-    the receiver's horizon (a point sees only the light in front of its tangent plane): the
-    reference applies it per light sample, every other technique is capped by its front fraction."""
+    the receiver's horizon (a point sees only the light in front of its tangent plane, and nothing
+    of a rect or disk light behind its emitting plane): the reference applies it per light sample,
+    every other technique is capped by its front fraction; receivers behind a one-sided light are
+    counted and warned about (:meth:`~wsoft.pipeline.context.RenderContext.light_behind`)."""
     tech = tctx.tech
     vk = tech.add_passes(tctx, light)
     if tech.distance_caveat and light.distance_limited:
         ctx.warn(ctx.graph.producers[vk], distance_caveat_warning(tech, light))
-    return vk if tech.horizon == "exact" else ctx.clip_to_front(tctx, light, vk)
+    if tech.ellipsoid_caveat and light.kind == LIGHT_SPHERE and light.elliptical:
+        ctx.warn(ctx.graph.producers[vk], ellipsoid_caveat_warning(tech, light))
+    return ctx.clip_to_front(tctx, light, vk)
+
+
+def ellipsoid_caveat_warning(tech, light: Light) -> str:
+    """The warning of a technique that models an ellipsoidal sphere light approximately
+    (:attr:`~wsoft.techniques.Technique.ellipsoid_caveat`)."""
+    semi = " x ".join(f"{a:g}" for a in light.semi_axes)
+    return (f"light {light.path}: a SphereLight scaled into an ellipsoid (semi-axes {semi}): {tech.name} models it as "
+            f"{tech.ellipsoid_caveat} of radius {light.radius:g} (the reference samples the silhouette ellipse each point sees)")
 
 
 def distance_caveat_warning(tech, light: Light) -> str:

@@ -182,6 +182,8 @@ class RenderContext:
             if probe:
                 view = self._grown_for_casters(res[sk], light, view, fit, name)
             self.pass_counters(name)["receivers_outside"] = view.receivers_outside
+            if light.one_sided:
+                self.pass_counters(name)["receivers_behind_light"] = view.receivers_behind
             if view.persp and far_light(light, *_bounds_of(rec)):
                 spacing = float(np.spacing(np.float32(view.far)))
                 if spacing > FAR_DEPTH_LIMIT * view.extent:
@@ -294,16 +296,51 @@ class RenderContext:
 
         return self.add(Pass(name, (gk,), (key,), run, kind="shade", light=self.label(light)))
 
+    def light_behind(self, light: Light) -> Key | None:
+        """Resource: how many covered G-buffer samples lie on or behind a rect or disk light's
+        emitting plane (they get none of its light: every technique gives them V = 0), counted once
+        per light and warned about with the light's path (counter ``receivers_behind_light``).
+        None, and no pass, when the light emits all around or every corner of the scene's bounds
+        lies in front of its plane by more than 1e-3 of the scene's diagonal."""
+        if not light.one_sided:
+            return None
+        lo, hi = self.scene.bounds
+        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+        ahead = (corners - np.asarray(light.position, np.float64)) @ np.asarray(light.direction, np.float64)
+        if ahead.min() > 1e-3 * self.scene.diagonal:
+            return None
+        gk = self.gbuffer()
+        key = Key("light_behind", self.label(light))
+        name = f"light_behind[{self.label(light)}]"
+
+        def run(res):
+            gb = res[gk]
+            covered = gb.prim.numpy() >= 0
+            n = light.points_behind(gb.pos.numpy()[covered])
+            self.pass_counters(name)["receivers_behind_light"] = n
+            if n:
+                self.warn(name, light_behind_warning(light, n, int(covered.sum())))
+            return {key: n}
+
+        return self.add(Pass(name, (gk,), (key,), run, kind="shade", light=self.label(light)))
+
     def clip_to_front(self, tctx: "TechniqueContext", light: Light, vis_key: Key) -> Key:
-        """A technique's visibility of ``light`` capped by the light's front fraction (V = min(V, front))."""
-        fk = self.front_fraction(light, centre=tctx.tech.horizon == "centre")
+        """A technique's visibility of ``light`` capped by the light's front fraction (V = min(V,
+        front)); a technique that applies the horizon itself (``horizon = "exact"``) keeps its own,
+        handed on only where :meth:`light_behind` has receivers to count (else ``vis_key`` itself)."""
+        bk = self.light_behind(light)
+        exact = tctx.tech.horizon == "exact"
+        if exact and bk is None:
+            return vis_key
+        fk = None if exact else self.front_fraction(light, centre=tctx.tech.horizon == "centre")
         key = Key("visibility", self.label(light), technique=tctx.label_, variant="front")
 
         def run(res):
             v = res[vis_key]
-            return {key: Visibility(clip_to_front(v.vis, res[fk]), v.stderr)}
+            return {key: v if exact else Visibility(clip_to_front(v.vis, res[fk]), v.stderr)}
 
-        return self.add(Pass(tctx.pass_name(f"horizon_{tctx.tech.name}", light), (vis_key, fk), (key,), run, kind="shade", stage="horizon",
+        inputs = (vis_key,) + tuple(k for k in (fk, bk) if k is not None)
+        return self.add(Pass(tctx.pass_name(f"horizon_{tctx.tech.name}", light), inputs, (key,), run, kind="shade", stage="horizon",
                              technique=tctx.label_, light=self.label(light)))
 
     def provide(self, key: Key, value: Any, *, name: str | None = None, kind: str = "reference") -> Key:
@@ -312,6 +349,13 @@ class RenderContext:
 
     def technique(self, tech, label: str) -> "TechniqueContext":
         return TechniqueContext(self, tech, label)
+
+
+def light_behind_warning(light: Light, n: int, total: int) -> str:
+    """The warning for the ``n`` of ``total`` receivers behind a rect or disk light's plane."""
+    d = ", ".join(f"{c:.3g}" for c in np.round(np.asarray(light.direction, np.float64), 6) + 0.0)
+    return (f"light {light.path}: {n} of {total} visible samples lie behind its emitting plane (a {light.kind_name} light emits "
+            f"from its front only, toward ({d})) and get none of its light (V = 0)")
 
 
 class TechniqueContext:

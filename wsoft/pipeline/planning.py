@@ -9,7 +9,7 @@ import numpy as np
 from wsoft.pipeline.build import build_graph
 from wsoft.pipeline.framing import frame_setup
 from wsoft.pipeline.loading import instancing_plan, too_big_to_flatten
-from wsoft.scene.types import Light, Scene
+from wsoft.scene.types import LIGHT_DISTANT, Light, Scene
 
 
 COLOR_APPLIED = "applied to R G B, not to V"
@@ -41,11 +41,26 @@ def shadow_controls(scene: Scene, light: Light) -> dict:
     }
 
 
+def emission(scene: Scene, light: Light) -> dict:
+    """Where a light emits, as ``wsoft plan`` lists it: ``side`` (``front``: a rect or disk light,
+    from its front only, along ``direction``, its transformed local −Z; ``all around``: a sphere or
+    point light; ``along``: a distant light's ``direction``) and, for a one-sided light, how many of
+    the scene's mesh points (:attr:`Scene.caster_points`) lie on or behind its plane, where it gives
+    V = 0 (``points_behind`` of ``points``)."""
+    d = [float(c) + 0.0 for c in np.round(np.asarray(light.direction, np.float64), 6)]
+    if light.one_sided:
+        pts = scene.caster_points
+        return {"side": "front", "direction": d, "points_behind": light.points_behind(pts), "points": int(len(pts))}
+    if light.kind == LIGHT_DISTANT:
+        return {"side": "along", "direction": d}
+    return {"side": "all around"}
+
+
 def plan(scene: Scene, techniques: list[str] | None = None, *, width: int | None = None, height: int | None = None, light=None,
          camera=None) -> dict:
     """What would run: the time code the scene was loaded at (``time``; None: the default time),
-    shadow-casting lights (with their UsdLux shadow controls, :func:`shadow_controls`), skipped
-    lights, cutout materials, the purposes loaded, the framing
+    shadow-casting lights (where each emits, :func:`emission`, with their UsdLux shadow controls,
+    :func:`shadow_controls`), skipped lights, cutout materials, the purposes loaded, the framing
     (``framing``: which render settings prim and camera, where each came from, the resolution,
     conform policy and data window; see :meth:`Framing.describe`), and per technique the passes
     (with their kinds) or why it is not applicable to a light."""
@@ -58,8 +73,8 @@ def plan(scene: Scene, techniques: list[str] | None = None, *, width: int | None
         "instancing": instancing_plan(scene, [], []),
         "up_axis": scene.up_axis,
         "meters_per_unit": scene.meters_per_unit,
-        "lights": [{"path": l.path, "kind": l.kind_name, "size": l.size_description(), "shadow": shadow_controls(scene, l)}
-                   for l in scene.lights],
+        "lights": [{"path": l.path, "kind": l.kind_name, "size": l.size_description(), "emits": emission(scene, l),
+                    "shadow": shadow_controls(scene, l)} for l in scene.lights],
         "skipped_lights": [{"path": l.path, "kind": l.kind_name, "reason": "shadow:enable = false"} for l in scene.unshadowed_lights]
         + [{"path": s.path, "kind": s.kind, "reason": s.reason} for s in scene.skipped_lights],
         "cutout_materials": [{"path": p, "triangles": n} for p, n in scene.cutout_triangle_counts().items()],

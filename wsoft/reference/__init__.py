@@ -5,8 +5,11 @@ For each G-buffer sample, shadow rays go to the points of a light-sample pattern
 pixel: a jittered ``m x m`` grid for a perfect-square count, else a randomly shifted rank-1
 (Fibonacci) lattice, both unbiased; ``regular`` puts samples at stratum centres, one sample =
 the light's centre). Rect lights take the points in the rectangle; disk and sphere lights
-through the concentric map onto the disk (the sphere seen as its silhouette disk); distant
-lights uniformly in the sun's cone. Rays are any-hit against the scene's BVH and alpha-tested
+through the concentric map onto the disk (an elliptical disk's scaled by its semi-axes; the
+sphere seen as its silhouette disk, an ellipsoid as its silhouette ellipse); distant lights
+uniformly in the sun's cone. A sample counts only where its ray leaves the receiver's visible
+side and the light emits back along it (a rect or disk light from its front only:
+:func:`~wsoft.lightspace.light.lit_along`). Rays are any-hit against the scene's BVH and alpha-tested
 through cutout triangles. Randomness is seeded by the pattern's seed and the sample index.
 
 Two traversals give the same answer bit for bit (``tests/test_packets.py``; three kinds of
@@ -28,7 +31,7 @@ from __future__ import annotations
 import warp as wp
 
 import wsoft.parallel  # noqa: F401  (Warp configured before this package's kernels are defined)
-from wsoft.lightspace.light import LightGPU, in_front, light_point
+from wsoft.lightspace.light import LightGPU, light_point, lit_along
 from wsoft.lightspace.samples import LightSamples, SamplePattern, sample_coords
 from wsoft.parallel import launch_chunked
 from wsoft.raster.gbuffer import GBufferGPU, gb_covered
@@ -77,7 +80,7 @@ def trace_visibility(
         c, state = sample_coords(ls, state, base, rot, s)
         r = light_point(light, p, c)
         d = wp.vec3(r[0], r[1], r[2])
-        if in_front(n, d):
+        if lit_along(light, n, d):
             tm = shadow_ray_length(r[3], dmax, off)
             if unoccluded(occ, o, d, tm):
                 visible += 1
@@ -130,7 +133,7 @@ def trace_visibility_packets(
             c, state = sample_coords(ls, state, base, rot, first + k)
             r = light_point(light, p, c)
             d = wp.vec3(r[0], r[1], r[2])
-            if in_front(n, d):  # behind the tangent plane: blocked by the surface itself, not traced
+            if lit_along(light, n, d):  # behind the tangent plane (the surface's own sheet) or the light's back: not traced
                 dx[k] = d[0]
                 dy[k] = d[1]
                 dz[k] = d[2]
@@ -247,7 +250,7 @@ def generate_shadow_rays(
         d = wp.vec3(r[0], r[1], r[2])
         origin[k * samples + s] = o
         dir[k * samples + s] = d
-        tmax[k * samples + s] = wp.where(in_front(n, d), r[3] - off, 0.0)  # behind the plane: blocked, not traced
+        tmax[k * samples + s] = wp.where(lit_along(light, n, d), r[3] - off, 0.0)  # behind a plane: blocked, not traced
 
 
 @wp.kernel

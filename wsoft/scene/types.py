@@ -87,9 +87,13 @@ class Light:
     """A shadow-casting light in world space.
 
     ``frame`` is a 3x3 matrix whose columns are the light's world-space X, Y and Z axes,
-    unit length. Rect lights span ``±half_size`` along X/Y and emit along −Z; disk lights
-    have radius ``radius`` in the XY plane; sphere lights a radius about ``position``;
-    distant lights shine along −Z with a cone of full angle ``angle_deg``.
+    unit length (a mirroring transform keeps its reflection: the columns are where the local
+    axes go). Rect lights span ``±half_size`` along X/Y and disk lights an ellipse of semi-axes
+    :attr:`semi_axes` in the XY plane; both emit from their front only, along −Z
+    (:attr:`direction`): nothing behind their plane receives their light. Sphere lights are an
+    ellipsoid of semi-axes :attr:`semi_axes` along the frame's axes about ``position`` (a ball of
+    ``radius`` when round) and emit all around; distant lights shine along −Z with a cone of full
+    angle ``angle_deg``.
     """
 
     path: str
@@ -97,7 +101,7 @@ class Light:
     position: np.ndarray  # world position (unused for distant)
     frame: np.ndarray  # 3x3, columns = X, Y, Z axes (unit)
     half_size: tuple[float, float] = (0.0, 0.0)  # rect half width / half height (world units)
-    radius: float = 0.0  # disk / sphere radius (world units)
+    radius: float = 0.0  # disk / sphere radius (world units); of an ellipse or ellipsoid its largest semi-axis
     angle_deg: float = 0.0  # distant light full cone angle
     intensity: float = 1.0
     color: tuple[float, float, float] = (1.0, 1.0, 1.0)
@@ -115,6 +119,9 @@ class Light:
     """``inputs:shadow:falloff`` (scene units; <= 0: none). Read, listed by ``wsoft plan``, not applied."""
     shadow_falloff_gamma: float = 1.0
     """``inputs:shadow:falloffGamma``. Read, listed by ``wsoft plan``, not applied."""
+    aspect: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    """A disk's (X, Y) or sphere's (X, Y, Z) semi-axes along the frame's axes as fractions of
+    ``radius``: (1, 1, 1) for a round light, else one of them 1 (``radius`` is the largest)."""
 
     @property
     def distance_limited(self) -> bool:
@@ -134,9 +141,35 @@ class Light:
         """World direction the light emits along (its −Z axis)."""
         return -self.frame[:, 2]
 
+    @property
+    def one_sided(self) -> bool:
+        """Does the light emit from one side only (a rect or disk light: its front, along
+        :attr:`direction`)? Receivers on or behind its plane get none of its light."""
+        return self.kind in (LIGHT_RECT, LIGHT_DISK)
+
+    @property
+    def elliptical(self) -> bool:
+        """Is the light a disk or sphere light of unequal semi-axes (an ellipse or ellipsoid)?"""
+        return self.kind in (LIGHT_DISK, LIGHT_SPHERE) and tuple(self.aspect) != (1.0, 1.0, 1.0)
+
+    @property
+    def semi_axes(self) -> tuple[float, ...]:
+        """A disk light's semi-axes along the frame's X and Y, a sphere light's along X, Y and Z."""
+        n = 2 if self.kind == LIGHT_DISK else 3
+        return tuple(self.radius * a for a in self.aspect[:n])
+
+    def points_behind(self, points: np.ndarray) -> int:
+        """How many of ``points`` ([N, 3]) lie on or behind a one-sided light's plane (0 for the others)."""
+        if not self.one_sided or len(points) == 0:
+            return 0
+        d = (np.asarray(points, np.float64) - np.asarray(self.position, np.float64)) @ np.asarray(self.direction, np.float64)
+        return int(np.count_nonzero(~(d > 0.0)))
+
     def size_description(self) -> str:
         if self.kind == LIGHT_RECT:
             return f"{2 * self.half_size[0]:g} x {2 * self.half_size[1]:g}"
+        if self.elliptical:
+            return f"{'ellipse' if self.kind == LIGHT_DISK else 'ellipsoid'}, semi-axes {' x '.join(f'{a:g}' for a in self.semi_axes)}"
         if self.kind in (LIGHT_DISK, LIGHT_SPHERE):
             return f"radius {self.radius:g}"
         if self.kind == LIGHT_DISTANT:
@@ -144,7 +177,7 @@ class Light:
         return "point"
 
     def extent(self) -> float:
-        """Radius of the light's emitting region (world units; radians for distant)."""
+        """Radius of the light's emitting region's bounding ball (world units; radians for distant)."""
         if self.kind == LIGHT_RECT:
             return math.hypot(*self.half_size)
         if self.kind in (LIGHT_DISK, LIGHT_SPHERE):

@@ -27,11 +27,23 @@ UNHANDLED_REASONS = {
 }
 
 
+ROUND = 1e-6  # scale factors within this fraction of each other are one radius (a rotation's rounding makes no ellipse)
+
+
 def read_light(ctx: StageContext, prim, type_name: str) -> Light | None:
     """The light ``prim`` (``type_name`` one of :data:`HANDLED_LIGHTS`) in the world: a rect light
-    spans +-width/2, +-height/2 in its local XY plane, a disk or sphere light its radius (a sphere
-    treated as a point, or of radius 0, is a point light), a distant light its full ``angle`` in
-    degrees; sizes scaled by the transform, intensity by ``2^exposure``."""
+    spans +-width/2, +-height/2 in its local XY plane, a disk light its radius there, a sphere light
+    its radius about its origin (a sphere treated as a point, or of radius 0, is a point light), a
+    distant light its full ``angle`` in degrees; sizes scaled by the transform, intensity by
+    ``2^exposure``.
+
+    The frame's columns are the transformed local axes, normalised (and re-orthonormalised under
+    shear). A mirroring transform (a negative determinant) keeps its reflection: the light's Z axis
+    is where the transform takes the local Z axis, so a rect or disk light emits along the
+    transformed local −Z whatever the handedness (scale (1, 1, −1) turns it round, (−1, 1, 1)
+    leaves it facing the same way). Under a non-uniform scale a disk is the ellipse of semi-axes
+    ``radius * scale`` along its X and Y and a sphere the ellipsoid the transform makes of it
+    (semi-axes ``radius`` times the transform's singular values, along their directions)."""
     Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = pxr()
     M = ctx.world(prim)
     axes = M[:3, :3]
@@ -39,7 +51,7 @@ def read_light(ctx: StageContext, prim, type_name: str) -> Light | None:
     if np.any(scale < 1e-12) or not np.all(np.isfinite(M)):
         raise ctx.err(prim, "light transform is singular or not finite")
     frame = axes / scale
-    # re-orthonormalise (shear would make the frame skew)
+    # re-orthonormalise (shear would make the frame skew); the nearest orthogonal matrix keeps a reflection
     u, _, vt = np.linalg.svd(frame)
     frame = u @ vt
     pos = M[:3, 3].copy()
@@ -62,20 +74,37 @@ def read_light(ctx: StageContext, prim, type_name: str) -> Light | None:
             ctx.warn(prim, f"RectLight has zero {'width' if w == 0 else 'height'}: it emits from a line segment (no area)")
         return Light(kind=LIGHT_RECT, half_size=(0.5 * w, 0.5 * h), **common)
     if type_name == "DiskLight":
-        r = ctx.size(prim, "inputs:radius", ctx.get(UsdLux.DiskLight(prim).GetRadiusAttr(), 0.5)) * 0.5 * (scale[0] + scale[1])
+        r0 = ctx.size(prim, "inputs:radius", ctx.get(UsdLux.DiskLight(prim).GetRadiusAttr(), 0.5))
+        r = r0 * 0.5 * (scale[0] + scale[1])
         if r == 0:
             ctx.warn(prim, "DiskLight has radius 0: rendered as a point light (hard shadows)")
-        return Light(kind=LIGHT_DISK if r > 0 else LIGHT_POINT, radius=max(r, 0.0), **common)
+            return Light(kind=LIGHT_POINT, **common)
+        if _round(scale[:2]):
+            return Light(kind=LIGHT_DISK, radius=r, **common)
+        semi = r0 * scale[:2]
+        return Light(kind=LIGHT_DISK, radius=float(semi.max()), aspect=(*(float(a) for a in semi / semi.max()), 1.0), **common)
     if type_name == "SphereLight":
         lt = UsdLux.SphereLight(prim)
-        r = ctx.size(prim, "inputs:radius", ctx.get(lt.GetRadiusAttr(), 0.5)) * float(np.mean(scale))
+        r0 = ctx.size(prim, "inputs:radius", ctx.get(lt.GetRadiusAttr(), 0.5))
+        r = r0 * float(np.mean(scale))
         if bool(ctx.get(lt.GetTreatAsPointAttr(), False)) or r <= 0:
             return Light(kind=LIGHT_POINT, **common)
-        return Light(kind=LIGHT_SPHERE, radius=r, **common)
+        sv_u, sv, _ = np.linalg.svd(axes)  # the unit ball's image: semi-axes r0 * sv along sv_u's columns
+        if _round(sv):
+            return Light(kind=LIGHT_SPHERE, radius=r, **common)
+        if np.linalg.det(sv_u) < 0:
+            sv_u[:, 2] = -sv_u[:, 2]  # a ball has no handedness: its frame a rotation
+        common["frame"] = sv_u
+        return Light(kind=LIGHT_SPHERE, radius=float(r0 * sv[0]), aspect=tuple(float(a) for a in sv / sv[0]), **common)
     angle = ctx.finite(prim, "inputs:angle", ctx.get(UsdLux.DistantLight(prim).GetAngleAttr(), 0.53))
     if not (0.0 <= angle < 180.0):
         raise ctx.err(prim, f"DistantLight angle {angle} must be in [0, 180) degrees")
     return Light(kind=LIGHT_DISTANT, angle_deg=angle, **common)
+
+
+def _round(s: np.ndarray) -> bool:
+    """Are the scale factors ``s`` equal, to within a fraction :data:`ROUND` of the largest?"""
+    return float(s.max() - s.min()) <= ROUND * float(s.max())
 
 
 def read_shadow_controls(ctx: StageContext, prim, light: Light, casters: list[str]) -> Light:

@@ -649,6 +649,40 @@ def b_cutout_exr(folder):
     return _cutout_stage(folder, "cutout_exr", "checker.exr")
 
 
+# -- light side and shape: a rect or disk light emits from its front only (its transformed local -Z)
+
+
+def _turned_light(folder, name: str, op: str, value, disk: bool = False):
+    """The base with its light (a DiskLight of radius 0.5 when ``disk``) turned away from every
+    receiver by ``op`` (``rotate`` or ``scale``) ``value``: everything in view lies behind it."""
+    from pxr import Gf, UsdGeom, UsdLux
+
+    st = _base()
+    if disk:
+        st.RemovePrim("/World/Light")
+        UsdLux.DiskLight.Define(st, "/World/Light").CreateRadiusAttr(0.5)
+    xf = UsdGeom.XformCommonAPI(st.GetPrimAtPath("/World/Light"))
+    xf.SetTranslate(Gf.Vec3d(0, 0, 3))
+    (xf.SetRotate if op == "rotate" else xf.SetScale)(Gf.Vec3f(*value))
+    return _save(st, folder, name)
+
+
+def b_light_facing_away(folder):
+    return _turned_light(folder, "light_facing_away", "rotate", (180, 0, 0))
+
+
+def b_light_scaled_away(folder):
+    return _turned_light(folder, "light_scaled_away", "scale", (1, 1, -1))
+
+
+def b_light_inverted(folder):
+    return _turned_light(folder, "light_inverted", "scale", (-1, -1, -1))
+
+
+def b_disk_facing_away(folder):
+    return _turned_light(folder, "disk_facing_away", "rotate", (0, 180, 0), disk=True)
+
+
 # --------------------------------------------------------------------------- expectations
 
 
@@ -819,6 +853,15 @@ CASES: list[Case] = [
          note="inverted texture read with scale -1, bias 1"),
     Case("cutout_udim", b_cutout_udim, check=same_as("cutout_clamp"), silent_hazard=True, note="UDIM texture, st in tile 1002"),
     Case("cutout_exr", b_cutout_exr, check=same_as("cutout_8bit"), silent_hazard=True, note="OpenEXR cutout texture"),
+    # light side and shape
+    Case("light_facing_away", b_light_facing_away, check=all_dark, message=("behind its emitting plane",), silent_hazard=True,
+         note="the base's rect light turned 180 degrees about X: it emits up, away from everything"),
+    Case("light_scaled_away", b_light_scaled_away, check=all_dark, message=("behind its emitting plane",), silent_hazard=True,
+         note="the base's rect light scaled (1, 1, -1): its -Z turned up"),
+    Case("light_inverted", b_light_inverted, check=all_dark, message=("behind its emitting plane",), silent_hazard=True,
+         note="the base's rect light scaled (-1, -1, -1): its -Z turned up"),
+    Case("disk_facing_away", b_disk_facing_away, check=all_dark, message=("behind its emitting plane",), silent_hazard=True,
+         note="a DiskLight in the base's light's place, turned 180 degrees about Y"),
 ]
 BASES = {"base": b_base, "base_sun": b_base_sun, "base_dynamic": b_base_dynamic, "far_light_100": b_far_light_100}
 

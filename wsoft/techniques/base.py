@@ -143,6 +143,11 @@ class Technique:
     # (e.g. "the caster nearest the light in each texel of the depth map"); every frame with a
     # finite distance then warns that a caster behind that one within the distance is missed
     distance_caveat: ClassVar[str] = ""
+    # a technique that sizes its penumbrae by a filter kernel which cannot follow an ellipsoidal
+    # sphere light's silhouette (a SphereLight under a non-uniform scale) names what it uses instead
+    # (e.g. "its bounding sphere"); every frame with such a light then warns. "" when it samples the
+    # silhouette ellipse (light_point, lightspace.coverage) or does not size its shadow by the light
+    ellipsoid_caveat: ClassVar[str] = ""
     # instanced stages (load_scene(..., instancing=True)): "" when the technique's passes draw and
     # trace instances as they are (prototypes once, wsoft.scene.instancing), else why it needs the
     # triangle soup; the frame graph then flattens the stage for it (wsoft.pipeline.instancing_plan)

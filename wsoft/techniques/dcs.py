@@ -7,8 +7,9 @@ the *depth complexity* ``count(s)``: how many occluding layers the shadow ray ``
 ``V`` (the paper's ``v_coef``) is the fraction of samples with ``count = 0``. The shadow rays are
 the reference's (:mod:`wsoft.reference`): from ``o``, ``p`` moved off its surface by
 :func:`~wsoft.raster.shadow_rays.ray_offset`, to each light point (:func:`~wsoft.lightspace.light.light_point`,
-a distant light's at its ``far`` length); samples behind the receiver's tangent plane are blocked
-(the horizon, applied per sample as the reference does).
+a distant light's at its ``far`` length); samples behind the receiver's tangent plane, and every
+sample of a rect or disk light whose emitting side faces away from the receiver, are blocked (the
+horizon, applied per sample as the reference does, :func:`~wsoft.lightspace.light.lit_along`).
 
 What is counted. ``count(s)`` is the number of opaque triangles the segment ``o -> s`` crosses
 plus the perforated triangles that block it at their alpha texture: a closed layer counts twice
@@ -103,7 +104,7 @@ import warp as wp
 
 from wsoft.accel.dcs_bins import BinsGPU, receiver_items
 from wsoft.accel.occluders import count_crossings, in_wedge, side
-from wsoft.lightspace.light import LightGPU, in_front, light_bound, light_point
+from wsoft.lightspace.light import LightGPU, is_round, light_bound, light_point, lit_along, silhouette_ellipse
 from wsoft.lightspace.samples import LightSamples, sample_coords
 from wsoft.accel.stsv import in_volume, light_ball, planes_t, receiver_matrix, s_triangle, sample_blocked
 from wsoft.parallel import launch_chunked
@@ -186,7 +187,7 @@ def dcs_visibility(
         d = wp.vec3(r[0], r[1], r[2])
         x = o + d * wp.max(r[3] - off, 0.0)
         xs[s] = x
-        if in_front(nrm, d):
+        if lit_along(light, nrm, d):
             cnt[s] = 0
             if first_front < 0:
                 first_front = s
@@ -199,7 +200,7 @@ def dcs_visibility(
     rc = light_point(light, p, wp.vec2(0.0, 0.0))
     dc = wp.vec3(rc[0], rc[1], rc[2])
     xr = o + dc * wp.max(rc[3] - off, 0.0)
-    if not in_front(nrm, dc):
+    if not lit_along(light, nrm, dc):
         xr = xs[first_front]
     base_count = int(0)
     if has_opaque != 0:
@@ -283,6 +284,11 @@ def dcs_visibility(
         axis = light.az
         if light.kind == 2:
             axis = wp.normalize(light.position - p)
+            if not is_round(light):  # an ellipsoid: the normal of the silhouette ellipse's plane, away from p
+                ce, eu, ev, ext = silhouette_ellipse(light, p)
+                axis = wp.normalize(wp.cross(eu, ev))
+                if wp.dot(axis, ce - p) < 0.0:
+                    axis = -axis
         for s in range(S):
             dv = xs[s] - o
             dist = wp.length(dv)

@@ -550,6 +550,7 @@ class ESSM(Technique):
     )
     tolerance = Tolerance(mae=0.001, mae_penumbra=0.025)
     distance_refusal = "its summed-area tables of exp(-c z) sum every caster of a kernel together, so they cannot tell which lie within the distance"
+    ellipsoid_caveat = "its bounding sphere (search and penumbra kernels sized by its largest semi-axis)"
 
     def add_passes(self, ctx, light):
         p = self.params

@@ -142,6 +142,7 @@ class PCSS(Technique):
     size_param = "shadow_map_size"
     # a finite inputs:shadow:distance is tested against the caster the map keeps per texel
     distance_caveat = "the caster nearest the light in each texel of the depth map"
+    ellipsoid_caveat = "its bounding sphere (blocker search and filter kernel sized by its largest semi-axis)"
 
     quality = (Quality("filter_samples", (16, 36, 100), "more filter taps: smoother penumbrae, linearly more time"),)
     tolerance = Tolerance(mae=0.0025, mae_penumbra=0.06)

@@ -16,7 +16,7 @@ Per receiver ``o`` (a G-buffer sample, moved off its surface as the reference's 
 3. **Wedges** (``pwedge``). For each silhouette edge whose wedge holds ``o`` (the plane through
    ``o`` and the edge cuts the light's bound), the edge projected from ``o`` onto the light and
    clipped to it changes the covered fraction by the area of the light beyond it as seen from
-   ``c`` (:mod:`wsoft.lightspace.coverage`, exact for rect and disk lights): added when ``o`` is
+   ``c`` (:mod:`wsoft.lightspace.coverage`, exact for rect, disk and elliptical lights): added when ``o`` is
    outside the edge's hard shadow quad, subtracted inside. This is the papers' per-wedge pixel
    shader with the coverage computed analytically instead of read from a 4D texture.
 4. **STSV** (``pwedge_stsv``, only when the light's casters hold perforated triangles not wholly
@@ -43,9 +43,10 @@ not thread-safe across the thread pool). A scan conversion of wedge polygons int
 would do the same tests on more pixels: a wedge's screen footprint bounds its receivers loosely
 where the wedge grazes a surface.
 
-Lights: rect, disk, sphere (its silhouette disk) and distant (its cone as the disk it cuts at unit
-distance). A point light has no penumbra (use ``hard`` or ``izb``). The receiver's own horizon
-caps ``V`` by the part of the light in front of its tangent plane (``horizon = "fraction"``).
+Lights: rect, disk (an elliptical one too), sphere (its silhouette disk; an ellipsoid's silhouette
+ellipse) and distant (its cone as the disk it cuts at unit distance). A point light has no penumbra
+(use ``hard`` or ``izb``). The receiver's own horizon caps ``V`` by the part of the light in front
+of its tangent plane that emits toward it (``horizon = "fraction"``).
 ``collection:shadowLink`` is honoured; ``inputs:shadow:distance`` is refused. Instanced stages are
 flattened.
 

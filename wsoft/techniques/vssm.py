@@ -197,6 +197,7 @@ class VSSM(Technique):
     quality = (Quality("subdivision", (1, 3, 5), "finer subdivision of non-planar kernels: less light leaking, more look-ups"),)
     tolerance = Tolerance(mae=0.0003, mae_penumbra=0.01)
     distance_refusal = "its summed-area tables of depth moments sum every caster of a kernel together, so they cannot tell which lie within the distance"
+    ellipsoid_caveat = "its bounding sphere (search and penumbra kernels sized by its largest semi-axis)"
 
     def add_passes(self, ctx, light):
         p = self.params

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from wsoft.lightspace.light import LightGPU, in_front, light_center_dir
+from wsoft.lightspace.light import LightGPU, light_center_dir, lit_along
 from wsoft.parallel import launch_chunked
 from wsoft.raster.camera import CameraGPU, subpixel_pattern
 from wsoft.raster.gbuffer import GBufferGPU, camera_ray, cast_primary, gb_covered, gb_pixel
@@ -25,14 +25,15 @@ BACKGROUND, TEST, HORIZON = 0, 1, 2  # sample states
 @wp.func
 def shadow_ray(L: LightGPU, p: wp.vec3, n: wp.vec3, eps: float, dmax: float):
     """A sample's ray toward the light's centre: (origin off the surface, unit direction, length,
-    state TEST, or HORIZON where the centre lies behind the tangent plane). ``dmax >= 0``
+    state TEST, or HORIZON where the centre lies behind the tangent plane or the sample behind a
+    rect or disk light's emitting plane). ``dmax >= 0``
     (``inputs:shadow:distance``): the ray ends that far from the surface point."""
     off = ray_offset(p, eps)
     o = ray_origin(p, n, off)
     c = light_center_dir(L, o)
     d = wp.vec3(c[0], c[1], c[2])
     state = int(1)
-    if not in_front(n, d):
+    if not lit_along(L, n, d):
         state = 2
     t = c[3]
     if dmax >= 0.0:

@@ -13,7 +13,7 @@ import numpy as np
 import warp as wp
 
 from wsoft.accel.pyramid import build_bounds_pyramid, build_moments_pyramid
-from wsoft.lightspace.light import LightGPU, in_front, light_center_dir
+from wsoft.lightspace.light import LightGPU, light_center_dir, lit_along
 from wsoft.lightspace.moments import chebyshev_bound, moments_variance
 from wsoft.lightspace.view import ViewGPU, receiver_plane_affine, receiver_plane_range, view_dir, view_of
 from wsoft.parallel import launch_chunked
@@ -166,8 +166,8 @@ def footprint_certainty(
     across texels. ``may_shadow = 0`` (a finite ``inputs:shadow:distance``, which the maps cannot
     check): never certainly shadowed by a blocker, only by the light's centre being behind the plane."""
     c = light_center_dir(L, p)
-    if not in_front(n, wp.vec3(c[0], c[1], c[2])):
-        return wp.vec2i(0, 1)  # the light's centre is behind the plane: every sample on it is shadowed
+    if not lit_along(L, n, wp.vec3(c[0], c[1], c[2])):
+        return wp.vec2i(0, 1)  # the centre behind the plane (or p behind the light): every sample on it is shadowed
     ok, xp, q0, gx, gy = receiver_plane_affine(lv, view_of(lv, ray_origin(p, n, ray_offset(p, eps))), view_dir(lv, n))
     if not ok:
         return wp.vec2i(0, 0)

@@ -342,6 +342,7 @@ class SSM(Technique):
     quality = (Quality("budget", (4.0, 8.0, 16.0, math.inf), "b_mo, micro-occluders per axis: more is closer to level 0 and slower"),)
     tolerance = Tolerance(mae=0.0005, mae_penumbra=0.012)
     distance_refusal = "its pruning pyramids and merged micro-occluders classify receivers by depth ranges of all casters, not by each caster's distance"
+    ellipsoid_caveat = "its bounding sphere (back-projection onto a disk of its largest semi-axis)"
 
     def supports(self, scene, light) -> str | None:
         why = super().supports(scene, light)
