@@ -32,7 +32,7 @@ SWEEPS = {"foundation": "wsoft.bench.foundation", "filtered": "wsoft.bench.filte
           "essm-table1": "wsoft.bench.essm_table1", "essm-table2": "wsoft.bench.essm_table2", "ssm": "wsoft.bench.ssm", "izb": "wsoft.bench.izb",
           "ssm-table1": "wsoft.bench.ssm_table1", "ssm-table2": "wsoft.bench.ssm_table2", "pareto": "wsoft.bench.pareto",
           "adversarial": "wsoft.bench.adversarial", "usd_pipeline": "wsoft.bench.usd_pipeline",
-          "instancing": "wsoft.bench.instancing", "stsv": "wsoft.bench.stsv"}
+          "instancing": "wsoft.bench.instancing", "stsv": "wsoft.bench.stsv", "modern": "wsoft.bench.modern"}
 REFERENCE_VERSION = 3  # bump when the reference changes (2: rows render one named light; 3: the receiver's horizon, ray offsets from the frame's extent)
 _SCENE_DIR: Path | None = None
 
