@@ -173,6 +173,19 @@ def hamburger_bound(b: wp.vec4, z: float) -> float:
     return hamburger_canonical(b, z)[0]
 
 
+@wp.func
+def unbiased_intensity(g: float, alpha: float, z: float) -> float:
+    """A lower bound ``g`` on the mass in front of ``z`` of moments biased by :func:`bias_moments`
+    turned into one on the kernel's own distribution: the biased distribution's mass in front of
+    z > 0 is (1 - alpha) P + alpha / 2 (half of the mixed-in distribution sits at depth 0), so
+    P >= (g - alpha / 2) / (1 - alpha), clamped to [0, 1]. A lit receiver alone in its kernel then
+    gets 0, where ``g`` alone leaves up to alpha / 2."""
+    h = g
+    if z > 0.0:
+        h = g - 0.5 * alpha
+    return wp.clamp(h / (1.0 - alpha), 0.0, 1.0)
+
+
 # --------------------------------------------------------------------------- exponential warps
 
 #: The largest exponent of an EVSM warp on depth mapped to [-1, 1]: e^c and its square e^{2c}, the

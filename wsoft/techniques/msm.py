@@ -5,7 +5,11 @@ The depth map, normalised to [0, 1] between the light view's near and far planes
 ``radius`` texels, ``vsm``'s blur) and read bilinearly. A receiver at normalised depth z (less the
 depth ``bias``) gets the shadow intensity G of the Hamburger four-moment bound (the paper's
 Algorithm 2, :func:`wsoft.lightspace.moments.hamburger_bound`) on the biased moments
-b' = (1 - alpha) b + alpha (1/2, 1/2, 1/2, 1/2), and V = 1 - G. G is the sharpest lower bound on
+b' = (1 - alpha) b + alpha (1/2, 1/2, 1/2, 1/2), and V = 1 - G', G' = (G - alpha / 2) / (1 - alpha)
+(clamped to [0, 1]): the bias's own share in front of z taken off (half of the mixed-in
+distribution sits at depth 0; not in the paper, whose G leaves a lit receiver alone in its kernel
+up to alpha / 2 = 1.5e-5 below 1; G' leaves it at 1, and every other V moves by at most 1.5e-5).
+G is the sharpest lower bound on
 the fraction of the kernel's depths in front of z given the four moments, where Chebyshev's bound
 on two moments (``vsm``) is far looser: two occluders at different depths leak much less light.
 
@@ -16,16 +20,14 @@ integers, the moment map and each blur pass alike, as a GPU stores them in a UNO
 target; the shading reads them bilinearly (in float) and applies the inverse transform.
 
 Moment bias ``moment_bias`` (alpha): 3e-5 for both storages, the value Peters & Klein give for
-their 16-bit quantisation. For ``float32`` it is a measured choice (the paper's float32 value is
-not used here): the shading's float32 arithmetic, not the storage, sets the floor. At 96 x 72 on
-``ogre`` (64 reference samples) MAE is 0.0210 at 3e-5, 0.0219 at 3e-6 and 0.22 at 3e-7 (rounding
-noise in lit areas); the ``stacked_plates`` leak is 1.41%, 1.33% and 1.18%. ``optimised16`` needs
-alpha at least the 16-bit step (1.5e-5): at 3e-6 ``ogre``'s MAE is 0.19. Values below 1e-6 are
-rejected.
+their 16-bit quantisation. For ``float32`` it is a measured choice: the shading's float32
+arithmetic, not the storage, sets the floor. At 96 x 72 on ``ogre`` (64 reference samples) MAE is
+0.0210 at 3e-5, 0.0219 at 3e-6, 0.057 at 1e-6 and 0.22 at 3e-7 (rounding noise in lit areas); the
+``stacked_plates`` leak is 1.41% at 3e-5 and 1.33% at 3e-6. Values below 3e-6 are refused, and
+``optimised16`` needs alpha at least its 16-bit step, 1.5e-5 (at 3e-6 ``ogre``'s MAE is 0.19).
 
 Known limits: light still leaks where three or more depths overlap in one kernel (four moments
-pin a three-point canonical distribution); a lit receiver's own depth makes G a little above 0
-(at most about alpha / 2 from the bias).
+pin a three-point canonical distribution).
 """
 
 from __future__ import annotations
@@ -35,7 +37,7 @@ from dataclasses import dataclass
 import warp as wp
 
 from wsoft.accel.blur import blur_moments4
-from wsoft.lightspace.moments import bias_moments, depth_moments4, dequantise_moments, hamburger_bound, quantise_moments, unorm
+from wsoft.lightspace.moments import bias_moments, depth_moments4, dequantise_moments, hamburger_bound, quantise_moments, unbiased_intensity, unorm
 from wsoft.lightspace.view import ViewGPU, bilinear, normalised_depth
 from wsoft.parallel import launch_chunked
 from wsoft.params import check_ranges
@@ -53,14 +55,16 @@ class MSMParams:
     filter: str = param("gaussian", "prefilter: box or gaussian")
     radius: int = param(2, "prefilter radius in texels (0: none)", range=(0, 64))
     storage: str = param("float32", "moment storage: float32 (128 bits a texel) or optimised16 (the paper's 64-bit optimised quantisation)")
-    moment_bias: float = param(3e-5, "moment bias alpha: the weight of the (1/2, 1/2, 1/2, 1/2) moments mixed in (at least the storage's rounding: 1.5e-5 for optimised16)",
-                               range=(1e-6, 0.1))
+    moment_bias: float = param(3e-5, "moment bias alpha: the weight of the moments (1/2, 1/2, 1/2, 1/2) mixed in (optimised16: at least 1.5e-5, its 16-bit step)",
+                               range=(3e-6, 0.1))
     bias: float = param(1e-4, "depth bias as a fraction of the frame's extent (receivers in view and the light)", range=(0.0, 0.1))
 
     def __post_init__(self):
         check_ranges(self)
         check(self.filter in ("box", "gaussian"), f"filter {self.filter!r} is not box or gaussian")
         check(self.storage in STORAGES, f"storage {self.storage!r} is not one of {', '.join(STORAGES)}")
+        check(self.storage != "optimised16" or self.moment_bias >= 1.5e-5,
+              f"moment_bias {self.moment_bias:g} is below optimised16's 16-bit step (1.5e-5): its rounding would show as noise")
 
 
 @wp.kernel
@@ -102,7 +106,7 @@ def shade_msm(
     b = bilinear(lv, mom, m)
     if quantised != 0:
         b = dequantise_moments(b)
-    vis[i] = wp.clamp(1.0 - hamburger_bound(bias_moments(b, alpha), z), 0.0, 1.0)
+    vis[i] = 1.0 - unbiased_intensity(hamburger_bound(bias_moments(b, alpha), z), alpha, z)
 
 
 class MSM(Prefiltered):
@@ -116,7 +120,7 @@ class MSM(Prefiltered):
     quick_params = {"shadow_map_size": 256}
 
     quality = (Quality("radius", (1, 2, 4), "a wider prefilter: softer edges (not wider penumbrae), a little more time"),)
-    tolerance = Tolerance(mae=0.007, mae_penumbra=0.28)  # measured 0.0054, 0.219 (optimised16: 0.0054, 0.219)
+    tolerance = Tolerance(mae=0.007, mae_penumbra=0.28)  # measured 0.00537, 0.219 (optimised16 the same)
     distance_refusal = "its blurred moments (four powers of the depths) cannot tell which casters lie within the distance"
 
     def prefilter(self, dm, device):
