@@ -261,9 +261,10 @@ def test_evsm_warps_at_the_exponent_limit_stay_finite():
 
 
 def test_evsm_at_the_exponent_limit_on_a_huge_depth_range_and_a_4096_map(device):
-    """``c_pos = c_neg = 42`` on box_plane at a 4096^2 map, and on a ground 2e5 wide seen to its
-    horizon under a sun (a depth range of 1e5 units): finite, in [0, 1], and box_plane's shadow
-    within the declared tolerance."""
+    """``c_pos = c_neg = 42`` on box_plane at a 4096^2 map, and on a ground 2e5 wide seen from
+    2e4 above under a sun 45 degrees off the zenith (the receivers span 1.8e4 along the light):
+    finite, in [0, 1], box_plane's shadow within the declared tolerance, the plate's shadow where
+    the reference has it."""
     from wsoft.stages import add_camera, add_quad, add_sun, make_stage
 
     kw = dict(c_pos=42.0, c_neg=42.0)
@@ -273,14 +274,20 @@ def test_evsm_at_the_exponent_limit_on_a_huge_depth_range_and_a_4096_map(device)
     assert mae < 0.007 and pen < 0.3
     st = make_stage()
     add_quad(st, "/World/G", (0, 0, 0), 1e5)
-    add_quad(st, "/World/O", (0, 0, 1), 0.5)
-    add_sun(st, "/World/Sun", 1.0, (30, 0, 0))
-    add_camera(st, "/World/Cam", (0, -4, 1.5), (0, 1, 0.5), focal=12, clip=(0.01, 1e6))
+    add_quad(st, "/World/O", (0, 0, 1000), 1500)
+    add_sun(st, "/World/Sun", 1.0, (45, 0, 0))
+    add_camera(st, "/World/Cam", (0, -1, 2e4), (0, 0, 0), focal=12, clip=(1.0, 1e6))
+    scene = wsoft.load_scene(st)
+    ref = wsoft.render(scene, "reference", width=48, height=36, device=device, samples=16)
+    cov = ref["A"] > 0
+    along = np.stack([ref["P.X"], ref["P.Y"], ref["P.Z"]], -1)[cov] @ np.array([0.0, -np.sqrt(0.5), np.sqrt(0.5)])
+    assert along.max() - along.min() > 1e4
+    shadow = cov & (ref.V < 0.5)
+    assert shadow.sum() >= 3
     for moments in (2, 4):
-        g = wsoft.render(wsoft.load_scene(st), "evsm", width=48, height=36, device=device, moments=moments, **kw)
-        cov = g["A"] > 0
+        g = wsoft.render(scene, "evsm", width=48, height=36, device=device, moments=moments, **kw)
         assert np.isfinite(g.V).all() and g.V.min() >= 0.0 and g.V.max() <= 1.0
-        assert (g.V[cov] < 0.5).any() and (g.V[cov] > 0.99).mean() > 0.5  # a shadow, and a lit ground
+        assert (g.V[shadow] < 0.5).all() and (g.V[cov & ~shadow] > 0.99).mean() > 0.99
 
 
 @pytest.mark.parametrize("technique,params,needle", [

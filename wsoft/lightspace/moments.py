@@ -39,9 +39,10 @@ def chebyshev_bound(mean: float, var: float, t: float) -> float:
 
 # --------------------------------------------------------------------------- four moments
 
-#: Peters & Klein 2015, §4.3 (64-bit moment shadow maps): q = QUANTISATION @ (z, z^2, z^3, z^4) +
-#: QUANTISATION_OFFSET maps the moments of every distribution on [0, 1] into [0, 1]^4 (to 1e-7),
-#: spreading them so that 16 bits per channel keep what the Hamburger bound needs.
+#: Peters & Klein 2015's optimised quantisation (their 64-bit moment shadow maps):
+#: q = QUANTISATION @ (z, z^2, z^3, z^4) + QUANTISATION_OFFSET maps the moments of every
+#: distribution on [0, 1] into [0, 1]^4 (to 1e-7), spreading them so that 16 bits per channel keep
+#: what the Hamburger bound needs.
 QUANTISATION = np.array([
     [-2.07224649, 32.23703778, -68.571074599, 39.3703274134],
     [13.7948857237, -59.4683975703, 82.0359750338, -35.364903257],
@@ -167,7 +168,7 @@ def hamburger_canonical(b: wp.vec4, z: float) -> wp.vec2:
 
 @wp.func
 def hamburger_bound(b: wp.vec4, z: float) -> float:
-    """The Hamburger four-moment bound (Peters & Klein 2015, Algorithm 2): the sharpest lower bound
+    """The Hamburger four-moment bound (Peters & Klein 2015's Hamburger 4MSM): the sharpest lower bound
     on the mass of a distribution with (biased) moments ``b`` strictly in front of ``z``, the
     shadow intensity; :func:`hamburger_canonical`'s G."""
     return hamburger_canonical(b, z)[0]

@@ -1,5 +1,5 @@
 """``evsm``: exponential variance shadow maps (Lauritzen & McCool 2008, "Layered Variance Shadow
-Maps", §5), filtered like ``vsm``.
+Maps"), filtered like ``vsm``.
 
 The depth map, normalised to z in [0, 1] between the light view's near and far planes (empty
 texels at 1), is mapped to x = 2z - 1 in [-1, 1] (MJP's "Shadows" sample's reading: both halves of

@@ -4,7 +4,7 @@ The depth map, normalised to [0, 1] between the light view's near and far planes
 1), becomes four moments (z, z^2, z^3, z^4) per texel, blurred separably (box or Gaussian of
 ``radius`` texels, ``vsm``'s blur) and read bilinearly. A receiver at normalised depth z (less the
 depth ``bias``) gets the shadow intensity G of the Hamburger four-moment bound (the paper's
-Algorithm 2, :func:`wsoft.lightspace.moments.hamburger_bound`) on the biased moments
+Hamburger 4MSM, :func:`wsoft.lightspace.moments.hamburger_bound`) on the biased moments
 b' = (1 - alpha) b + alpha (1/2, 1/2, 1/2, 1/2), and V = 1 - G', G' = (G - alpha / 2) / (1 - alpha)
 (clamped to [0, 1]): the bias's own share in front of z taken off (half of the mixed-in
 distribution sits at depth 0; not in the paper, whose G leaves a lit receiver alone in its kernel

@@ -1,6 +1,6 @@
 """``msm_soft``: moment soft shadow mapping (Peters, Münstermann, Wetzstein & Klein 2016, "Beyond
-Hard Shadows: Moment Shadow Maps for Single Scattering, Soft Shadows and Translucent Occluders",
-§4): PCSS with both of its steps answered by four depth moments from summed-area tables. Not the
+Hard Shadows: Moment Shadow Maps for Single Scattering, Soft Shadows and Translucent Occluders"):
+PCSS with both of its steps answered by four depth moments from summed-area tables. Not the
 multi-scale shadow map (``ssm``'s ``structure=mssm``): "MSM" here is "moment shadow map".
 
 1. Moments: the light-space linear depth normalised to z in [0, 1] over the map's effective depth
@@ -13,8 +13,11 @@ multi-scale shadow map (``ssm``'s ``structure=mssm``): "MSM" here is "moment sha
    size it): the box's mean moments, biased (moment bias alpha), give the canonical three-point
    representation holding the receiver's depth z_f (:func:`wsoft.lightspace.moments.hamburger_canonical`);
    the weights of its points in front of z_f sum to the blocker search's shadow intensity G_s and
-   their weighted mean depth is the average blocker depth z_occ (the paper's estimate; the
-   parts of the box outside the map count as lit at depth 1). G_s <= 1e-4: lit.
+   their weighted mean depth is the average blocker depth z_occ (the paper's estimate, as the
+   shader code of its extended version, Peters et al. JCGT 2017, computes it; the parts of the
+   box outside the map count as lit at depth 1). G_s <= 1e-4 (the bias's share taken off, as in
+   step 3): lit (that code instead blends z_occ toward z_f with a small weight, which ends lit
+   there too).
 3. Penumbra from z_occ as in PCSS (``wsoft.lightspace.light.spread``: w (1/z_occ - 1/z_f) for a
    local light of half-extent w, (z_f - z_occ) tan a for a distant one), clamped to
    [``min_radius``, ``max_radius``] texels; visibility 1 - G', G the Hamburger bound of the
@@ -23,21 +26,22 @@ multi-scale shadow map (``ssm``'s ``structure=mssm``): "MSM" here is "moment sha
 
 Storage (``sat``): ``tiles`` (the default: uint32 SAT tile grid with ``mu`` precision bits, tiles
 sized by the overflow test, exact box sums of any size; the project's structure from ``essm``),
-``uint32`` (the paper's: one full integer SAT whose fixed-point precision is what its largest box,
+``uint32`` (the JCGT 2017 code's: one full integer SAT whose fixed-point precision is what its largest box,
 2 ``max_radius`` + 2 texels a side, leaves: ``mu`` = 0 takes the most bits that keep that box's
 sum below 2^32, a larger ``mu`` is a parameter error, since its sums would wrap) or ``float32``
 (one full float SAT: its cancellation makes small kernels noise at large maps).
 
 The moment bias alpha (``moment_bias``, 0: 1e-4 for an integer SAT of at least 16 bits, 1e-3
 for fewer bits and for float32) and the depth bias (``bias``, 0.002 on the normalised depth) are
-measured choices (the paper sets them per scene): at 96 x 72 against 256 reference samples,
+measured choices: at 96 x 72 against 256 reference samples,
 penumbra MAE on ``ogre`` / ``dinosaurs`` 0.0263 / 0.0411 at the defaults, 0.0276 / 0.0379 at
-alpha 3e-5, 0.0253 / 0.0431 at 3e-4; the full uint32 SAT at max_radius 512 (11 bits) 0.0257 /
-0.0411 at 1e-4 but MAE 0.0103 on ``ogre`` (0.0052 at 1e-3); bias 0.005 gives 0.0249 / 0.0459.
+alpha 3e-5, 0.0253 / 0.0430 at 3e-4; the full uint32 SAT at max_radius 512 (11 bits) 0.0257 /
+0.0411 at 1e-4 but MAE 0.0103 on ``ogre`` (0.0050 at 1e-3); bias 0.005 gives 0.0249 / 0.0459.
 
 Known limits: like ``pcss`` it takes one blocker depth per receiver, so overlapping blockers at
 different depths give one penumbra; a receiver's own surface inside a large kernel (a curved or
-tilted receiver) counts as a blocker in front of it unless ``bias`` covers it.
+tilted receiver) counts as a blocker in front of it unless ``bias`` covers it (the JCGT 2017 code
+scales its depth bias with the kernel size; here it is constant).
 """
 
 from __future__ import annotations
@@ -192,7 +196,7 @@ def msm_soft_shade(
     # 1. blocker search over the region where any caster could cover part of the light
     sh = spread_texels(lv, k, q.zmin, d_lin, 0.5, q.max_r)
     r = hamburger_canonical(box_moments(q, data, tc[0] - sh[0], tc[0] + sh[0], tc[1] - sh[1], tc[1] + sh[1]), zf)
-    if r[0] <= LIT_BELOW:
+    if unbiased_intensity(r[0], q.alpha, zf) <= LIT_BELOW:
         return
     z_occ = wp.clamp(r[1] / r[0], 0.0, wp.max(zf, 0.0))
     blocker[i] = z_occ
