@@ -9,9 +9,9 @@ b' = (1 - alpha) b + alpha (1/2, 1/2, 1/2, 1/2), and V = 1 - G', G' = (G - alpha
 (clamped to [0, 1]): the bias's own share in front of z taken off (half of the mixed-in
 distribution sits at depth 0; not in the paper, whose G leaves a lit receiver alone in its kernel
 up to alpha / 2 = 1.5e-5 below 1; G' leaves it at 1, and every other V moves by at most 1.5e-5).
-G is the sharpest lower bound on
-the fraction of the kernel's depths in front of z given the four moments, where Chebyshev's bound
-on two moments (``vsm``) is far looser: two occluders at different depths leak much less light.
+G is the sharpest lower bound on the fraction of the kernel's depths in front of z given the four
+moments, where Chebyshev's bound on two moments (``vsm``) is far looser: two occluders at
+different depths leak much less light.
 
 ``storage``: ``float32`` (128 bits a texel) or ``optimised16``, the paper's 64-bit variant: the
 moments go through its optimised quantisation transform (an affine map into [0, 1]^4,
@@ -37,7 +37,15 @@ from dataclasses import dataclass
 import warp as wp
 
 from wsoft.accel.blur import blur_moments4
-from wsoft.lightspace.moments import bias_moments, depth_moments4, dequantise_moments, hamburger_bound, quantise_moments, unbiased_intensity, unorm
+from wsoft.lightspace.moments import (
+    bias_moments,
+    depth_moments4,
+    dequantise_moments,
+    hamburger_bound,
+    quantise_moments,
+    unbiased_intensity,
+    unorm,
+)
 from wsoft.lightspace.view import ViewGPU, bilinear, normalised_depth
 from wsoft.parallel import launch_chunked
 from wsoft.params import check_ranges
