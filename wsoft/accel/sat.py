@@ -1,5 +1,6 @@
-"""Summed-area tables for pre-filtered soft shadows (ESSM, VSSM): the full float32 SAT, the full
-uint32 SAT, and the overflow-free uint32 *SAT tile grid* of Shen, Feng & Yang (§6).
+"""Summed-area tables for pre-filtered soft shadows (ESSM, VSSM, moment soft shadow mapping): the
+full float32 SAT, the full uint32 SAT, and the overflow-free uint32 *SAT tile grid* of Shen, Feng &
+Yang (§6).
 
 Layout: ``data[k, y, x]`` holds, for channel ``k``, the inclusive prefix sum over the texels
 ``[ty*T, y] x [tx*T, x]`` of the tile ``(tx, ty)`` holding ``(x, y)``; a full SAT is the grid
@@ -288,7 +289,7 @@ for _t in (wp.uint32, wp.float32):
 
 
 def check_sat_params(p) -> None:
-    """The parameters every SAT-filtered technique (essm, vssm) shares; raises ValueError."""
+    """The parameters every SAT-filtered technique (essm, vssm, msm_soft) shares; raises ValueError."""
     n = p.shadow_map_size
     check(256 <= n <= 8192 and n & (n - 1) == 0, f"shadow_map_size {n} must be a power of two in [256, 8192]")
     check(p.sat in STORAGES, f"sat {p.sat!r} is not one of {', '.join(STORAGES)}")

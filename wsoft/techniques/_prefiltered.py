@@ -1,4 +1,4 @@
-"""The frame of the prefiltered shadow maps (``vsm``, ``esm``): a map made from the light's depth
+"""The frame of the prefiltered shadow maps (``vsm``, ``esm``, ``msm``, ``evsm``): a map made from the light's depth
 map and blurred (the ``map`` pass, shared by instances whose map size and named parameters agree),
 then each G-buffer sample shaded from it (the ``shadow`` pass). A technique supplies how the map
 is made (:meth:`Prefiltered.prefilter`) and read (:meth:`Prefiltered.shade`). This module holds no
@@ -25,7 +25,7 @@ def normalised_bias(bias: float, view) -> float:
 
 
 class Prefiltered(Technique):
-    """Base class of ``vsm`` and ``esm`` (module docstring): :meth:`add_passes` is theirs; a subclass
+    """Base class of ``vsm``, ``esm``, ``msm`` and ``evsm`` (module docstring): :meth:`add_passes` is theirs; a subclass
     declares ``map_kind``, ``map_stage``, ``map_params`` (the parameters the map depends on besides
     the map size) and ``passes = prefiltered_passes(map_kind, map_stage)``, and implements
     :meth:`prefilter` and :meth:`shade`."""
