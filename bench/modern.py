@@ -37,7 +37,7 @@ GROUND_TRUTH = 1024
 SIZE = (640, 480)  # the pareto sweep's frames
 MAP = 1024
 TARGETS = (0.05, 0.02)
-LEAK_LIT = 0.2  # a umbra pixel lit above this leaks
+LEAK_LIT = 0.2  # an umbra pixel lit above this leaks (wsoft.metrics.leak.LEAK_THRESHOLD)
 
 
 def _registered() -> set[str]:
@@ -49,14 +49,17 @@ def _registered() -> set[str]:
 def cases(quick: bool, devices: list[str]) -> list[dict]:
     from wsoft import usd_scenes
 
+    from wsoft.stages.moment_cases import stage_file
+
     have = set(usd_scenes.names())
-    names = [n for n in (QUICK_SCENES if quick else SCENES) if n in have]
+    files = {n: n for n in have} | {"stacked_plates": stage_file(3)}  # the stacked occluders: a stage written into the cache
+    names = [n for n in (QUICK_SCENES if quick else SCENES) if n in files]
     w, h = (96, 72) if quick else SIZE
     out = []
     for dev in devices:
         for name in names:
-            for light in [l.path for l in load(name).lights]:
-                out.append({"kind": "frame", "scene": name, "light": light, "device": dev, "width": w, "height": h,
+            for light in [l.path for l in load(files[name]).lights]:
+                out.append({"kind": "frame", "scene": name, "file": files[name], "light": light, "device": dev, "width": w, "height": h,
                             "ground_truth": 64 if quick else GROUND_TRUTH, "map": 256 if quick else MAP, "quick": quick})
     return out
 
@@ -83,19 +86,21 @@ def settings(scene, light, map_size: int, quick: bool) -> list[tuple[str, dict]]
 
 def leak(v: np.ndarray, truth_v: np.ndarray, covered: np.ndarray) -> float:
     """The fraction of the reference's umbra pixels (covered, V = 0) that ``v`` lights above
-    :data:`LEAK_LIT`; NaN where the reference has no umbra."""
-    umbra = covered & (truth_v <= 0.0)
-    return float((v[umbra] > LEAK_LIT).mean()) if umbra.any() else math.nan
+    :data:`LEAK_LIT` (:func:`wsoft.metrics.leak.umbra_leak`); NaN where the reference has no umbra."""
+    from wsoft.metrics.leak import umbra_leak
+
+    u = umbra_leak(v, truth_v, covered, LEAK_LIT)
+    return u["leak"] if u["umbra_pixels"] else math.nan
 
 
 def run_case(case: dict, ctx: dict) -> dict:
-    name, light = case["scene"], case["light"]
-    scene = load(name)
+    name, light, file = case["scene"], case["light"], case["file"]
+    scene = load(file)
     L = scene.find_light(light)
-    ref = reference(name, width=case["width"], height=case["height"], light=light, samples=case["ground_truth"], device=case["device"])
-    truth = ground_truth(name, ref, light)
+    ref = reference(file, width=case["width"], height=case["height"], light=light, samples=case["ground_truth"], device=case["device"])
+    truth = ground_truth(file, ref, light)
     techs = settings(scene, L, case["map"], case["quick"])
-    fs = measure(name, techs, device=case["device"], width=case["width"], height=case["height"], light=light, truth=truth)
+    fs = measure(file, techs, device=case["device"], width=case["width"], height=case["height"], light=light, truth=truth)
     covered = ref["A"] > 0
     entries = []
     for (tech, params), (label, fr) in zip(techs, fs.items()):
@@ -106,11 +111,11 @@ def run_case(case: dict, ctx: dict) -> dict:
     row = {"scene": name, "light": L.path, "light_kind": L.kind_name, "device": case["device"], "width": case["width"], "height": case["height"],
            "ground_truth_samples": case["ground_truth"], "entries": entries, "umbra_pixels": int((covered & (ref["V"] <= 0)).sum())}
     if name in IMAGE_SCENES and "rtdenoise" in _registered():
-        row["strip"] = _strip(name, light, case, ref, ctx)
+        row["strip"] = _strip(name, file, light, case, ref, ctx)
     return row
 
 
-def _strip(name: str, light: str, case: dict, ref: dict, ctx: dict) -> str:
+def _strip(name: str, file: str, light: str, case: dict, ref: dict, ctx: dict) -> str:
     """rtdenoise at 1 sample with each denoiser beside the reference: a labelled PNG under
     ``images/<stem>/``; its path relative to the report."""
     import matplotlib
@@ -122,7 +127,7 @@ def _strip(name: str, light: str, case: dict, ref: dict, ctx: dict) -> str:
 
     denoisers = ("none", "atrous", "penumbra")
     techs = [("rtdenoise", {"samples": 1, "denoiser": d}) for d in denoisers]
-    fs = wsoft.render(load(name), techs, width=case["width"], height=case["height"], light=light, device=case["device"])
+    fs = wsoft.render(load(file), techs, width=case["width"], height=case["height"], light=light, device=case["device"])
     panels = [(f"rtdenoise 1 spp, {d}", fr.V) for d, fr in zip(denoisers, fs.values())] + [(f"reference {case['ground_truth']} spp", ref["V"])]
     fig, axes = plt.subplots(1, len(panels), figsize=(3.2 * len(panels), 2.8), constrained_layout=True)
     for ax, (title, v) in zip(axes, panels):
