@@ -12,8 +12,10 @@ Variance-Guided Filtering", its spatial part, read with the authors' implementat
 ``SVGFPass``). A single frame has no history, so the variance comes from SVGF's spatial fallback
 for a history shorter than 4 frames: the first and second moments of the visibility over a 7 x 7
 cross-bilateral window (depth, normal and visibility weights; the depth weight 3 times as
-tolerant), the variance boosted by 4 / history (history 1 here: x 4), and the window's filtered
-visibility is the first iteration's input, as Falcor's ``SVGFFilterMoments`` returns it. Then
+tolerant), times a boost (Falcor's ``SVGFFilterMoments`` multiplies by 4 / history length, 4 for
+a single frame; the paper gives none: ``boost`` chooses), and the window's filtered visibility is
+the first iteration's input, as Falcor's pass returns it (the paper's text estimates only the
+variance there, the input staying the raw estimate). Then
 ``iterations`` à-trous steps (5 x 5 taps of the B3 spline, ``{1, 2/3, 1/6}`` per axis, 2^k pixels
 apart at step k) weighted by
 
@@ -259,9 +261,10 @@ def svgf_atrous_step(
 
 
 def atrous_filter(gb, vis: wp.array, iterations: int, sigma_z: float, sigma_n: float, sigma_l: float, device: str,
-                  boost: float = 4.0) -> wp.array:
-    """SVGF's spatial filter of ``vis`` (flat float32 per G-buffer sample): the spatial moments, then
-    ``iterations`` à-trous steps (module docstring). Returns the filtered visibility."""
+                  boost: float = 1.0) -> wp.array:
+    """SVGF's spatial filter of ``vis`` (flat float32 per G-buffer sample): the spatial moments (their
+    variance times ``boost``), then ``iterations`` à-trous steps (module docstring). Returns the
+    filtered visibility."""
     n = gb.count
     g = gb.gpu()
     grad = wp.empty(n, dtype=float, device=device)
