@@ -3,21 +3,20 @@
 Both filters read a visibility estimate per G-buffer sample (a few shadow rays' visible fraction,
 or :data:`UNKNOWN` where no ray was cast: such a sample takes its value from its neighbours and
 gives none) and the G-buffer itself; each pass reads one buffer and writes another (a pixel's
-result never depends on the order in which chunks run). Samples gather from their own layer's pixel
-neighbours (:func:`sample_at`); background samples are neither filtered
-nor read, so a bake G-buffer (no pixel grid) passes through unchanged.
+result never depends on the order in which chunks run). Samples gather from their own layer's
+pixel neighbours (:func:`sample_at`); background samples are neither filtered nor read, and a bake
+G-buffer (no pixel grid) has no neighbours.
 
-**Edge-avoiding à-trous wavelet filter** (:func:`atrous_filter`; Schied et al. 2017, "Spatiotemporal
-Variance-Guided Filtering", its spatial part, read with the authors' implementation in Falcor's
-``SVGFPass``). A single frame has no history, so the variance comes from SVGF's spatial fallback
-for a history shorter than 4 frames: the first and second moments of the visibility over a 7 x 7
-cross-bilateral window (depth, normal and visibility weights; the depth weight 3 times as
-tolerant), times a boost (Falcor's ``SVGFFilterMoments`` multiplies by 4 / history length, 4 for
-a single frame; the paper gives none: ``boost`` chooses), and the window's filtered visibility is
-the first iteration's input, as Falcor's pass returns it (the paper's text estimates only the
-variance there, the input staying the raw estimate). Then
-``iterations`` à-trous steps (5 x 5 taps of the B3 spline, ``{1, 2/3, 1/6}`` per axis, 2^k pixels
-apart at step k) weighted by
+**Edge-avoiding à-trous wavelet filter** (:func:`atrous_filter`; Schied et al. 2017,
+"Spatiotemporal Variance-Guided Filtering", its spatial part, read with the implementation in
+Falcor's ``SVGFPass``). A single frame has no history, so the variance comes from SVGF's spatial
+fallback for a history shorter than 4 frames: the first and second moments of the visibility over a
+7 x 7 cross-bilateral window (depth, normal and visibility weights; the depth weight 3 times as
+tolerant), times ``boost`` (Falcor's ``SVGFFilterMoments`` multiplies by 4 / history length, 4 for
+a single frame; the paper gives no factor). The window's filtered visibility is the first step's
+input, as Falcor's pass returns it (the paper's text estimates only the variance there, leaving the
+input raw: measured worse at 640 x 480, better at 160 x 120). Then ``iterations`` à-trous steps
+(5 x 5 taps of the B3 spline, ``{1, 2/3, 1/6}`` per axis, 2^k pixels apart at step k) weighted by
 
 * depth: ``exp(-|z_p - z_q| / (sigma_z |grad z_p| |p - q|))``, ``z`` the G-buffer's camera distance
   and ``|grad z|`` its screen-space gradient (per axis the smaller of the two one-sided differences,
@@ -39,25 +38,25 @@ filter's radius in pixels follows.
    (every ray blocked; an :data:`UNKNOWN` sample fits either) is *uniform*; every other tile
    *mixed*, with the largest penumbra radius in pixels of its samples (a tile of unknown samples
    only is filtered, reaching no other). A uniform tile is skipped (its samples keep their
-   estimate, its unknown ones take the tile's 1 or 0) unless a mixed tile's penumbra reaches it: within ``max(1,
-   ceil(radius / tile))`` tiles of that mixed tile (SIGMA smooths its tile map with a Gaussian whose
-   width follows each tile's radius and reads it bicubically, scaling the blur radius by it; here
-   the reach is a yes or no).
+   estimate, its unknown ones take the tile's 1 or 0) unless a mixed tile's penumbra reaches it:
+   within ``max(1, ceil(radius / tile))`` tiles of that mixed tile (SIGMA smooths its tile map with
+   a Gaussian whose width follows each tile's radius and reads it bicubically, scaling the blur
+   radius by it; here the reach is a yes or no).
 2. *Blur* and *post-blur*, the same gather twice (the second reads the first's shadow and its
    penumbra estimate): a dense 5 x 5 window (SIGMA's 5 x 5 radius estimation) estimates the
    penumbra radius as the blockers' radii weighted toward the smaller (``w pixel / (pixel + r)``,
    lit samples left out) and averages the visibility; below ``sharp_below`` pixels of penumbra
    radius the window's average gives way to the centre (a smoothstep ``f``: a hard shadow stays
    sharp; SIGMA's 2 pixels, where its temporal pass removes the centre's noise), and the dense sum
-   then counts as ``g = lerp(4, 1, f)`` taps; then ``taps`` Poisson-disk taps over the estimated radius in pixels times ``g`` (at
-   most ``max_radius``; SIGMA's code scales the estimate by ``g`` before it takes the radius), turned by a random angle per pixel and per pass (SIGMA turns its kernel per
-   frame; one frame with one angle for every pixel leaves a pattern), foreshortened along the
-   surface's tilt (SIGMA's screen-space skew), snapped to pixel centres. Weights: the distance to the
-   centre's tangent plane, ``smoothstep(1, 0, |n . (x_q - x_p)| / (plane_sensitivity x frustum size))``
-   (the frustum's smaller side at the centre's depth: what keeps a filter from blurring across a
-   depth discontinuity), a Gaussian
-   ``exp(-0.66 r^2)`` of the tap's normalised distance, and against umbra leaking into a wide
-   penumbra ``min(1, r_q / r_estimated)``.
+   then counts as ``g = lerp(4, 1, f)`` taps. Then ``taps`` Poisson-disk taps over the estimated
+   radius in pixels times ``g`` (at most ``max_radius``; SIGMA's code scales the estimate by ``g``
+   before it takes the radius), turned by a random angle per pixel and per pass (SIGMA turns its
+   kernel per frame; one frame with one angle for every pixel leaves a pattern), foreshortened
+   along the surface's tilt (SIGMA's screen-space skew), snapped to pixel centres. Weights: the
+   distance to the centre's tangent plane, ``smoothstep(1, 0, |n . (x_q - x_p)| / (plane_sensitivity
+   x frustum size))`` (the frustum's smaller side at the centre's depth: what keeps the filter from
+   blurring across a depth discontinuity), a Gaussian ``exp(-0.66 r^2)`` of the tap's normalised
+   distance, and against umbra leaking into a wide penumbra ``min(1, r_q / r_estimated)``.
 """
 
 from __future__ import annotations
@@ -617,8 +616,8 @@ def penumbra_filter(gb, cam: CameraGPU, vis: wp.array, pen: wp.array, *, tile: i
         m = len(listed) * tile * tile
         for src, spen, dst, dpen, k in ((vis, pen, s1, p1, 0), (s1, p1, s2, p2, 1)):
             launch_chunked(sigma_blur, m, inputs=[g, cam, src, spen, filtered, tile, tiles_x, tiles_y, tp, float(max_radius),
-                                                  float(sharp_below), float(plane_sensitivity), int(seed) + k], outputs=[dst, dpen], device=device,
-                           min_chunk=256, per_thread=16)
+                                                  float(sharp_below), float(plane_sensitivity), int(seed) + k],
+                           outputs=[dst, dpen], device=device, min_chunk=256, per_thread=16)
     if counters is not None:
         counters["tiles"] = int(nt)
         counters["tiles_skipped"] = int((on == 0).sum())

@@ -5,7 +5,8 @@
 with the cutouts' alpha textures. Kernels call :func:`surface_present` to alpha-test a point on a
 triangle; scenes without cutouts pass ``has_cutouts = 0`` and never sample. :func:`occluded_from`
 (any-hit), :func:`nearest_blocker_from` (a shadow ray's nearest blocker) and :func:`nearest_from`
-(the eye ray's nearest surface) walk one ``wp.Mesh`` through the cutouts' holes; :mod:`wsoft.scene.rays` composes them over the soup and the instances.
+(the eye ray's nearest surface) walk one ``wp.Mesh`` through the cutouts' holes;
+:mod:`wsoft.scene.rays` composes them over the soup and the instances.
 """
 
 from __future__ import annotations
@@ -128,7 +129,8 @@ def occluded_from(mesh: wp.uint64, tri0: int, cut: Surfaces, has_cutouts: int, o
 
 
 @wp.func
-def nearest_blocker_from(mesh: wp.uint64, tri0: int, cut: Surfaces, has_cutouts: int, origin: wp.vec3, dir: wp.vec3, max_t: float) -> float:
+def nearest_blocker_from(mesh: wp.uint64, tri0: int, cut: Surfaces, has_cutouts: int, origin: wp.vec3, dir: wp.vec3,
+                         max_t: float) -> float:
     """The distance along the segment origin + t*dir, t in (0, max_t), to the nearest surface of
     ``mesh`` (face ``f`` is the triangle ``tri0 + f`` of ``cut``) that blocks it, or -1 when none
     does: a closest-hit shadow query, both sides of every triangle, alpha-tested through cutouts as

@@ -9,49 +9,67 @@ penumbra, guided by the G-buffer.
 lattice; every receiver's set drawn from its own random stream, so the noise is decorrelated
 between pixels), the same offset origins, ray lengths, light points and receiver's horizon (a
 sample behind the tangent plane is blocked). With ``seed`` equal, a receiver's rays are exactly the
-rays of ``reference samples=N`` with the same ``N``. Each ray is a *closest-hit* query
-(:func:`~wsoft.scene.rays.blocker_distance`: alpha-tested through cutouts, through the prims the
-light's ``collection:shadowLink`` leaves out, ending at ``inputs:shadow:distance``, through the
-instances of an instanced stage), so each pixel keeps the distance to its blockers (the mean over
-its blocked rays): the penumbra estimate needs it, an any-hit test does not give it.
+rays of ``reference samples=N`` with the same ``N``, and ``denoiser=none`` is that reference bit for
+bit. Each ray is a *closest-hit* query (:func:`~wsoft.scene.rays.blocker_distance`: alpha-tested
+through cutouts, through the prims the light's ``collection:shadowLink`` leaves out, ending at
+``inputs:shadow:distance``, through the instances of an instanced stage), so each pixel keeps the
+distance to its blockers (the mean over its blocked rays): the penumbra estimate needs it, an
+any-hit test does not give it.
 
 **Penumbra radius** (what NRD SIGMA's front end packs per pixel, ``SIGMA_FrontEnd_PackPenumbra``):
-per blocked ray, ``d tan(a) / 2``, ``d`` the blocker's distance and ``a`` the light's angular
-radius seen from the blocker (``tan a = r / (D - d)``, ``r`` the light's radius: half a rect light's
-mean side, a disk's or sphere's radius, 0 for a point light (no penumbra: nothing is blurred);
-``D`` the light point's distance; a distant light: the tangent of its half angle), a quarter of the
-penumbra's geometric width ``2 r d / (D - d)``. This is NRD's directional front end (``d`` times the
-tangent of the angular radius, halved) for every light; NRD's local-light front end halves the
-full width instead (``lightSize d / (D - d) / 2``), twice as wide: ``radius_scale = 2``. Measured at
-640 x 480 with 2 rays (``box_plane``, ``contact``, ``penumbra_ramp``, penumbra MAE against 256
-reference samples): 0.025, 0.028, 0.032 at ``radius_scale = 1``; 0.060, 0.038, 0.071 at 2 (a
-single frame's blur over half the width darkens the lit end of the penumbra and lightens the
-umbra's).
+per blocked ray ``d tan(a) / 2``, ``d`` the blocker's distance and ``a`` the light's angular radius
+seen from the blocker (``tan a = r / (D - d)``: ``r`` half a rect light's mean side, a disk's or
+sphere's radius, 0 for a point light, whose shadows are not blurred; ``D`` the light point's
+distance; a distant light: the tangent of its half angle), a quarter of the penumbra's geometric
+width ``2 r d / (D - d)``. This is NRD's directional front end (``d`` times the tangent of the
+angular radius, halved) for every light; NRD's local-light front end halves the full width instead,
+a radius twice as large (``radius_scale = 2``). Penumbra MAE against 256 reference samples with 2
+rays at 640 x 480 on ``box_plane``, ``contact``, ``penumbra_ramp``: 0.026, 0.029, 0.031 at
+``radius_scale = 1``, 0.057, 0.037, 0.067 at 2 (one frame's blur over half the width darkens the lit
+end of the penumbra and lightens the umbra's).
 
 **Denoisers** (:mod:`wsoft.accel.denoise`; ``denoiser=``):
 
-* ``penumbra`` — SIGMA-style: 16 x 16 (or ``tile``) pixel tiles all lit or all in umbra are
-  skipped unless a neighbouring tile's penumbra reaches them (``tiles_skipped`` and
+* ``penumbra`` (the default) — SIGMA-style: ``tile`` x ``tile`` pixel tiles all lit or all in umbra
+  are skipped unless a neighbouring tile's penumbra reaches them (``tiles_skipped`` and
   ``samples_skipped`` in the counters), then SIGMA's blur and post-blur: a 5 x 5 estimate of the
   penumbra radius, and ``taps`` Poisson taps over it in pixels (projected through the G-buffer
   point's depth and the camera's field of view, at most ``max_radius``), weighted by the distance
   to the centre's tangent plane (``plane_sensitivity`` of the frustum's size: no blur across a
-  depth discontinuity), a Gaussian and the umbra-leak guard.
+  depth discontinuity), a Gaussian and SIGMA's umbra-leak guard. SIGMA keeps a pixel's own value
+  below 2 pixels of penumbra radius, for a signal its temporal pass accumulates; one frame keeps
+  its own value only below ``sharp_below`` = 0.5 pixel (a hard shadow stays sharp): 0.053, 0.059,
+  0.045 at 160 x 120 where SIGMA's 2 pixels give 0.060, 0.068, 0.048 (at 640 x 480 within 0.001).
 * ``atrous`` — SVGF's spatial part (Schied et al. 2017): a 7 x 7 spatial variance estimate (the
   frame has no history), then ``iterations`` edge-avoiding à-trous steps weighted by the camera
   distance and its screen-space gradient (``sigma_z``), the normal (``sigma_n``) and the visibility
-  against its variance (``sigma_l``, SVGF's luminance weight).
+  against its variance (``sigma_l``, SVGF's luminance weight). 3 steps (the paper: 5) and no
+  variance boost (Falcor's: x 4 without history) measured best: 0.019, 0.032, 0.027 at 640 x 480,
+  where 5 steps give 0.019, 0.032, 0.031 and the boost 0.020, 0.035, 0.029. Its depth weight grows
+  with the step, so a depth step smaller than the gradient times the tap's distance is blurred
+  across; on 2 CPU cores at 640 x 480 it takes 1.7 to 2.6 times the reference's 16 samples.
 * ``none`` — the rays' raw visible fraction.
 
+**The horizon.** The rays test it per sample, as the reference does. The denoisers filter the
+visible fraction of the rays *in front of* the receiver's tangent plane and multiply it by the
+light's front fraction (the shared exact pass, :mod:`wsoft.raster.horizon`), so a wall the light
+straddles is not noisy where half its rays leave behind it; a pixel none of whose rays is in front
+takes its neighbours' fraction (or 0 when none has one).
+
 A single frame is spatial only: SIGMA's temporal stabilisation and SVGF's temporal accumulation
-need a sequence of frames with motion vectors, which wsoft does not render yet. The receiver's
-horizon is applied per ray, and the denoised V is capped by the light's front fraction as for the
-map techniques (``min(V, front)``: never further from the answer). Bakes need ``denoiser=none``
-(a bake point has no pixel neighbours to filter with).
+need a sequence of frames with motion vectors, which wsoft does not render yet. Bakes need
+``denoiser=none`` (a bake point has no pixel neighbours to filter with).
+
+**Defaults by measurement** (penumbra MAE against 256 reference samples, ``box_plane``,
+``contact``, ``penumbra_ramp``, 640 x 480): 2 rays (0.026, 0.029, 0.031; 1 ray: 0.041, 0.040,
+0.044), the ``penumbra`` denoiser (``atrous``: 0.019, 0.032, 0.027, at three to four times its
+time), SIGMA's 8 taps (16 taps: 0.025, 0.028, 0.030). The penumbra's width in pixels decides: at
+160 x 120 the same defaults give 0.053, 0.059, 0.045.
 
 Counters (``stats["counters"]["techniques"]["rtdenoise"][light]``): ``samples``, ``denoiser``,
 ``rays`` (traced: in front of the receiver's plane), ``rays_blocked``, ``penumbra_samples`` (pixel
-samples with both blocked and unblocked rays), and for ``penumbra`` the tiles'.
+samples with both blocked and unblocked rays), and for ``penumbra`` ``tiles``, ``tiles_skipped``,
+``samples_skipped``.
 
 Example::
 
@@ -213,8 +231,9 @@ def light_radius(light) -> tuple[float, bool]:
 @dataclass
 class RayEstimate:
     """What a pixel's shadow rays found, flat float32 per G-buffer sample: ``vis`` the visible
-    fraction, ``frac`` that of the rays in front of the tangent plane (``UNKNOWN``: none), ``hit`` the mean blocker distance (-1: none), ``pen`` the penumbra radius (world
-    units, ``LIT``); counts of rays ``traced`` and ``blocked`` (int32)."""
+    fraction, ``frac`` that of the rays in front of the tangent plane (``UNKNOWN``: none), ``hit``
+    the mean blocker distance (-1: none), ``pen`` the penumbra radius (world units, ``LIT``); the
+    counts of rays ``traced`` and ``blocked`` (int32)."""
 
     vis: wp.array
     frac: wp.array
@@ -228,13 +247,14 @@ def trace_estimate(ds, L: LightGPU, light, gb, samples: int, seed: int, radius_s
     """Trace ``samples`` of the reference's shadow rays per G-buffer sample with closest hits."""
     n = gb.count
     dev = ds.device
-    out = RayEstimate(*(wp.empty(n, dtype=float, device=dev) for _ in range(4)), *(wp.empty(n, dtype=wp.int32, device=dev) for _ in range(2)))
+    out = RayEstimate(*(wp.empty(n, dtype=float, device=dev) for _ in range(4)),
+                      *(wp.empty(n, dtype=wp.int32, device=dev) for _ in range(2)))
     radius, distant = light_radius(light)
     dmax = float(light.shadow_distance) if light.shadow_distance >= 0.0 else -1.0
     pattern = reference_pattern(samples, seed, True)
     launch_chunked(trace_blockers, n,
-                   inputs=[occluders(ds, light.shadow_excluded), L, pattern.on(dev, disk_shaped(light)), gb.gpu(), ray_epsilon(gb, light), dmax,
-                           radius, int(distant), float(radius_scale)],
+                   inputs=[occluders(ds, light.shadow_excluded), L, pattern.on(dev, disk_shaped(light)), gb.gpu(), ray_epsilon(gb, light),
+                           dmax, radius, int(distant), float(radius_scale)],
                    outputs=[out.vis, out.frac, out.hit, out.pen, out.traced, out.blocked], device=dev, min_chunk=256, per_thread=32)
     return out
 
@@ -257,7 +277,7 @@ class RTDenoise(Technique):
                                                                   "à-trous steps over every pixel"))
     quick_params = {"samples": 1}
     # measured 0.0024, 0.0615 at 128 x 96 (seeds 1-3: 0.057-0.067), where the penumbra is 4 pixels
-    # wide; at 640 x 480 against 256 reference samples 0.026 (the README's table)
+    # wide; at 640 x 480 against 256 reference samples the penumbra MAE is 0.026
     tolerance = Tolerance(mae=0.003, mae_penumbra=0.075)
     instancing_refusal = ""  # closest-hit rays go through the instances' top-level BVH (wsoft.scene.rays.blocker_distance)
     horizon = "exact"  # per ray, and the denoised part in front times the exact front fraction
@@ -296,7 +316,8 @@ class RTDenoise(Technique):
                 frac = atrous_filter(gb, est.frac, p.iterations, p.sigma_z, p.sigma_n, p.sigma_l, ctx.device, boost=p.variance_boost)
             else:
                 frac = penumbra_filter(gb, camera_gpu(ctx.camera), est.frac, est.pen, tile=p.tile, taps=p.taps, max_radius=p.max_radius,
-                                       sharp_below=p.sharp_below, plane_sensitivity=p.plane_sensitivity, seed=p.seed, device=ctx.device, counters=ctx.counters(light))
+                                       sharp_below=p.sharp_below, plane_sensitivity=p.plane_sensitivity, seed=p.seed, device=ctx.device,
+                                       counters=ctx.counters(light))
             vis = wp.empty(gb.count, dtype=float, device=ctx.device)
             launch_chunked(times_front, gb.count, inputs=[frac, res[front_key]], outputs=[vis], device=ctx.device)
             return {out: ctx.visibility(vis)}
