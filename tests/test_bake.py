@@ -109,19 +109,23 @@ def test_hard_at_the_vertices_is_the_point_light_answer(device):
 # ssm at a finite budget has an error that depends on where a point falls on its coarse levels
 # (0.018 to 0.05 over the penumbra of this grid's vertices as the grid shifts by 1 cm, 0.028 averaged
 # over an eye view's pixels; its bake of the eye view's own points is the eye view, below): level 0 here
-BAKE_PARAMS = {"izb": {"aa": "none"}, "reference": {"samples": 64}, "ssm": {"budget": float("inf")}}
+BAKE_PARAMS = {"izb": {"aa": "none"}, "reference": {"samples": 64}, "ssm": {"budget": float("inf")},
+               "rtdenoise": {"denoiser": "none", "samples": 8}}
+# techniques refused at their defaults, and the setting their refusal names
+REFUSED_AT_DEFAULTS = {"izb": "aa=none", "rtdenoise": "denoiser=none"}
 
 
 @pytest.mark.parametrize("name", sorted(TECHNIQUES))
 def test_every_technique_bakes_or_says_why(name):
     """Every technique bakes the parallel-rectangle scene within the penumbra tolerance it declares
     for an eye view (x 1.5, + 0.02 for the coarser vertex sampling), or is refused with a reason;
-    ``izb`` is refused with its default anti-aliasing and bakes with ``aa=none``."""
+    ``izb`` is refused with its default anti-aliasing and bakes with ``aa=none``, ``rtdenoise`` with
+    its default denoiser (a screen-space filter) and bakes its raw rays with ``denoiser=none``."""
     tech = TECHNIQUES[name](TECHNIQUES[name].make_params({}))
-    if name == "izb":
-        assert tech.bake_support() is not None and "aa=none" in tech.bake_support()
-        with pytest.raises(wsoft.ParameterError, match="izb cannot bake"):
-            wsoft.bake(parallel_stage(4), "izb", device="cpu")
+    if name in REFUSED_AT_DEFAULTS:
+        assert tech.bake_support() is not None and REFUSED_AT_DEFAULTS[name] in tech.bake_support()
+        with pytest.raises(wsoft.ParameterError, match=f"{name} cannot bake"):
+            wsoft.bake(parallel_stage(4), name, device="cpu")
     else:
         assert tech.bake_support() is None
     stage = parallel_stage(24)
@@ -135,7 +139,8 @@ def test_every_technique_bakes_or_says_why(name):
     assert np.abs(v - exact)[pen].mean() <= 1.5 * tol.mae_penumbra + 0.02, (name, np.abs(v - exact)[pen].mean())
 
 
-EYE_PARAMS = {"izb": {"aa": "none"}, "essm": {"anisotropic": False}, "ssm": {"smooth_radius": 0}, "reference": {"samples": 16}}
+EYE_PARAMS = {"izb": {"aa": "none"}, "essm": {"anisotropic": False}, "ssm": {"smooth_radius": 0}, "reference": {"samples": 16},
+              "rtdenoise": {"denoiser": "none"}}
 
 
 @pytest.mark.parametrize("name", sorted(TECHNIQUES))
@@ -143,8 +148,9 @@ def test_a_bake_of_an_eye_views_own_points_is_the_eye_view(name):
     """The bake G-buffer runs a technique's passes unchanged: baking the points an eye view's pixels
     see (their positions and normals, in the same order and the same 48 x 48 packing, every pixel
     covered) gives that eye view's V bit for bit, at each technique's defaults (the reference's
-    random streams included), but for what reads pixel neighbours (``essm``'s anisotropic footprint
-    and ``ssm``'s level-of-quality smoothing, off here) or casts eye rays (``izb``'s anti-aliasing, off)."""
+    random streams included), but for what reads pixel neighbours (``essm``'s anisotropic footprint,
+    ``ssm``'s level-of-quality smoothing and ``rtdenoise``'s denoiser, off here) or casts eye rays
+    (``izb``'s anti-aliasing, off)."""
     import warp as wp
 
     from conftest import add_camera

@@ -190,7 +190,7 @@ def test_excluded_blocker_casts_no_shadow(name):
     assert (np.abs(f["P.Z"][f["A"] > 0] - 1.0) < 1e-3).sum() > 10  # the blockers are seen
     maps = {n: c["casting_triangles"] for n, c in f.stats["counters"]["passes"].items() if "casting_triangles" in c}
     assert all(v == scene.triangle_count - 2 for v in maps.values())
-    if name not in ("reference", "salzman"):
+    if name not in ("reference", "salzman", "rtdenoise"):  # rtdenoise, as the reference, traces rays and draws no map
         assert maps, f"{name}: no depth map drew the light's casters only"
 
 

@@ -389,6 +389,9 @@ class TechniqueContext:
                     opaque: bool = False, faces: str = "all") -> Key:
         return self.ctx.light_depth(light, size, conservative, soft, inner, opaque, faces)
 
+    def front_fraction(self, light: Light, centre: bool = False) -> Key:
+        return self.ctx.front_fraction(light, centre)
+
     def label(self, light: Light) -> str:
         return self.ctx.label(light)
 

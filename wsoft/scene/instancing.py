@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from wsoft.scene.surfaces import Surfaces, nearest_from, occluded_from
+from wsoft.scene.surfaces import Surfaces, nearest_blocker_from, nearest_from, occluded_from
 
 
 @wp.struct
@@ -54,6 +54,28 @@ def occluded_instances(inst: InstancesGPU, cut: Surfaces, has_cutouts: int, orig
         if occluded_from(inst.proto_mesh[p], inst.proto_tri0[p], cut, has_cutouts, o, d, max_t):
             blocked = True
     return blocked
+
+
+@wp.func
+def nearest_blocker_instances(inst: InstancesGPU, cut: Surfaces, has_cutouts: int, origin: wp.vec3, dir: wp.vec3, max_t: float) -> float:
+    """The distance along the segment origin + t*dir (``dir`` unit length), t in (0, max_t), to the
+    nearest instance surface that blocks it (:func:`~wsoft.scene.surfaces.nearest_blocker_from` in
+    each instance's frame, where ``t`` is the world's), or -1 when none does."""
+    best = float(-1.0)
+    if inst.count == 0:
+        return best
+    reach = max_t
+    q = wp.bvh_query_ray(inst.tlas, origin, dir)
+    i = int(0)
+    while wp.bvh_query_next(q, i, reach):
+        m = inst.to_object[i]
+        p = inst.proto[i]
+        t = nearest_blocker_from(inst.proto_mesh[p], inst.proto_tri0[p], cut, has_cutouts, wp.transform_point(m, origin),
+                                 wp.transform_vector(m, dir), reach)
+        if t >= 0.0:
+            best = t
+            reach = t
+    return best
 
 
 @wp.func

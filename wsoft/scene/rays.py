@@ -2,11 +2,12 @@
 
 A device scene's geometry is the soup (one ``wp.Mesh``) and, for an instanced scene, the instances
 (:mod:`wsoft.scene.instancing`). :func:`unoccluded` asks of a shadow ray's segment whether anything
-of the scene blocks it, :func:`nearest_hit` finds the nearest surface along an eye ray: the soup is
-tested first, then the instances. A kernel that casts shadow rays takes one :class:`Occluders`
-(built by :func:`occluders`, once per device scene and set of prims a light's
-``collection:shadowLink`` leaves out). :func:`ray_triangle` is the ray-triangle test Warp's own BVH
-queries use, for kernels that test triangles of their own.
+of the scene blocks it, :func:`blocker_distance` how far along it the nearest blocker lies (a
+closest-hit query, for techniques that need the blocker's distance), :func:`nearest_hit` finds the
+nearest surface along an eye ray: the soup is tested first, then the instances. A kernel that
+casts shadow rays takes one :class:`Occluders` (built by :func:`occluders`, once per device scene
+and set of prims a light's ``collection:shadowLink`` leaves out). :func:`ray_triangle` is the
+ray-triangle test Warp's own BVH queries use, for kernels that test triangles of their own.
 """
 
 from __future__ import annotations
@@ -14,8 +15,8 @@ from __future__ import annotations
 import warp as wp
 
 from wsoft.scene.device import DeviceScene, shadow_surfaces
-from wsoft.scene.instancing import InstancesGPU, nearest_instance_hit, occluded_instances
-from wsoft.scene.surfaces import Surfaces, nearest_from, occluded
+from wsoft.scene.instancing import InstancesGPU, nearest_blocker_instances, nearest_instance_hit, occluded_instances
+from wsoft.scene.surfaces import Surfaces, nearest_blocker_from, nearest_from, occluded
 
 
 @wp.struct
@@ -52,6 +53,22 @@ def unoccluded(occ: Occluders, origin: wp.vec3, dir: wp.vec3, max_t: float) -> b
     if occluded(occ.mesh, occ.cut, occ.has_cutouts, origin, dir, max_t):
         return False
     return not occluded_instances(occ.inst, occ.cut, occ.has_cutouts, origin, dir, max_t)
+
+
+@wp.func
+def blocker_distance(occ: Occluders, origin: wp.vec3, dir: wp.vec3, max_t: float) -> float:
+    """:func:`unoccluded`'s segment as a closest-hit query: the distance from ``origin`` to the
+    nearest surface that blocks it (alpha-tested through cutouts, through the prims the light's
+    ``collection:shadowLink`` leaves out), or -1 when the segment is free. The soup is tested first,
+    then the instances within the soup's hit."""
+    t = nearest_blocker_from(occ.mesh, 0, occ.cut, occ.has_cutouts, origin, dir, max_t)
+    reach = max_t
+    if t >= 0.0:
+        reach = t
+    ti = nearest_blocker_instances(occ.inst, occ.cut, occ.has_cutouts, origin, dir, reach)
+    if ti >= 0.0:
+        t = ti
+    return t
 
 
 @wp.func

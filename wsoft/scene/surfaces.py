@@ -4,8 +4,9 @@
 (:mod:`wsoft.scene.instancing`), each triangle's cutout, sidedness and light-view cull flag,
 with the cutouts' alpha textures. Kernels call :func:`surface_present` to alpha-test a point on a
 triangle; scenes without cutouts pass ``has_cutouts = 0`` and never sample. :func:`occluded_from`
-(any-hit) and :func:`nearest_from` (the eye ray's nearest surface) walk one ``wp.Mesh`` through
-the cutouts' holes; :mod:`wsoft.scene.rays` composes them over the soup and the instances.
+(any-hit), :func:`nearest_blocker_from` (a shadow ray's nearest blocker) and :func:`nearest_from`
+(the eye ray's nearest surface) walk one ``wp.Mesh`` through the cutouts' holes;
+:mod:`wsoft.scene.rays` composes them over the soup and the instances.
 """
 
 from __future__ import annotations
@@ -125,6 +126,40 @@ def occluded_from(mesh: wp.uint64, tri0: int, cut: Surfaces, has_cutouts: int, o
     if remaining > 0.0 and not blocked:
         return True
     return blocked
+
+
+@wp.func
+def nearest_blocker_from(mesh: wp.uint64, tri0: int, cut: Surfaces, has_cutouts: int, origin: wp.vec3, dir: wp.vec3,
+                         max_t: float) -> float:
+    """The distance along the segment origin + t*dir, t in (0, max_t), to the nearest surface of
+    ``mesh`` (face ``f`` is the triangle ``tri0 + f`` of ``cut``) that blocks it, or -1 when none
+    does: a closest-hit shadow query, both sides of every triangle, alpha-tested through cutouts as
+    :func:`occluded_from` is (the same walk, so the same rays are blocked; 64 cutout layers crossed
+    count as blocked where the walk gives up)."""
+    if has_cutouts == 0:
+        q0 = wp.mesh_query_ray(mesh, origin, dir, max_t)
+        if q0.result:
+            return q0.t
+        return -1.0
+    o = origin
+    remaining = max_t
+    travelled = float(0.0)
+    hit = float(-1.0)
+    for _k in range(64):
+        if remaining > 0.0 and hit < 0.0:
+            q = wp.mesh_query_ray(mesh, o, dir, remaining)
+            if not q.result:
+                remaining = -1.0
+            elif surface_present(cut, tri0 + q.face, q.u, q.v, 1.0 - q.u - q.v):
+                hit = travelled + q.t
+            else:
+                step = q.t + 1.0e-5 * (cut.step + q.t)
+                o = o + dir * step
+                travelled += step
+                remaining = remaining - step
+    if remaining > 0.0 and hit < 0.0:
+        hit = travelled
+    return hit
 
 
 @wp.func
