@@ -87,3 +87,16 @@ def test_metrics_on_known_images():
     assert e["mae_penumbra"] == pytest.approx(0.2) and e["penumbra_pixels"] == 1
     assert e["frac_outside_3se"] == pytest.approx(1 / 3)
     assert json.dumps(e)
+
+
+def test_modern_sweep_states_its_targets(tmp_path):
+    """``wsoft bench modern --quick``: the modern techniques beside the baselines on the same frames,
+    the stacked stage's leak per technique, and every target as a row (met or not, never left out)."""
+    out = tmp_path / "reports"
+    assert harness.run_sweep("modern", quick=True, device=["cpu"], out_dir=str(out)) == 0
+    md = (out / "modern-quick.md").read_text()
+    assert "## Targets" in md and md.count("| rtdenoise (defaults) on ") == 3 and "msm's leak ≤ half of vsm's on stacked_plates | msm " in md
+    for t in ("rtdenoise", "msm", "msm_soft", "evsm", "vsm", "reference"):
+        assert f"| box_plane | Light | {t}" in md, t
+    assert "## Light leak per technique" in md and "(images/modern-quick/box_plane-rtdenoise.png)" in md
+    assert (out / "images" / "modern-quick" / "box_plane-rtdenoise.png").is_file()
