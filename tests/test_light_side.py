@@ -268,7 +268,9 @@ def test_every_technique_that_sizes_its_shadow_by_the_light_follows_the_ellipse(
     are skipped)."""
     if not _sizes_by_light(technique):
         pytest.skip(f"{technique}'s shadow does not depend on the light's size")
-    f = wsoft.render(_disk_stage(), technique, width=W, height=H, device="cpu", **quick(technique))
+    # a stochastic technique at its most rays: at 2 its noise (0.03 mean) hides the ellipse's difference from the circle
+    more = {"samples": 8} if technique == "rtdenoise" else {}
+    f = wsoft.render(_disk_stage(), technique, width=W, height=H, device="cpu", **(quick(technique) | more))
     g, p = _ground(f)
     e_ellipse = np.abs(f.V[g] - _brute_disk(p, 2.0, 0.125)).mean()
     e_circle = np.abs(f.V[g] - _brute_disk(p, 1.0625, 1.0625)).mean()

@@ -218,13 +218,15 @@ def times_front(
 
 def light_radius(light) -> tuple[float, bool]:
     """(the light's radius in ``tan a = r / (D - d)``: half a rect light's mean side, a disk's or
-    sphere's radius, 0 for a point light; for a distant light the tangent of its half angle, True)."""
+    sphere's radius (an ellipse's or ellipsoid's smallest semi-axis: the filter is round, and a
+    radius from a longer axis blurs across the short one), 0 for a point light; for a distant light
+    the tangent of its half angle, True)."""
     if light.kind == LIGHT_DISTANT:
         return math.tan(math.radians(0.5 * light.angle_deg)), True
     if light.kind == LIGHT_RECT:
         return 0.5 * float(light.half_size[0] + light.half_size[1]), False
     if light.kind in (LIGHT_DISK, LIGHT_SPHERE):
-        return float(light.radius), False
+        return float(min(light.semi_axes)) if light.elliptical else float(light.radius), False
     return 0.0, False
 
 
