@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import warp as wp
 
-from wsoft.lightspace.view import ViewGPU, in_front_of_light, inside_map, map_coords, texel_of, view_of
+from wsoft.lightspace.view import ViewGPU, in_front_of_light, inside_map, map_coords, normalised_depth, texel_of, view_of
 from wsoft.parallel import launch_chunked
 from wsoft.raster.camera import CameraGPU
 from wsoft.scene.device import DeviceScene
@@ -209,6 +209,15 @@ def gb_mapped_receiver(lv: ViewGPU, gb: GBufferGPU, i: int):
     pv = wp.vec3(r[0], r[1], r[2])
     t = texel_of(lv, pv)
     return r[3] != 0.0 and inside_map(lv, t), pv, map_coords(lv, pv), t
+
+
+@wp.func
+def gb_mapped_depth(lv: ViewGPU, gb: GBufferGPU, i: int, bias: float):
+    """:func:`gb_mapped_receiver` as a prefiltered map (``vsm``, ``esm``, ``msm``, ``evsm``) reads
+    it: (mapped, the receiver's depth normalised over the view's near and far planes less ``bias``,
+    its window coordinates)."""
+    mapped, pv, m, t = gb_mapped_receiver(lv, gb, i)
+    return mapped, normalised_depth(pv[2], lv.near, lv.far - lv.near) - bias, m
 
 
 @dataclass

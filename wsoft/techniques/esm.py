@@ -18,7 +18,7 @@ import warp as wp
 from wsoft.accel.blur import blur_log
 from wsoft.lightspace.view import ViewGPU, bilinear_cell, normalised_depth
 from wsoft.parallel import launch_chunked
-from wsoft.raster.gbuffer import GBufferGPU, gb_mapped_receiver
+from wsoft.raster.gbuffer import GBufferGPU, gb_mapped_depth
 from wsoft.params import check_ranges
 from wsoft.techniques._prefiltered import Prefiltered, normalised_bias, prefiltered_passes
 from wsoft.techniques.base import Quality, Tolerance, check, param
@@ -82,11 +82,10 @@ def shade_esm(
     vis: wp.array[float],
 ):
     i = wp.tid() + offset
-    mapped, pv, m, t = gb_mapped_receiver(lv, gb, i)
+    mapped, z, m = gb_mapped_depth(lv, gb, i, bias)
     if not mapped:
         vis[i] = 1.0
         return
-    z = normalised_depth(pv[2], lv.near, lv.far - lv.near) - bias
     vis[i] = wp.clamp(wp.exp(wp.min(bilinear_log(lv, lmap, m) - c * z, 0.0)), 0.0, 1.0)
 
 

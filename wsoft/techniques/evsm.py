@@ -35,7 +35,7 @@ from wsoft.lightspace.moments import EVSM_MAX_EXPONENT, evsm_warp, warped_chebys
 from wsoft.lightspace.view import ViewGPU, bilinear, normalised_depth
 from wsoft.parallel import launch_chunked
 from wsoft.params import check_ranges
-from wsoft.raster.gbuffer import GBufferGPU, gb_mapped_receiver
+from wsoft.raster.gbuffer import GBufferGPU, gb_mapped_depth
 from wsoft.techniques._prefiltered import Prefiltered, normalised_bias, prefiltered_passes
 from wsoft.techniques.base import Quality, Tolerance, check, param
 
@@ -110,11 +110,10 @@ def shade_evsm2(
     vis: wp.array[float],
 ):
     i = wp.tid() + offset
-    mapped, pv, m, t = gb_mapped_receiver(lv, gb, i)
+    mapped, z, m = gb_mapped_depth(lv, gb, i, bias)
     if not mapped:
         vis[i] = 1.0
         return
-    z = normalised_depth(pv[2], lv.near, lv.far - lv.near) - bias
     w = evsm_warp(z, c_pos, 1.0)
     e = bilinear(lv, mom, m)
     cp = wp.min(c_pos, EVSM_MAX_EXPONENT)
@@ -136,11 +135,10 @@ def shade_evsm4(
     vis: wp.array[float],
 ):
     i = wp.tid() + offset
-    mapped, pv, m, t = gb_mapped_receiver(lv, gb, i)
+    mapped, z, m = gb_mapped_depth(lv, gb, i, bias)
     if not mapped:
         vis[i] = 1.0
         return
-    z = normalised_depth(pv[2], lv.near, lv.far - lv.near) - bias
     w = evsm_warp(z, c_pos, c_neg)
     e = bilinear(lv, mom, m)
     cp = wp.min(c_pos, EVSM_MAX_EXPONENT)

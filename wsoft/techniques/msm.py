@@ -49,7 +49,7 @@ from wsoft.lightspace.moments import (
 from wsoft.lightspace.view import ViewGPU, bilinear, normalised_depth
 from wsoft.parallel import launch_chunked
 from wsoft.params import check_ranges
-from wsoft.raster.gbuffer import GBufferGPU, gb_mapped_receiver
+from wsoft.raster.gbuffer import GBufferGPU, gb_mapped_depth
 from wsoft.techniques._prefiltered import Prefiltered, normalised_bias, prefiltered_passes
 from wsoft.techniques.base import Quality, Tolerance, check, param
 
@@ -106,11 +106,10 @@ def shade_msm(
     vis: wp.array[float],
 ):
     i = wp.tid() + offset
-    mapped, pv, m, t = gb_mapped_receiver(lv, gb, i)
+    mapped, z, m = gb_mapped_depth(lv, gb, i, bias)
     if not mapped:
         vis[i] = 1.0
         return
-    z = normalised_depth(pv[2], lv.near, lv.far - lv.near) - bias
     b = bilinear(lv, mom, m)
     if quantised != 0:
         b = dequantise_moments(b)

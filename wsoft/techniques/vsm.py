@@ -20,7 +20,7 @@ from wsoft.accel.blur import blur_moments
 from wsoft.lightspace.moments import chebyshev_bound, moments_variance
 from wsoft.lightspace.view import ViewGPU, bilinear, normalised_depth
 from wsoft.parallel import launch_chunked
-from wsoft.raster.gbuffer import GBufferGPU, gb_mapped_receiver
+from wsoft.raster.gbuffer import GBufferGPU, gb_mapped_depth
 from wsoft.params import check_ranges
 from wsoft.techniques._prefiltered import Prefiltered, normalised_bias, prefiltered_passes
 from wsoft.techniques.base import Quality, Tolerance, check, param
@@ -67,11 +67,10 @@ def shade_vsm(
     vis: wp.array[float],
 ):
     i = wp.tid() + offset
-    mapped, pv, m, t = gb_mapped_receiver(lv, gb, i)
+    mapped, z, m = gb_mapped_depth(lv, gb, i, bias)
     if not mapped:
         vis[i] = 1.0
         return
-    z = normalised_depth(pv[2], lv.near, lv.far - lv.near) - bias
     e = bilinear(lv, mom, m)
     mu = e[0]
     if z <= mu:
