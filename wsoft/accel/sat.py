@@ -301,6 +301,21 @@ def check_sat_params(p) -> None:
 
 
 @dataclass
+class Moments:
+    """A light map's depth moments as a SAT's basis ``[C, n, n]`` (``vssm``: z, z²; ``msm_soft``:
+    four quantised moments), their mean pyramid (for the tile test; ``[basis]`` without tiles) and
+    the effective depth range [zmin, zmax] they were normalised over."""
+
+    basis: wp.array
+    pyramid: list
+    zmin: float
+    zmax: float
+
+    def arrays(self) -> dict[str, wp.array]:
+        return {"moments": self.basis}
+
+
+@dataclass
 class SAT:
     """A built SAT (full or tile grid) of ``channels`` channels over an ``n x n`` map."""
 

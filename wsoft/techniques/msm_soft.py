@@ -54,7 +54,7 @@ import numpy as np
 import warp as wp
 
 from wsoft.accel.pyramid import effective_depth_range
-from wsoft.accel.sat import box_area, build_sat, check_sat_params, mean_pyramid, sat_box
+from wsoft.accel.sat import Moments, box_area, build_sat, check_sat_params, mean_pyramid, sat_box
 from wsoft.lightspace.light import LightKernel, light_kernel, spread_texels
 from wsoft.lightspace.moments import (
     QUANTISATION,
@@ -208,19 +208,6 @@ def msm_soft_shade(
 
 for _t in (wp.uint32, wp.float32):
     wp.overload(msm_soft_shade, {"data": wp.array3d(dtype=_t)})
-
-
-@dataclass
-class Moments:
-    """The quantised moments [4, n, n] of one light's map, their mean pyramid (for the tile test) and the depth range."""
-
-    basis: wp.array
-    pyramid: list
-    zmin: float
-    zmax: float
-
-    def arrays(self) -> dict[str, wp.array]:
-        return {"moments": self.basis}
 
 
 class MSMSoft(Technique):

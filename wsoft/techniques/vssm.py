@@ -25,7 +25,7 @@ from typing import Any
 import warp as wp
 
 from wsoft.accel.pyramid import effective_depth_range
-from wsoft.accel.sat import box_area, build_sat, check_sat_params, mean_pyramid, sat_box
+from wsoft.accel.sat import Moments, box_area, build_sat, check_sat_params, mean_pyramid, sat_box
 from wsoft.lightspace.light import LightKernel, light_kernel, spread_texels
 from wsoft.lightspace.moments import chebyshev_bound, moments_variance
 from wsoft.lightspace.view import ViewGPU, normalised_depth
@@ -167,17 +167,6 @@ def vssm_shade(
 
 for _t in (wp.uint32, wp.float32):
     wp.overload(vssm_shade, {"data": wp.array3d(dtype=_t)})
-
-
-@dataclass
-class Moments:
-    basis: wp.array
-    pyramid: list
-    zmin: float
-    zmax: float
-
-    def arrays(self) -> dict[str, wp.array]:
-        return {"moments": self.basis}
 
 
 class VSSM(Technique):
