@@ -145,6 +145,8 @@ def cmd_render(args) -> int:
 
     for path, what in ((args.out, "--out"), (args.stats, "--stats"), (args.png, "--png")):
         check_output(path, what)
+    if args.frames is not None:
+        return _render_frames(args)
     scene = load_stage(scene_arg(args.scene), time=args.time, render_settings=args.render_settings, instancing=args.instancing)
     out = output_of(scene, args.out)
     params = _parse_sets(args.set)
@@ -166,6 +168,71 @@ def cmd_render(args) -> int:
     print(f"{st['technique']} on {os.path.basename(scene.path)} ({st['width']}x{st['height']}, {st['device']}): "
           f"{st['timings_ms']['total']:.1f} ms{_compile_note(st['timings_ms']['compile'])}, passes: {', '.join(st['passes'])}")
     print(f"wrote {out}" + (f", {args.png}" if args.png else "") + (f", {args.stats}" if args.stats else ""))
+    return 0
+
+
+def _frames_args(args) -> None:
+    """``--frames`` and ``--time`` exclude each other."""
+    from wsoft.errors import ParameterError
+
+    if args.time is not None:
+        raise ParameterError(f"--time {args.time:g} and --frames {args.frames}: give one of them")
+
+
+class _FrameProgress:
+    """One line per finished frame on stderr: ``frame 12 (3/24): 0.21 s``."""
+
+    def __init__(self):
+        self.t0 = time.perf_counter()
+
+    def __call__(self, done: int, total: int, t: float) -> None:
+        now = time.perf_counter()
+        print(f"frame {t:g} ({done}/{total}): {now - self.t0:.2f} s", file=sys.stderr)
+        self.t0 = now
+
+
+def _sequence_line(seq) -> str:
+    s = seq.summary
+    how = ", ".join(f"{s[k]} {w}" for k, w in (("scene_built", "built"), ("scene_refit", "refit"), ("scene_reused", "reused")) if s[k])
+    return (f"{s['frames']} frame(s), time codes {seq.times[0]:g}..{seq.times[-1]:g}; scene on the device: {how} "
+            f"(load {s['load_ms'] / 1e3:.2f} s, upload {s['upload_ms']:.0f} ms, refit {s['refit_ms']:.0f} ms in all)")
+
+
+def _render_frames(args) -> int:
+    """``render --frames``: one EXR (PNG, stats) per time code, named as render delegates number
+    frames (``out.0012.exr``); ``--stats`` itself gets the sequence's summary and every frame's costs."""
+    import types
+
+    from wsoft.pipeline.sequence import frame_path, render_sequence
+
+    _frames_args(args)
+    params = _parse_sets(args.set)
+    seq = render_sequence(scene_arg(args.scene), args.technique, frames=args.frames, width=args.width, height=args.height,
+                          camera=args.camera, light=args.light, device=args.device, pixel_samples=args.pixel_samples,
+                          render_settings=args.render_settings, instancing=args.instancing, progress=_FrameProgress(), **params)
+    first = seq.frames[0]
+    rs = seq.render_settings
+    out = output_of(types.SimpleNamespace(render_settings=rs, path=first.stats["scene"]["path"]), args.out)
+    for w in seq.warnings + sorted({w for fr in seq.frames for w in fr.stats["warnings"]}):
+        print(f"warning: {w}", file=sys.stderr)
+    for t, fr in zip(seq.times, seq.frames):
+        fr.write_exr(frame_path(out, t))
+        if args.png:
+            fr.write_png(frame_path(args.png, t))
+        if args.stats:
+            os.makedirs(os.path.dirname(os.path.abspath(args.stats)), exist_ok=True)
+            with open(frame_path(args.stats, t), "w") as f:
+                json.dump(fr.stats, f, indent=2, default=str)
+    if args.stats:
+        with open(args.stats, "w") as f:
+            json.dump({"times": seq.times, "summary": seq.summary, "frames": seq.stats, "warnings": seq.warnings}, f, indent=2, default=str)
+    ms = [fr.stats["timings_ms"]["total"] for fr in seq.frames]
+    st = first.stats
+    print(f"{st['technique']} on {os.path.basename(st['scene']['path'])} ({st['width']}x{st['height']}, {st['device']}): "
+          f"{sum(ms) / len(ms):.1f} ms a frame (min {min(ms):.1f}, max {max(ms):.1f}); {_sequence_line(seq)}")
+    written = [frame_path(out, seq.times[0])] + ([frame_path(out, seq.times[-1])] if len(seq.times) > 1 else [])
+    print(f"wrote {' ... '.join(written)}" + (f", PNGs {frame_path(args.png, seq.times[0])} ..." if args.png else "")
+          + (f", {args.stats} and a JSON per frame" if args.stats else ""))
     return 0
 
 
@@ -287,9 +354,11 @@ def cmd_compare(args) -> int:
     from wsoft.io import write_gray_png
 
     check_output(args.out_dir, "--out-dir", folder=True)
-    scene = load_stage(scene_arg(args.scene), time=args.time, render_settings=args.render_settings, instancing=args.instancing)
     names = list(dict.fromkeys(args.technique or ["hard"]))
     techs = _technique_sets(names, args.set)
+    if args.frames is not None:
+        return _compare_frames(args, techs)
+    scene = load_stage(scene_arg(args.scene), time=args.time, render_settings=args.render_settings, instancing=args.instancing)
     with PassProgress("compare") as progress:
         fs = wsoft.compare(scene, techs, samples=args.samples, width=args.width, height=args.height, camera=args.camera, light=args.light,
                            device=args.device, progress=progress)
@@ -342,6 +411,66 @@ def cmd_compare(args) -> int:
     for w in sorted({w for fr in fs.values() for w in fr.stats["warnings"]}):
         print(f"warning: {w}", file=sys.stderr)
     print(f"\nwrote {', '.join(b + '.exr/.png/.json' for b in written)}, {md}")
+    return 0
+
+
+def _compare_frames(args, techs) -> int:
+    """``compare --frames``: per time code each technique's EXR/PNG/JSON (``<stage>-<label>.0012.exr``),
+    and ``<stage>-compare.md`` / ``<stage>-sequence.json`` with the temporal measures (flicker against
+    the reference, mean and worst error) and each frame's times and errors."""
+    from wsoft.pipeline.sequence import compare_sequence, frame_path
+
+    _frames_args(args)
+    seq = compare_sequence(scene_arg(args.scene), techs, frames=args.frames, samples=args.samples, width=args.width, height=args.height,
+                           camera=args.camera, light=args.light, device=args.device, render_settings=args.render_settings,
+                           instancing=args.instancing, progress=_FrameProgress())
+    os.makedirs(args.out_dir, exist_ok=True)
+    stem = os.path.splitext(os.path.basename(seq.frames[0].stats["scene"]["path"]))[0]
+    labels = list(seq.frames[0])
+    for t, fs in zip(seq.times, seq.frames):
+        for label, fr in fs.items():
+            base = os.path.join(args.out_dir, f"{stem}-{label}.exr")
+            fr.write_exr(frame_path(base, t))
+            fr.write_png(frame_path(base[:-4] + ".png", t))
+            with open(frame_path(base[:-4] + ".json", t), "w") as f:
+                json.dump(fr.stats, f, indent=2, default=str)
+    temporal = seq.summary["temporal"]
+    static = any("temporal_std" in m for per in temporal.values() for m in per.values())
+    head = "| technique | light | mean MAE | mean penumbra MAE | worst frame (penumbra MAE) | flicker | own change | reference change |"
+    head += " temporal std |" if static else ""
+    rows = [head, "|---|---|---:|---:|---|---:|---:|---:|" + ("---:|" if static else "")]
+    for label in labels:
+        for ll, m in temporal[label].items():
+            w = m.get("worst_frame", {})
+            rows.append(f"| {label} | {ll} | {m['mae']:.4f} | {m['mae_penumbra']:.4f} | {w.get('time', 0):g} ({w.get('mae_penumbra', 0):.4f}) | "
+                        f"{m['flicker']:.5f} | {m['change']:.5f} | {m['reference_change']:.5f} |"
+                        + (f" {m.get('temporal_std', 0):.5f} |" if static else ""))
+    noise = next((m.get("flicker_noise") for per in temporal.values() for m in per.values()), None)
+    per_frame = ["| time | " + " | ".join(f"{l} ms | {l} penumbra MAE" for l in labels) + " |",
+                 "|---:|" + "---:|---:|" * len(labels)]
+    for t, fs in zip(seq.times, seq.frames):
+        per_frame.append(f"| {t:g} | " + " | ".join(f"{fs[l].stats['timings_ms']['total']:.1f} | {fs[l].stats['error']['mae_penumbra']:.4f}"
+                                                   for l in labels) + " |")
+    cmd = "wsoft " + " ".join(sys.argv[1:]) if sys.argv[1:2] == ["compare"] else f"wsoft compare {args.scene} --frames {args.frames}"
+    lines = [f"# {', '.join(labels)} over {len(seq.times)} frames of {stem} ({seq.frames[0].stats['width']}x{seq.frames[0].stats['height']}, "
+             f"{seq.frames[0].stats['device']})", "", f"Command: `{cmd}`", "",
+             f"Against the reference at {seq.summary['ground_truth_samples']} light samples in every frame (seed 0). Flicker: the mean over "
+             "pixels and frame pairs of |ΔV − ΔV_ref| at the same surface point (the same pixel while the camera stands still, else the "
+             "pixel of the previous frame that saw the same world point; disocclusions left out); own change: mean |ΔV|; reference "
+             "change: mean |ΔV_ref|." + (f" The reference's own noise floor (from its standard errors): {noise:.5f}." if noise is not None else "")
+             + (" The stage authors no time sample: temporal std is each pixel's standard deviation over the frames (a stochastic "
+                "technique's crawl; the reference's own is in `" + stem + "-sequence.json`)." if static else ""), "",
+             "## Over the sequence", "", *rows, "", f"Scene: {_sequence_line(seq)}.", "", "## Per frame", "", *per_frame]
+    md = os.path.join(args.out_dir, f"{stem}-compare.md")
+    with open(md, "w") as f:
+        f.write("\n".join(lines) + "\n")
+    js = os.path.join(args.out_dir, f"{stem}-sequence.json")
+    with open(js, "w") as f:
+        json.dump({"times": seq.times, "summary": seq.summary, "frames": seq.stats, "warnings": seq.warnings}, f, indent=2, default=str)
+    print("\n".join(lines))
+    for w in seq.warnings + sorted({w for fs in seq.frames for fr in fs.values() for w in fr.stats["warnings"]}):
+        print(f"warning: {w}", file=sys.stderr)
+    print(f"\nwrote {len(seq.times)} frames of {', '.join(labels)} ({stem}-<technique>{frame_path('', seq.times[0])}.exr/.png/.json ...), {md}, {js}")
     return 0
 
 
@@ -448,6 +577,8 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--instancing", choices=("auto", "keep", "flatten"), default="auto", help=_INST_HELP)
     r.add_argument("--time", type=float, help="USD time code (default: the stage's start time code; without a time range, "
                    "its earliest time sample)")
+    r.add_argument("--frames", metavar="A:B[:STEP]", help="a sequence: every time code from A to B (step 1, or STEP) within the stage's "
+                   "range, one output per frame named out.0012.exr; --stats gets the sequence's summary")
     r.add_argument("--device", help="cpu or cuda:N (default: cuda:0 when available, else cpu)")
     r.add_argument("--pixel-samples", type=int, default=1, help="G-buffer samples per pixel")
     r.add_argument("--out", help="output EXR (default: the productName of the render settings' product with a "
@@ -470,7 +601,9 @@ def main(argv: list[str] | None = None) -> int:
     c.add_argument("--render-settings", metavar="PRIM", help=_RS_HELP)
     c.add_argument("--light")
     c.add_argument("--instancing", choices=("auto", "keep", "flatten"), default="auto", help=_INST_HELP)
-    c.add_argument("--time", type=float)
+    c.add_argument("--time", type=float, help="USD time code (default: the stage's start time code)")
+    c.add_argument("--frames", metavar="A:B[:STEP]", help="a sequence: every time code from A to B (step 1, or STEP) within the stage's "
+                   "range; adds flicker against the reference and each frame's error (<stage>-compare.md, <stage>-sequence.json)")
     c.add_argument("--device")
     c.add_argument("--out-dir", default="out", help="where the images, stats and the compare table are written")
     c.set_defaults(fn=cmd_compare)

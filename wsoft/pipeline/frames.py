@@ -84,6 +84,20 @@ def frame_ms(total_ms: float, records: list[dict], closure: set[str], single: bo
     return sum(r["ms"] for r in records if r["name"] in closure)
 
 
+def camera_model(ctx) -> dict:
+    """The camera the G-buffer cast its rays with, in world space (``to_world`` 4x4, ``tan_half``,
+    ``offset``, ``orthographic``), the full image's size and the data window's pixels (``crop``):
+    what :class:`wsoft.metrics.temporal.FrameCamera` projects world points with."""
+    cam = ctx.camera
+    m = np.array(cam.to_world, np.float64)
+    if ctx.origin is not None:  # the render worked in a frame centred near the camera: back to world space
+        m[:3, 3] += np.asarray(ctx.origin, np.float64)
+    crop = ctx.framing.crop if ctx.framing is not None else None
+    return {"to_world": m.tolist(), "tan_half": [float(x) for x in cam.tan_half], "offset": [float(x) for x in cam.offset],
+            "orthographic": bool(cam.orthographic), "width": int(ctx.width), "height": int(ctx.height),
+            "crop": list(crop) if crop is not None else None}
+
+
 def cpu_over_wall(record: dict) -> float:
     """A pass's CPU time over its wall time: how many CPU threads it kept busy on average (the
     process's CPU time, so other work in the process during the pass counts too)."""
@@ -117,6 +131,7 @@ def frames_of(built: Built, res: Resources, records: list[dict], total_ms: float
         "height": ctx.framing.out_size[1] if ctx.framing is not None else ctx.height,
         "pixel_samples": ctx.pixel_samples,
         "camera": ctx.camera.path,
+        "camera_model": camera_model(ctx),
         "framing": ctx.framing.describe() if ctx.framing is not None else None,
         "warnings": list(scene.warnings),
     }

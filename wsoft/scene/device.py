@@ -8,6 +8,7 @@ give the surfaces one light view or one light's shadow rays meet.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -264,3 +265,23 @@ def shadow_surfaces(ds: DeviceScene, excluded_prims: tuple[int, ...]) -> tuple[S
         s.tex = wp.array(np.r_[c.tex.numpy()[:n_cut], -1].astype(np.int32), dtype=wp.int32, device=dev)
         ds.linked[key] = (s, int(bool(out.any()) or bool(ds.has_cutouts)))
     return ds.linked[key]
+
+
+def refit_scene(ds: DeviceScene, scene: Scene) -> DeviceScene:
+    """``ds``, the device copy of a scene with ``scene``'s triangles, materials and textures, moved
+    to ``scene``'s points: the points copied into its arrays and its BVH refitted (``wp.Mesh.refit``:
+    the tree kept, its boxes recomputed), the bounds and per-prim culling boxes recomputed, and what
+    was built from the old points (the packed BVH, shadow-link occluder meshes) dropped to be built
+    again on first use. The previous points are overwritten: ``ds`` is the new scene's from then on.
+    Not for a scene with instances (their placements live in the top level, built once)."""
+    if scene.instanced or ds.instances is not None:
+        raise ValueError("refit_scene does not move instances")
+    if scene.triangle_count == 0 or len(scene.points) != ds.points.shape[0]:
+        raise ValueError("refit_scene needs the same points and triangles")
+    ds.points.assign(scene.points.astype(np.float32))
+    ds.mesh.refit()
+    ds.cutouts.step = float(min(1.0, scene.diagonal))  # as upload_scene sets it
+    lo, hi = scene.bounds
+    closed_lo, closed_hi = _closed_bounds(scene, ds.cull_host[: scene.triangle_count])
+    return dataclasses.replace(ds, closed_lo=closed_lo, closed_hi=closed_hi, diagonal=scene.diagonal, lo=lo, hi=hi, packed=None,
+                               linked={}, occluders={})

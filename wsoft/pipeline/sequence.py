@@ -1,0 +1,390 @@
+"""Sequences: a stage rendered at a run of time codes, one frame each, and what is shared between them.
+
+:func:`render_sequence` renders one or several techniques at every time code of ``frames``
+(``"A:B"``, ``"A:B:STEP"``, ``"A"`` or a list, within the stage's ``startTimeCode``–``endTimeCode``):
+each frame is the stage at that time code (animated cameras, lights, transforms, points,
+visibility). The stage is opened once; each frame is read from it at its time code. The scene's
+device copy (triangles, cutouts, the BVH, and what the techniques cache on it) is kept from one
+frame to the next while the geometry is the same (a moving camera or light; compared by content);
+where only points moved (the same triangles, a walking character) the copy's points are updated
+and its BVH refitted (:func:`wsoft.scene.device.refit_scene`); anything else (triangles appearing,
+instances moving) builds it again. Each frame's stats say which (``sequence.scene``: ``reused``,
+``refit`` or ``built``) and what loading, refitting and uploading cost. Compiled kernels are shared
+by the process.
+
+Techniques with a ``seed`` (the reference, rtdenoise, the object-based techniques' sample sets)
+draw other light samples in each frame (seed + the frame's index) unless ``reseed=False``: what an
+engine does, so that a stochastic technique's noise changes from frame to frame as it would on
+screen (the crawl :func:`wsoft.metrics.temporal.temporal_std` measures).
+
+:func:`compare_sequence` adds a ground truth per frame (the reference at ``samples``, seed 0 in
+every frame: its noise does not crawl) and each technique's error against it, and the temporal
+measures of :mod:`wsoft.metrics.temporal` over the frames: flicker against the reference (pixels
+paired through the camera's motion), mean and worst error, the reference's own noise floor.
+
+Frames are written as render delegates write a sequence: ``name.0012.exr`` (:func:`frame_path`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import math
+import os
+import time as _time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from wsoft.errors import ParameterError
+from wsoft.params import parse_frames
+from wsoft.scene.types import Scene
+
+
+def stage_time_codes(stage, frames, file: str) -> list[float]:
+    """The time codes of ``frames`` (``"a:b"``, ``"a:b:step"``, ``"a"``, a number or a list of
+    numbers) on ``stage``: finite, and within its ``startTimeCode``–``endTimeCode`` when it
+    authors a range; a :class:`ParameterError` naming the file otherwise."""
+    if isinstance(frames, str):
+        try:
+            times = parse_frames(frames)
+        except ValueError as exc:
+            raise ParameterError(f"--frames {exc}", file=file) from None
+    else:
+        try:
+            times = [float(t) for t in (frames if hasattr(frames, "__iter__") else [frames])]
+        except (TypeError, ValueError):
+            raise ParameterError(f"frames {frames!r}: need one or more finite time codes", file=file) from None
+        if not times or not all(math.isfinite(t) for t in times):
+            raise ParameterError(f"frames {frames!r}: need one or more finite time codes", file=file)
+    if stage.HasAuthoredTimeCodeRange():
+        lo, hi = stage.GetStartTimeCode(), stage.GetEndTimeCode()
+        out = [t for t in times if not lo - 1e-9 <= t <= hi + 1e-9]
+        if out:
+            raise ParameterError(f"frames {min(times):g}..{max(times):g} lie outside the stage's time range "
+                                 f"[{lo:g}, {hi:g}] (startTimeCode, endTimeCode)", file=file)
+    return times
+
+
+def stage_is_animated(stage) -> bool:
+    """Does any layer the stage uses author a time sample?"""
+    return any(layer.ListAllTimeSamples() for layer in stage.GetUsedLayers())
+
+
+def frame_token(t: float) -> str:
+    """A time code as render delegates number frames: ``0012`` for 12, ``12.5`` for 12.5, ``m3`` for −3."""
+    return f"{int(t):04d}" if float(t).is_integer() and t >= 0 else f"{t:g}".replace("-", "m")
+
+
+def frame_path(path: str, t: float) -> str:
+    """``out/x.exr`` at time code 12 -> ``out/x.0012.exr`` (the frame number before the extension)."""
+    root, ext = os.path.splitext(path)
+    return f"{root}.{frame_token(t)}{ext}"
+
+
+def geometry_digest(scene: Scene, points: bool = True) -> str:
+    """A digest of everything a scene's device copy is built from (points, triangles and their
+    per-triangle fields, materials, textures, instances): equal digests, equal device copies.
+    ``points=False``: all of it but the points (equal: the same triangles, moved)."""
+    h = hashlib.blake2b(digest_size=20)
+
+    def add(x) -> None:
+        if x is None:
+            h.update(b"-")
+        elif isinstance(x, np.ndarray):
+            h.update(str((x.dtype, x.shape)).encode())
+            h.update(np.ascontiguousarray(x).tobytes())
+        elif dataclasses.is_dataclass(x):
+            for f in dataclasses.fields(x):
+                add(getattr(x, f.name))
+        elif isinstance(x, (list, tuple)):
+            h.update(f"[{len(x)}".encode())
+            for y in x:
+                add(y)
+        elif isinstance(x, dict):
+            for k in sorted(x, key=str):
+                h.update(str(k).encode())
+                add(x[k])
+        else:
+            h.update(repr(x).encode())
+
+    for name in (("points",) if points else ()) + ("triangles", "tri_prim", "tri_material", "tri_uv", "tri_double_sided", "tri_closed", "tri_dynamic", "tri_baked",
+                 "materials", "textures", "instances", "prims"):
+        add(getattr(scene, name))
+    return h.hexdigest()
+
+
+@dataclass
+class Sequence:
+    """A rendered sequence: ``times`` (the time codes), ``frames`` (a :class:`~wsoft.pipeline.Frame`
+    per time code, or a :class:`~wsoft.pipeline.FrameSet` for several techniques), ``stats`` per
+    frame (time, load / upload / render ms, whether the scene's device copy was ``built`` or
+    ``reused``), ``summary`` (totals, the techniques' temporal measures after
+    :func:`compare_sequence`) and ``warnings`` (the sequence's own, once)."""
+
+    times: list[float]
+    frames: list
+    stats: list[dict] = field(default_factory=list)
+    summary: dict = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
+    render_settings: object = None  # the first frame's RenderSettings (wsoft.scene.render_settings), or None
+
+    def __len__(self) -> int:
+        return len(self.frames)
+
+    def __getitem__(self, i: int):
+        return self.frames[i]
+
+    def __iter__(self) -> Iterator:
+        return iter(self.frames)
+
+
+class _Loader:
+    """Reads a stage at time codes: the stage opened once, each frame's scene loaded from it, its
+    device copy carried over from the previous frame while the geometry's digest is the same."""
+
+    def __init__(self, scene, render_settings: str | None, instancing: str):
+        from wsoft.scene.usd import diagnostic_lines, open_stage, stage_file
+        from wsoft.pipeline.loading import load_stage  # noqa: F401  (imported before frames are timed)
+        from pxr import Usd, UsdUtils
+
+        self.render_settings = render_settings
+        self.instancing = instancing
+        self.warnings: list[str] = []
+        if isinstance(scene, Scene):
+            source = scene.__dict__.get("_loaded_from", (scene.path, None))[0]
+            if render_settings is None and scene.render_settings is not None:
+                self.render_settings = scene.render_settings.path
+        else:
+            source = scene
+        if isinstance(source, Usd.Stage):
+            self.stage = source
+        else:
+            delegate = UsdUtils.CoalescingDiagnosticDelegate()
+            self.stage = open_stage(os.fspath(source))
+            self.warnings += diagnostic_lines(delegate.TakeUncoalescedDiagnostics(), os.fspath(source))
+        self.file = stage_file(self.stage)
+        self._prev: Scene | None = None
+        self._digest: str | None = None
+        self._shape: str | None = None
+
+    def load(self, t: float) -> tuple[Scene, dict]:
+        from wsoft.pipeline.loading import load_stage
+
+        t0 = _time.perf_counter()
+        scene = load_stage(self.stage, time=t, render_settings=self.render_settings, instancing=self.instancing)
+        t1 = _time.perf_counter()
+        digest, shape = geometry_digest(scene), geometry_digest(scene, points=False)
+        t2 = _time.perf_counter()
+        cache = self._prev.__dict__.get("_device_cache") if self._prev is not None else None
+        how = "built"
+        if cache and digest == self._digest:
+            scene.__dict__["_device_cache"] = cache
+            how = "reused"
+        elif cache and shape == self._shape and not scene.instanced:
+            from wsoft.scene.device import refit_scene
+
+            scene.__dict__["_device_cache"] = {dev: refit_scene(ds, scene) for dev, ds in cache.items()}
+            how = "refit"
+        t3 = _time.perf_counter()
+        self._prev, self._digest, self._shape = scene, digest, shape
+        return scene, {"time": t, "load_ms": round(1e3 * (t1 - t0), 3), "digest_ms": round(1e3 * (t2 - t1), 3),
+                       "refit_ms": round(1e3 * (t3 - t2), 3) if how == "refit" else 0.0, "scene": how}
+
+
+def _reseeded(techs: list, index: int, reseed: bool) -> list:
+    """The techniques of frame ``index``: those with a ``seed`` draw seed + index when ``reseed``."""
+    from wsoft.techniques import create
+
+    if not reseed or index == 0:
+        return techs
+    out = []
+    for t in techs:
+        p = dataclasses.asdict(t.params)
+        if "seed" in p:
+            p["seed"] = int(p["seed"] + index) % (2**31 - 1)
+            t = create(t.name, p)
+        out.append(t)
+    return out
+
+
+def _one_frame_stats(fr) -> dict:
+    """The frame's own times: the techniques' frame ms (one or several)."""
+    if hasattr(fr, "frames"):
+        return {label: f.stats["timings_ms"]["total"] for label, f in fr.items()}
+    return {fr.stats["label"]: fr.stats["timings_ms"]["total"]}
+
+
+def _frames_and_loader(scene, frames, render_settings, instancing):
+    loader = _Loader(scene, render_settings, instancing)
+    times = stage_time_codes(loader.stage, frames, loader.file)
+    if len(times) > 1 and not stage_is_animated(loader.stage):
+        loader.warnings.append(f"{loader.file}: the stage authors no time sample: its {len(times)} frames are the same stage")
+    return loader, times
+
+
+def _upload_note(fr, info: dict) -> None:
+    """The scene upload's cost in ``info`` (near 0 when the device copy was reused)."""
+    info["upload_ms"] = round(float(fr.stats["timings_ms"].get("upload_scene", 0.0)), 3)
+
+
+def render_sequence(scene, technique, *, frames, width: int | None = None, height: int | None = None, camera=None, light=None,
+                    device: str | None = None, pixel_samples: int = 1, render_settings: str | None = None, instancing: str = "auto",
+                    reseed: bool = True, progress=None, **params) -> Sequence:
+    """Render ``technique`` (one, or a list as :func:`wsoft.render` takes it) on ``scene`` (a USD
+    path, an open ``Usd.Stage`` or a :class:`Scene`, whose source is read again at each time code)
+    at every time code of ``frames`` (see :func:`stage_time_codes`); a :class:`Sequence`.
+
+    ``progress``: called as ``progress(done, total, time_code)`` after each frame. The other
+    arguments as :func:`wsoft.render` takes them. A stage without time samples renders the same
+    stage at every time code and says so in ``warnings``."""
+    from wsoft.pipeline import as_techniques, render
+
+    loader, times = _frames_and_loader(scene, frames, render_settings, instancing)
+    techs = as_techniques(technique, params)
+    several = isinstance(technique, (list, tuple)) and not (isinstance(technique, tuple) and len(technique) == 2 and isinstance(technique[1], dict))
+    seq = Sequence(times=times, frames=[], warnings=list(loader.warnings))
+    for i, t in enumerate(times):
+        sc, info = loader.load(t)
+        if i == 0:
+            seq.render_settings = sc.render_settings
+        mine = _reseeded(techs, i, reseed)
+        t0 = _time.perf_counter()
+        fr = render(sc, mine if several else mine[0], width=width, height=height, camera=camera, light=light, device=device,
+                    pixel_samples=pixel_samples)
+        info["render_ms"] = round(1e3 * (_time.perf_counter() - t0), 3)
+        info["frame_ms"] = _one_frame_stats(fr)
+        _upload_note(fr, info)
+        _stamp(fr, info, i, len(times))
+        seq.frames.append(fr)
+        seq.stats.append(info)
+        if progress is not None:
+            progress(i + 1, len(times), t)
+    seq.summary = _cost_summary(seq)
+    return seq
+
+
+def _stamp(fr, info: dict, index: int, count: int) -> None:
+    """Record the frame's place in its sequence in its stats (and in each technique's)."""
+    mark = {**info, "index": index, "frames": count}
+    if hasattr(fr, "frames"):
+        fr.stats["sequence"] = mark
+        for f in fr.values():
+            f.stats["sequence"] = mark
+    else:
+        fr.stats["sequence"] = mark
+
+
+def _cost_summary(seq: Sequence) -> dict:
+    st = seq.stats
+    return {"frames": len(st), "time_codes": [seq.times[0], seq.times[-1]] if seq.times else [],
+            "scene_built": sum(1 for s in st if s["scene"] == "built"), "scene_refit": sum(1 for s in st if s["scene"] == "refit"),
+            "scene_reused": sum(1 for s in st if s["scene"] == "reused"), "refit_ms": round(sum(s["refit_ms"] for s in st), 3),
+            "load_ms": round(sum(s["load_ms"] for s in st), 3), "upload_ms": round(sum(s.get("upload_ms", 0.0) for s in st), 3),
+            "render_ms": round(sum(s["render_ms"] for s in st), 3)}
+
+
+def ground_truth_frame(scene: Scene, samples: int, *, width, height, camera, light, device, pixel_samples: int = 1):
+    """The reference at ``samples`` light samples (seed 0) on ``scene`` as a
+    :class:`~wsoft.metrics.GroundTruth` (every light it renders), and the frame itself."""
+    from wsoft.metrics import GroundTruth
+    from wsoft.pipeline import render
+
+    fr = render(scene, "reference", width=width, height=height, camera=camera, light=light, device=device, pixel_samples=pixel_samples,
+                samples=samples, seed=0)
+    return GroundTruth(ground_truth_lights(fr), samples), fr
+
+
+def ground_truth_lights(fr) -> dict[str, dict[str, np.ndarray]]:
+    """A reference frame's channels per light label, as :class:`~wsoft.metrics.GroundTruth` holds them."""
+    out = {}
+    for label in fr.stats["light_labels"]:
+        out[label] = {"V": fr[f"V.{label}"], "V_stderr": fr[f"V_stderr.{label}"], "A": fr["A"]}
+        for c in "RGB":
+            if c in fr.channels:
+                out[label][c] = fr[c]
+    return out
+
+
+def compare_sequence(scene, techniques, *, frames, samples: int = 256, ground_truth=None, width: int | None = None,
+                     height: int | None = None, camera=None, light=None, device: str | None = None, pixel_samples: int = 1,
+                     render_settings: str | None = None, instancing: str = "auto", reseed: bool = True, progress=None) -> Sequence:
+    """Render ``techniques`` at every time code of ``frames`` beside a ground truth and measure each
+    frame's error (as :func:`wsoft.compare`) and the sequence's temporal error.
+
+    The ground truth of frame t is the reference at ``samples`` light samples with seed 0 in every
+    frame, or ``ground_truth(scene_t, t)`` returning a :class:`~wsoft.metrics.GroundTruth` (the
+    benchmark's cached references). Each frame is a :class:`~wsoft.pipeline.FrameSet` with
+    ``stats["errors"]`` per technique; ``summary["temporal"][label][light]`` holds
+    :func:`~wsoft.metrics.temporal.sequence_summary` (flicker against the ground truth, pixels
+    paired through the camera's motion; mean and worst error; the ground truth's noise floor
+    ``flicker_noise``) and, on a static sequence (the stage authors no time sample),
+    ``temporal_std`` (a stochastic technique's crawl) beside the reference's own."""
+    from wsoft.metrics import compare
+    from wsoft.pipeline import as_techniques, is_several
+
+    loader, times = _frames_and_loader(scene, frames, render_settings, instancing)
+    techs = as_techniques(list(techniques) if is_several(techniques) else [techniques], {})
+    seq = Sequence(times=times, frames=[], warnings=list(loader.warnings))
+    truths: list = []
+    for i, t in enumerate(times):
+        sc, info = loader.load(t)
+        if i == 0:
+            seq.render_settings = sc.render_settings
+        t0 = _time.perf_counter()
+        if ground_truth is None:
+            gt, _ = ground_truth_frame(sc, samples, width=width, height=height, camera=camera, light=light, device=device,
+                                       pixel_samples=pixel_samples)
+        else:
+            gt = ground_truth(sc, t)
+        info["ground_truth_ms"] = round(1e3 * (_time.perf_counter() - t0), 3)
+        t0 = _time.perf_counter()
+        fs = compare(sc, _reseeded(techs, i, reseed), ground_truth=gt, width=width, height=height, camera=camera, light=light,
+                     device=device, pixel_samples=pixel_samples)
+        info["render_ms"] = round(1e3 * (_time.perf_counter() - t0), 3)
+        info["frame_ms"] = _one_frame_stats(fs)
+        _upload_note(fs, info)
+        _stamp(fs, info, i, len(times))
+        seq.frames.append(fs)
+        seq.stats.append(info)
+        truths.append(gt)
+        if progress is not None:
+            progress(i + 1, len(times), t)
+    seq.summary = _cost_summary(seq)
+    seq.summary["temporal"] = temporal_measures(seq, truths, static=not stage_is_animated(loader.stage))
+    seq.summary["ground_truth_samples"] = truths[0].samples if truths else samples
+    return seq
+
+
+def temporal_measures(seq: Sequence, truths: list, static: bool) -> dict:
+    """Per technique label and light label: :func:`~wsoft.metrics.temporal.sequence_summary` over
+    the frames of ``seq`` (each a FrameSet with errors) against ``truths`` (a GroundTruth per frame)."""
+    from wsoft.metrics.temporal import FrameCamera, flicker, flicker_noise, pair_pixels, sequence_summary, temporal_std
+
+    out: dict[str, dict] = {}
+    if not seq.frames:
+        return out
+    labels = list(seq.frames[0])
+    for label in labels:
+        first = seq.frames[0][label]
+        out[label] = {}
+        for ll in first.stats["light_labels"]:
+            pairs, noise, errors = [], [], []
+            for k, fs in enumerate(seq.frames):
+                fr = fs[label]
+                errors.append(fr.stats["errors"][ll])
+                if k == 0:
+                    continue
+                prev = seq.frames[k - 1][label]
+                g0, g1 = truths[k - 1].lights[ll], truths[k].lights[ll]
+                pp = pair_pixels(prev.channels, fr.channels, FrameCamera.of(prev.stats), FrameCamera.of(fr.stats))
+                pairs.append(flicker(prev[f"V.{ll}"], fr[f"V.{ll}"], g0["V"], g1["V"], pp))
+                noise.append(flicker_noise(g0["V_stderr"], g1["V_stderr"], pp))
+            s = sequence_summary(pairs, errors, seq.times, noise)
+            if static and len(seq.frames) > 1:
+                covered = np.all([np.asarray(fs[label]["A"]) > 0 for fs in seq.frames], axis=0)
+                s["temporal_std"] = temporal_std([fs[label][f"V.{ll}"] for fs in seq.frames], covered)
+                s["reference_temporal_std"] = temporal_std([g.lights[ll]["V"] for g in truths], covered)
+            out[label][ll] = s
+    return out
