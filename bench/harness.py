@@ -33,7 +33,7 @@ SWEEPS = {"foundation": "wsoft.bench.foundation", "filtered": "wsoft.bench.filte
           "ssm-table1": "wsoft.bench.ssm_table1", "ssm-table2": "wsoft.bench.ssm_table2", "pareto": "wsoft.bench.pareto",
           "adversarial": "wsoft.bench.adversarial", "usd_pipeline": "wsoft.bench.usd_pipeline",
           "instancing": "wsoft.bench.instancing", "stsv": "wsoft.bench.stsv", "modern": "wsoft.bench.modern"}
-REFERENCE_VERSION = 3  # bump when the reference changes (2: rows render one named light; 3: the receiver's horizon, ray offsets from the frame's extent)
+REFERENCE_VERSION = 4  # bump when the reference changes (2: rows render one named light; 3: the receiver's horizon, ray offsets from the frame's extent; 4: the shaded R, G, B for ꟻLIP)
 _SCENE_DIR: Path | None = None
 
 
@@ -98,8 +98,9 @@ def first_light(name: str, light: str | None) -> str:
 
 def reference(name: str, *, width: int, height: int, light: str | None, samples: int, seed: int = 0, camera: str | None = None,
               device: str | None = None, casters: str = "all") -> dict:
-    """The cached reference (V, V_stderr, A and the ms it took) for a view of one light of a scene
-    (``light``: a path or name; None: the first shadow-casting light).
+    """The cached reference (V, V_stderr, A, its shaded image R, G, B lit by that light alone, and
+    the ms it took) for a view of one light of a scene (``light``: a path or name; None: the first
+    shadow-casting light).
 
     ``casters = "dynamic"``: only the dynamic casters occlude (the ground truth of Salzman's mask)."""
     import wsoft
@@ -114,7 +115,8 @@ def reference(name: str, *, width: int, height: int, light: str | None, samples:
         z = np.load(path)
         return {k: z[k] for k in z.files} | {"cached": True, "samples": samples}
     fr = wsoft.render(load(name), "reference", width=width, height=height, camera=camera, light=light, device=device, samples=samples, seed=seed, casters=casters)
-    out = {"V": fr.V, "V_stderr": fr["V_stderr"], "A": fr["A"], "ms": np.float64(fr.stats["timings_ms"]["total"])}
+    out = {"V": fr.V, "V_stderr": fr["V_stderr"], "A": fr["A"], "R": fr["R"], "G": fr["G"], "B": fr["B"],
+           "ms": np.float64(fr.stats["timings_ms"]["total"])}
     tmp = path.with_suffix(".tmp.npz")
     np.savez_compressed(tmp, **out)
     os.replace(tmp, path)
@@ -122,13 +124,15 @@ def reference(name: str, *, width: int, height: int, light: str | None, samples:
 
 
 def ground_truth(name: str, ref: dict, light: str | None):
-    """A cached reference as the metric pass's :class:`~wsoft.metrics.GroundTruth` for ``light``."""
+    """A cached reference as the metric pass's :class:`~wsoft.metrics.GroundTruth` for ``light``,
+    with its shaded image (the rows render that light alone, so the error passes add ꟻLIP)."""
     from wsoft.metrics import GroundTruth
 
     scene = load(name)
     path = first_light(name, light)
     label = scene.light_label(scene.find_light(path))
-    return GroundTruth({label: {"V": ref["V"], "V_stderr": ref["V_stderr"], "A": ref["A"]}}, int(ref["samples"]))
+    return GroundTruth({label: {"V": ref["V"], "V_stderr": ref["V_stderr"], "A": ref["A"]}}, int(ref["samples"]),
+                       shaded={c: ref[c] for c in "RGB"})
 
 
 def measure(name: str, techniques: list, *, device: str, width: int, height: int, light: str | None, truth=None, repeats: int = 3,

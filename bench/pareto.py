@@ -125,6 +125,13 @@ def _err(entry: dict, metric: str = "mae_penumbra") -> float:
     return entry["error"][metric]
 
 
+def flip_text(entry: dict) -> str:
+    """The entry's ꟻLIP (whole-image mean of the shaded image against the reference's), ``-`` where
+    the row has none (rows measured without the reference's shaded image)."""
+    f = entry["error"].get("flip")
+    return "-" if f is None else f"{f:.4f}"
+
+
 def size_param(technique: str) -> str | None:
     """The parameter the sweep turned as ``technique``'s map size (None: none, or not registered in this process)."""
     from wsoft.techniques import TECHNIQUES
@@ -208,6 +215,8 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
     L.append(f"in **one frame graph per scene and light**: the passes they share run once (on average "
              f"{sum(r['shared_pass_count'] for r in rows) / len(rows):.0f} of {sum(r['graph_passes'] for r in rows) / len(rows):.0f} passes a graph).")
     L.append(f"Errors: penumbra MAE against a {'/'.join(sorted({str(r['ground_truth_samples']) for r in rows}))}-sample reference (seed 0) on the same pixels;")
+    L.append("ꟻLIP: NVIDIA's perceptual difference of the shaded image against the reference's, as the PNGs show them (whole-image")
+    L.append("mean; `-`: a row measured without the reference's shaded image);")
     L.append("frame ms: the passes a technique needs, shared ones included (median of 3 after a warm-up). Dashed lines: each")
     L.append("technique's Pareto front over its settings (faint points: the rest); solid: the reference's curve; dotted: MAE 0.05 and 0.02.")
     plain = sorted(f"{r['scene']}/{r['light'].split('/')[-1]}" for r in rows if row_metric(r) == "mae")
@@ -240,13 +249,13 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
             L.append(f"| {r['scene']} | {_light_cell(r)} | " + " | ".join(cells) + " |")
         L.append("")
     L += ["## Pareto-optimal settings per scene and light (all techniques together)", ""]
-    L.append("| scene | light | setting | frame ms | penumbra MAE | MAE | MAE facing the light | penumbra pixels |")
-    L.append("|---|---|---|---|---|---|---|---|")
+    L.append("| scene | light | setting | frame ms | penumbra MAE | MAE | MAE facing the light | penumbra pixels | ꟻLIP |")
+    L.append("|---|---|---|---|---|---|---|---|---|")
     for r in sorted(rows, key=lambda r: (r["scene"], r["light"])):
         pts = [(e["frame_ms"], _err(e, row_metric(r)), e) for e in r["entries"]]
         for t, e, x in pareto_front(pts):
             L.append(f"| {r['scene']} | {_light_cell(r)} | {setting_text(x)} | {t:.1f} | {_err(x):.4f} | {x['error']['mae']:.4f} | "
-                     f"{x['error']['facing']['mae']:.4f} | {x['error']['penumbra_pixels']} |")
+                     f"{x['error']['facing']['mae']:.4f} | {x['error']['penumbra_pixels']} | {flip_text(x)} |")
     not_applicable = sorted({(r["scene"], r["light"].split("/")[-1], t) for r in rows for t in techs
                              if not any(e["technique"] == t for e in r["entries"])})
     if not_applicable:
@@ -260,9 +269,10 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
         rel = Path("images") / ctx["stem"] / f"{r['scene']}-{r['light'].split('/')[-1]}-{r['device'].replace(':', '')}.png"
         plot(r, md.parent / rel)
         L += [f"![{r['scene']} {r['light']}]({rel.as_posix()})", ""]
-    L += ["## Every setting", "", "| scene | light | setting | frame ms | penumbra MAE | MAE | >3se | shared passes |", "|---|---|---|---|---|---|---|---|"]
+    L += ["## Every setting", "", "| scene | light | setting | frame ms | penumbra MAE | MAE | ꟻLIP | >3se | shared passes |",
+          "|---|---|---|---|---|---|---|---|---|"]
     for r in sorted(rows, key=lambda r: (r["scene"], r["light"])):
         for e in sorted(r["entries"], key=lambda e: (e["technique"], e["frame_ms"])):
             L.append(f"| {r['scene']} | {r['light'].split('/')[-1]} | {setting_text(e)} | {e['frame_ms']:.1f} | {_err(e):.4f} | {e['error']['mae']:.4f} | "
-                     f"{e['error'].get('frac_outside_3se', 0):.3f} | {len(e['shared_passes'])} |")
+                     f"{flip_text(e)} | {e['error'].get('frac_outside_3se', 0):.3f} | {len(e['shared_passes'])} |")
     md.write_text("\n".join(L) + "\n")

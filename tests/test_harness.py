@@ -44,8 +44,8 @@ def test_rows_resume_and_report(tiny):
     r = rows[0]
     for k in ("scene", "technique", "params", "device", "width", "height", "timings_ms", "memory_bytes", "error"):
         assert k in r
-    assert set(r["error"]) >= {"mae", "rmse", "max", "mae_penumbra", "frac_outside_3se"}
-    assert 0 <= r["error"]["mae"] <= 1
+    assert set(r["error"]) >= {"mae", "rmse", "max", "mae_penumbra", "frac_outside_3se", "flip", "flip_covered"}
+    assert 0 <= r["error"]["mae"] <= 1 and 0 < r["error"]["flip"] <= 1
     md = (out / "foundation-quick.md").read_text()
     assert "wsoft bench foundation --quick" in md and "| box_plane |" in md
     assert (out / "images" / "foundation-quick" / "error_vs_time.png").exists()

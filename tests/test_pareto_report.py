@@ -34,3 +34,18 @@ def test_a_light_without_penumbra_ranks_by_the_mae_over_all_pixels(tmp_path):
     # the point light's plot has its points (it was empty when every entry was filtered out by penumbra pixels)
     img = mpimg.imread(tmp_path / "images" / "pareto" / "tower-Light-cpu.png")
     assert (img[..., :3].std(axis=-1) > 0.1).mean() > 1e-3  # coloured markers drawn
+
+
+def test_the_tables_carry_flip_and_a_dash_where_a_row_has_none(tmp_path):
+    area = _row("contact", 500)
+    area["entries"][0]["error"]["flip"] = 0.1234
+    area["entries"][2]["error"]["flip"] = 0.0056
+    md = tmp_path / "pareto.md"
+    pareto.report([area], md, {"quick": False, "command": "wsoft bench pareto", "stem": "pareto"})
+    text = md.read_text()
+    every = text.split("## Every setting")[1]
+    assert "| penumbra MAE | MAE | ꟻLIP | >3se |" in every
+    assert "| hard 1024² | 10.0 | 0.2000 | 0.0300 | 0.1234 |" in every and "| hard 2048² | 20.0 | 0.1800 | 0.0100 | - |" in every
+    optimal = text.split("## Pareto-optimal settings")[1].split("##")[0]
+    assert "| penumbra pixels | ꟻLIP |" in optimal
+    assert "| reference 16 spp | 40.0 | 0.0100 | 0.0000 | 0.0000 | 500 | 0.0056 |" in optimal and "| 500 | - |" in optimal

@@ -109,8 +109,10 @@ def test_essm_instances_share_their_sat_across_shading_knobs():
 
 
 def test_metric_pass_matches_the_host_error():
-    """wsoft.compare's error comes from a metric pass: the same numbers as visibility_error on the frames."""
+    """wsoft.compare's error comes from a metric pass: the same numbers as visibility_error (and
+    ꟻLIP's flip_error of the shaded images) on the frames."""
     from wsoft.metrics import facing_light, visibility_error
+    from wsoft.metrics.flip import flip_error
 
     scene = wsoft.load_scene(scene_path("contact.usda"))
     fs = wsoft.compare(scene, ["pcss", "hard"], samples=16, width=40, height=30, device="cpu")
@@ -119,9 +121,10 @@ def test_metric_pass_matches_the_host_error():
     for label in ("pcss", "hard"):
         e = fs[label].stats["error"]
         want = visibility_error(fs[label].V, ref.V, ref["V_stderr"], ref["A"], facing=facing_light(fs[label].channels, scene.lights[0]))
-        assert e == want and e["penumbra_pixels"] > 20 and e["facing"]["pixels"] + e["not_facing"]["pixels"] == e["pixels"]
+        want |= flip_error(fs[label].channels, ref.channels)[0]
+        assert e == want and e["flip"] > 0.0 and e["penumbra_pixels"] > 20 and e["facing"]["pixels"] + e["not_facing"]["pixels"] == e["pixels"]
         assert fs[label].stats["pass_kinds"].get(f"error[{label}:Light]") is None  # the metric is not part of the frame's time
-    assert fs.stats["pass_kinds"]["error[pcss:Light]"] == "metric"
+    assert fs.stats["pass_kinds"]["error[pcss:Light]"] == "metric" and fs.stats["pass_kinds"]["flip[pcss]"] == "metric"
 
 
 def test_nan_in_an_image_is_counted_and_scored():

@@ -348,10 +348,12 @@ def _technique_sets(names: list[str], sets: list[str] | None) -> list[tuple[str,
 
 
 def cmd_compare(args) -> int:
-    """Render techniques and the reference in one graph; write EXR/PNG of each and a time / error table."""
+    """Render techniques and the reference in one graph; write EXR/PNG of each, each technique's ꟻLIP
+    map (magma) and a time / error table."""
     import wsoft
-    from wsoft.pipeline import load_stage
     from wsoft.io import write_gray_png
+    from wsoft.metrics.flip import write_flip_png
+    from wsoft.pipeline import load_stage
 
     check_output(args.out_dir, "--out-dir", folder=True)
     names = list(dict.fromkeys(args.technique or ["hard"]))
@@ -372,7 +374,9 @@ def cmd_compare(args) -> int:
         write_gray_png(base + "-V.png", fr.V)
         with open(base + ".json", "w") as f:
             json.dump(fr.stats, f, indent=2, default=str)
-        written.append(base)
+        if "flip" in fr.error_maps:
+            write_flip_png(base + "-flip.png", fr.error_maps["flip"])
+        written.append(base + ".exr/.png/-V.png/.json" + ("/-flip.png" if "flip" in fr.error_maps else ""))
     labels = list(fs)
     gstats = fs.stats
     shared = gstats["shared_passes"]
@@ -381,7 +385,7 @@ def cmd_compare(args) -> int:
         cells = []
         for label in labels:
             ms = fs[label].stats["timings_ms"].get(n)
-            if ms is None and gstats["pass_kinds"][n] == "metric" and n.startswith(f"error[{label}:"):
+            if ms is None and gstats["pass_kinds"][n] == "metric" and (n.startswith(f"error[{label}:") or n == f"flip[{label}]"):
                 ms = gstats["timings_ms"][n]
             cells.append("-" if ms is None else f"{ms:.1f}" + (" (shared)" if n in shared and label in shared[n] else ""))
         rows.append((n, gstats["pass_kinds"][n], *cells))
@@ -389,12 +393,13 @@ def cmd_compare(args) -> int:
     rows.append(("kernel compilation (not in the times above)", "", *[f"{fs[l].stats['timings_ms']['compile']:.1f}" for l in labels]))
     table = ["| " + " | ".join(r) + " |" for r in rows]
     table.insert(1, "|---|---|" + "---:|" * len(labels))
-    err_rows = ["| technique | light | MAE | RMSE | max | MAE penumbra | penumbra pixels | MAE facing | MAE not facing | >3 stderr | NaN |",
-                "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    err_rows = ["| technique | light | MAE | RMSE | max | MAE penumbra | penumbra pixels | MAE facing | MAE not facing | >3 stderr | NaN | "
+                "ꟻLIP | ꟻLIP covered |", "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for label in labels:
         for light, e in fs[label].stats.get("errors", {}).items():
+            flip = f"{e['flip']:.4f} | {e['flip_covered']:.4f}" if "flip" in e else "- | -"
             err_rows.append(f"| {label} | {light} | {e['mae']:.4f} | {e['rmse']:.4f} | {e['max']:.3f} | {e['mae_penumbra']:.4f} | {e['penumbra_pixels']} | "
-                            f"{e['facing']['mae']:.4f} | {e['not_facing']['mae']:.4f} | {e.get('frac_outside_3se', 0):.3f} | {e['nan_pixels']} |")
+                            f"{e['facing']['mae']:.4f} | {e['not_facing']['mae']:.4f} | {e.get('frac_outside_3se', 0):.3f} | {e['nan_pixels']} | {flip} |")
     cmd = "wsoft " + " ".join(sys.argv[1:]) if sys.argv[1:2] == ["compare"] else f"wsoft compare {args.scene}"
     ref = gstats["reference"]
     lines = [f"# {', '.join(l for l in labels if l != ref)} vs {ref} on {stem} ({gstats['width']}x{gstats['height']}, {gstats['device']})", "",
@@ -403,14 +408,17 @@ def cmd_compare(args) -> int:
              "## Time (ms)", "", *table, "",
              f"Kernel compilation: {gstats['timings_ms']['compile']:.1f} ms for the whole graph (Warp compiles or loads a module at its first launch; "
              "seconds with a cold kernel cache), excluded from every pass time and frame total above.", "",
-             f"## Error of V against `{ref}` (the metric pass, on the same pixels)", "", *err_rows]
+             f"## Error of V against `{ref}` (the metric pass, on the same pixels)", "", *err_rows, "",
+             "ꟻLIP: NVIDIA's perceptual difference of the shaded images as the PNGs show them (LDR, 67 pixels per degree), "
+             "its mean over the whole image and over the covered pixels; one image per technique, so every light of a technique "
+             f"has the same value. Its map: `{stem}-<technique>-flip.png` (magma)."]
     md = os.path.join(args.out_dir, f"{stem}-compare.md")
     with open(md, "w") as f:
         f.write("\n".join(lines) + "\n")
     print("\n".join(lines))
     for w in sorted({w for fr in fs.values() for w in fr.stats["warnings"]}):
         print(f"warning: {w}", file=sys.stderr)
-    print(f"\nwrote {', '.join(b + '.exr/.png/.json' for b in written)}, {md}")
+    print(f"\nwrote {', '.join(written)}, {md}")
     return 0
 
 
@@ -588,8 +596,9 @@ def main(argv: list[str] | None = None) -> int:
     r.set_defaults(fn=cmd_render)
 
     c = sub.add_parser("compare", help="render techniques and the reference in one graph; EXR/PNG of each, a time and error table",
-                       formatter_class=fmt, description="Writes OUT_DIR/<stage>-<technique>.exr/.png/-V.png/.json per technique "
-                       "and OUT_DIR/<stage>-compare.md (times and errors against the reference).")
+                       formatter_class=fmt, description="Writes OUT_DIR/<stage>-<technique>.exr/.png/-V.png/.json per technique, "
+                       "<stage>-<technique>-flip.png (its ꟻLIP map against the reference, magma) per technique compared, "
+                       "and OUT_DIR/<stage>-compare.md (times and errors against the reference: MAE of V, ꟻLIP of the shaded image).")
     c.add_argument("scene", help="a .usda/.usdc/.usdz file or a bundled stage's name (box_plane)")
     c.add_argument("--technique", "-t", action="append", metavar="TECHNIQUE",
                    help="a technique (repeatable; default: hard); one of: " + ", ".join(techniques))

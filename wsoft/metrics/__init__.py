@@ -9,8 +9,10 @@ warned about and scored as an error of 1, never dropped.
 
 :func:`add_error_pass` registers that computation as a ``metric`` pass comparing a technique's
 channels with the reference's (another technique of the same graph, or a :class:`GroundTruth`
-computed earlier and handed in); :func:`compare` renders techniques and the reference in one
-graph and returns the frames with ``stats["errors"]``.
+computed earlier and handed in); where both carry a shaded image (``R``, ``G``, ``B``) it adds
+ꟻLIP (:mod:`wsoft.metrics.flip`), measured once per technique by :func:`add_flip_pass`.
+:func:`compare` renders techniques and the reference in one graph and returns the frames with
+``stats["errors"]`` and each technique's ꟻLIP map in ``Frame.error_maps["flip"]``.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from wsoft.graph import Key, Pass
+from wsoft.metrics.flip import RGB, flip_error, has_rgb
 from wsoft.scene.types import LIGHT_DISTANT, Light
 
 PENUMBRA_LO = 0.01
@@ -86,14 +89,20 @@ def facing_light(channels: dict, light: Light) -> np.ndarray:
 
 @dataclass
 class GroundTruth:
-    """A reference computed earlier (a cached one): per light label, its ``V``, ``V_stderr`` and ``A``."""
+    """A reference computed earlier (a cached one): per light label, its ``V``, ``V_stderr`` and
+    ``A``; ``shaded``: its shaded image (``R``, ``G``, ``B``, float32 [H, W], linear) lit by the
+    lights the compared frames render, which the error passes measure ꟻLIP against (None: no ꟻLIP)."""
 
     lights: dict[str, dict[str, np.ndarray]]
     samples: int
+    shaded: dict[str, np.ndarray] | None = None
 
     def channels(self, label: str) -> dict[str, np.ndarray]:
         g = self.lights[label]
-        return {f"V.{label}": g["V"], f"V_stderr.{label}": g["V_stderr"], "A": g["A"]}
+        out = {f"V.{label}": g["V"], f"V_stderr.{label}": g["V_stderr"], "A": g["A"]}
+        if self.shaded is not None:
+            out.update({c: self.shaded[c] for c in RGB})
+        return out
 
 
 def ground_truth_key(ctx, truth: GroundTruth, light: Light) -> Key:
@@ -108,19 +117,49 @@ def ground_truth_key(ctx, truth: GroundTruth, light: Light) -> Key:
     return ctx.provide(key, channels, name=f"ground_truth[{label}]@{truth.samples}", kind="reference")
 
 
-def add_error_pass(ctx, technique_label: str, channels: Key, reference: Key, light: Light) -> Key:
-    """A ``metric`` pass: the error of a technique's ``V.<light>`` (from its ``channels``) against
-    the reference's (``reference``: a technique's channels or a ground-truth key)."""
-    label = ctx.label(light)
-    key = Key("error", label, technique=technique_label)
+def add_flip_pass(ctx, technique_label: str, channels: Key, reference: Key) -> Key:
+    """A ``metric`` pass ``flip[<technique>]``: ꟻLIP of the technique's shaded image against the
+    reference's (:func:`wsoft.metrics.flip.flip_error`), once per technique and frame. Its resource
+    is ``{"error": {flip, flip_covered, flip_nan_pixels}, "map": float32 [H, W]}``, or None when
+    either side has no ``R``, ``G``, ``B``. A technique has one shaded image whatever its lights, so
+    the first call registers the pass (against that call's ``reference``) and later calls return
+    its key: the references of one technique's lights must carry the same shaded image (a
+    :class:`GroundTruth` gives every light its ``shaded``)."""
+    key = Key("flip", technique=technique_label)
+    if key in ctx.graph.producers:
+        return key
 
     def run(res):
         ch, ref = res[channels], res[reference]
-        return {key: visibility_error(ch[f"V.{label}"], ref[f"V.{label}"], ref.get(f"V_stderr.{label}"), ref["A"],
-                                      facing=facing_light(ch, light))}
+        if not (has_rgb(ch) and has_rgb(ref)):
+            return {key: None}
+        err, emap = flip_error(ch, ref)
+        return {key: {"error": err, "map": emap}}
 
-    return ctx.add(Pass(f"error[{technique_label}:{label}]", (channels, reference), (key,), run, kind="metric", technique=technique_label,
-                        light=label))
+    return ctx.add(Pass(f"flip[{technique_label}]", (channels, reference), (key,), run, kind="metric", technique=technique_label))
+
+
+def add_error_pass(ctx, technique_label: str, channels: Key, reference: Key, light: Light) -> Key:
+    """A ``metric`` pass: the error of a technique's ``V.<light>`` (from its ``channels``) against
+    the reference's (``reference``: a technique's channels or a ground-truth key).
+
+    Where both carry ``R``, ``G``, ``B`` the error also holds ``flip`` (ꟻLIP's mean over the whole
+    image), ``flip_covered`` (over the reference's covered pixels) and ``flip_nan_pixels``, from
+    the technique's one :func:`add_flip_pass`. The shaded image combines every light the technique
+    renders, so the errors of its several lights carry the same ꟻLIP values."""
+    label = ctx.label(light)
+    key = Key("error", label, technique=technique_label)
+    flip = add_flip_pass(ctx, technique_label, channels, reference)
+
+    def run(res):
+        ch, ref = res[channels], res[reference]
+        out = visibility_error(ch[f"V.{label}"], ref[f"V.{label}"], ref.get(f"V_stderr.{label}"), ref["A"], facing=facing_light(ch, light))
+        if res[flip] is not None:
+            out.update(res[flip]["error"])
+        return {key: out}
+
+    return ctx.add(Pass(f"error[{technique_label}:{label}]", (channels, reference, flip), (key,), run, kind="metric",
+                        technique=technique_label, light=label))
 
 
 def compare(scene, techniques, *, samples: int = 256, ground_truth: GroundTruth | None = None, width: int | None = None,
@@ -132,9 +171,10 @@ def compare(scene, techniques, *, samples: int = 256, ground_truth: GroundTruth 
     The reference is ``reference`` with ``samples`` light samples (added unless the list holds a
     reference already), or ``ground_truth`` computed earlier. Returns the
     :class:`~wsoft.pipeline.FrameSet`; each technique's ``stats["errors"]`` maps light label ->
-    error, ``stats["error"]`` is the first light's. ``width``, ``height``, ``camera``,
-    ``render_settings``, ``progress``: as :func:`wsoft.render` takes them (errors are measured on
-    the data window's pixels when the settings have one)."""
+    error (:func:`add_error_pass`: with ꟻLIP where both shaded images exist), ``stats["error"]`` is
+    the first light's, and ``error_maps["flip"]`` holds its ꟻLIP map (float32 [H, W]). ``width``,
+    ``height``, ``camera``, ``render_settings``, ``progress``: as :func:`wsoft.render` takes them
+    (errors are measured on the data window's pixels when the settings have one)."""
     import time
 
     from wsoft.parallel import compile_time, resolve_device
@@ -162,7 +202,8 @@ def compare(scene, techniques, *, samples: int = 256, ground_truth: GroundTruth 
         for l in built.lights[label]:
             ref_key = built.channels[ref_label] if ground_truth is None else ground_truth_key(ctx, ground_truth, l)
             errors.setdefault(label, {})[ctx.label(l)] = add_error_pass(ctx, label, built.channels[label], ref_key, l)
-    extra = [k for m in errors.values() for k in m.values()]
+    flips = {label: Key("flip", technique=label) for label in errors}
+    extra = [k for m in errors.values() for k in m.values()] + list(flips.values())
     res, records, _ = execute(built, dev, extra=extra, progress=progress)
     t1 = time.perf_counter()
     fs = frames_of(built, res, records, 1e3 * (t1 - t0), compile_ms=1e3 * compile_time(t0, t1)[0])
@@ -171,5 +212,7 @@ def compare(scene, techniques, *, samples: int = 256, ground_truth: GroundTruth 
         st["errors"] = {ll: res[k] for ll, k in m.items()}
         st["error"] = st["errors"][st["light_labels"][0]]
         st["error_against"] = f"reference ({ground_truth.samples if ground_truth else built.techniques[built.labels.index(ref_label)].params.samples} samples)"
+        if res[flips[label]] is not None:
+            fs[label].error_maps["flip"] = res[flips[label]]["map"]
     fs.stats["reference"] = ref_label
     return fs

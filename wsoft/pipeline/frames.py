@@ -29,6 +29,9 @@ class Frame:
     exr_names: dict[str, str] = dataclasses.field(default_factory=dict)
     """Channels written to the EXR under another name: ``V`` (and ``V_stderr``) under the name of
     the output product's visibility RenderVar (:mod:`wsoft.scene.render_settings`)."""
+    error_maps: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
+    """Per-pixel error maps a comparison measured (``flip``: ꟻLIP against the reference, float32
+    [H, W] in [0, 1]); not written to the EXR."""
 
     def __getitem__(self, name: str) -> np.ndarray:
         return self.channels[name]
