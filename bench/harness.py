@@ -138,26 +138,26 @@ def ground_truth(name: str, ref: dict, light: str | None):
 def measure(name: str, techniques: list, *, device: str, width: int, height: int, light: str | None, truth=None, repeats: int = 3,
             pixel_samples: int = 1):
     """Render ``techniques`` (a list as :func:`wsoft.render` takes) in one graph, with their error
-    against ``truth`` (a GroundTruth) when given: once to warm up (kernel compiles), then
-    ``repeats`` times. Returns the FrameSet whose frames carry each technique's median run (its
-    ``timings_ms_runs`` lists every run's total)."""
+    against ``truth`` (a GroundTruth) when given: once to warm up (kernel compiles), measuring the
+    errors (:func:`wsoft.compare`: the metric passes, ꟻLIP included, run once), then ``repeats``
+    times without them. Returns the FrameSet whose frames carry each technique's median run (its
+    ``timings_ms_runs`` lists every run's total) and the warm-up's errors (the techniques are
+    deterministic: every run gives the same V)."""
     import wsoft
 
     scene = load(name)
     kw = dict(width=width, height=height, light=first_light(name, light), device=device, pixel_samples=pixel_samples)
-
-    def once():
-        if truth is None:
-            return wsoft.render(scene, list(techniques), **kw)
-        return wsoft.compare(scene, list(techniques), ground_truth=truth, **kw)
-
-    once()
-    runs = [once() for _ in range(repeats)]
+    first = wsoft.render(scene, list(techniques), **kw) if truth is None else wsoft.compare(scene, list(techniques), ground_truth=truth, **kw)
+    runs = [wsoft.render(scene, list(techniques), **kw) for _ in range(repeats)]
     out = runs[0]
     for label in out:
         totals = [r[label].stats["timings_ms"]["total"] for r in runs]
         med = runs[totals.index(statistics.median_low(totals))][label]
         med.stats["timings_ms_runs"] = totals
+        for k in ("error", "errors", "error_against"):
+            if k in first[label].stats:
+                med.stats[k] = first[label].stats[k]
+        med.error_maps = first[label].error_maps
         out.frames[label] = med
     return out
 

@@ -293,18 +293,8 @@ def ground_truth_frame(scene: Scene, samples: int, *, width, height, camera, lig
 
     fr = render(scene, "reference", width=width, height=height, camera=camera, light=light, device=device, pixel_samples=pixel_samples,
                 samples=samples, seed=0)
-    return GroundTruth(ground_truth_lights(fr), samples), fr
-
-
-def ground_truth_lights(fr) -> dict[str, dict[str, np.ndarray]]:
-    """A reference frame's channels per light label, as :class:`~wsoft.metrics.GroundTruth` holds them."""
-    out = {}
-    for label in fr.stats["light_labels"]:
-        out[label] = {"V": fr[f"V.{label}"], "V_stderr": fr[f"V_stderr.{label}"], "A": fr["A"]}
-        for c in "RGB":
-            if c in fr.channels:
-                out[label][c] = fr[c]
-    return out
+    lights = {label: {"V": fr[f"V.{label}"], "V_stderr": fr[f"V_stderr.{label}"], "A": fr["A"]} for label in fr.stats["light_labels"]}
+    return GroundTruth(lights, samples, shaded={c: fr[c] for c in "RGB"}), fr
 
 
 def compare_sequence(scene, techniques, *, frames, samples: int = 256, ground_truth=None, width: int | None = None,
