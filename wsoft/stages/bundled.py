@@ -17,7 +17,7 @@ import os
 import sys
 from collections.abc import Callable, Sequence
 
-from wsoft.stages.scenes import basics, bridge, city, forest, organic, stsv, tower, tunnel_fan
+from wsoft.stages.scenes import animated, basics, bridge, city, forest, organic, stsv, tower, tunnel_fan
 from wsoft.usd_scenes import folder as bundled_folder
 
 # name -> generator(out_dir) -> {"file": path, "triangles": n, ...}
@@ -44,6 +44,10 @@ SCENES: dict[str, Callable[[str], dict[str, object]]] = {
     "factory": stsv.scene_factory,
     "greece": stsv.scene_greece,
     "wedge_overlap": stsv.scene_wedge_overlap,
+    "city_flyby": animated.scene_city_flyby,
+    "bridge_sun_sweep": animated.scene_bridge_sun_sweep,
+    "ramp_slide": animated.scene_ramp_slide,
+    "ramp_static": animated.scene_ramp_static,
 }
 
 
