@@ -19,11 +19,12 @@ from wsoft.parallel import compile_time, resolve_device
 from wsoft.pipeline.build import Built, as_techniques, build_graph, execute, is_several, technique_labels
 from wsoft.pipeline.context import RenderContext, TechniqueContext, Visibility
 from wsoft.pipeline.frames import Frame, FrameSet, frames_of
+from wsoft.pipeline.history import History
 from wsoft.pipeline.framing import DEFAULT_SIZE, Framing, check_sizes, frame_setup
 from wsoft.pipeline.loading import INSTANCING_MODES, instancing_plan, load_stage, with_render_settings
 from wsoft.pipeline.planning import plan, shadow_controls
 
-__all__ = ["DEFAULT_SIZE", "INSTANCING_MODES", "Built", "Frame", "FrameSet", "Framing", "RenderContext", "TechniqueContext", "Visibility",
+__all__ = ["DEFAULT_SIZE", "INSTANCING_MODES", "Built", "Frame", "FrameSet", "Framing", "History", "RenderContext", "TechniqueContext", "Visibility",
            "as_techniques", "build_graph", "check_sizes", "execute", "frame_setup", "frames_of", "instancing_plan", "is_several",
            "load_stage", "plan", "render", "shadow_controls", "technique_labels", "with_render_settings"]
 
@@ -41,6 +42,7 @@ def render(
     time_code: float | None = None,
     render_settings: str | None = None,
     progress=None,
+    history=None,
     **params,
 ) -> Frame | FrameSet:
     """Render on ``scene`` (a :class:`Scene` or a USD path) and return a :class:`Frame`, or a
@@ -62,6 +64,10 @@ def render(
     ``progress``: called as ``progress(done, total, pass_name)`` before each pass of the graph and
     ``progress(total, total, None)`` after the last (the command line's progress bar).
 
+    ``history``: a sequence's :class:`~wsoft.pipeline.history.History` (:mod:`wsoft.pipeline.sequence`
+    passes one through its frames): time-aware techniques read their previous frame from it and
+    stochastic ones seed with the frame's index; None renders a single frame.
+
     With a ``dataWindowNDC`` the whole image is rendered and the frame's channels are the data
     window's pixels (``stats["framing"]["data_window"]``), the same values as the whole render's.
     """
@@ -73,7 +79,7 @@ def render(
 
     t0 = time.perf_counter()
     built = build_graph(scene, technique, width=width, height=height, camera=camera, light=light, device=dev,
-                        pixel_samples=pixel_samples, params=params)
+                        pixel_samples=pixel_samples, params=params, history=history)
     res, records, _ = execute(built, dev, progress=progress)
     t1 = time.perf_counter()
     fs = frames_of(built, res, records, 1e3 * (t1 - t0), compile_ms=1e3 * compile_time(t0, t1)[0])

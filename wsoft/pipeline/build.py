@@ -89,14 +89,15 @@ class Built:
 
 
 def build_graph(scene: Scene, technique, *, width: int | None = None, height: int | None = None, camera=None, light=None,
-                device: str = "cpu", pixel_samples: int = 1, params: dict | None = None, strict: bool = True) -> Built:
+                device: str = "cpu", pixel_samples: int = 1, params: dict | None = None, strict: bool = True, history=None) -> Built:
     """Register every pass for ``technique`` (one or several, see :func:`render`) on ``scene``.
 
     ``width``, ``height``, ``camera``: as :func:`frame_setup` resolves them (None: the scene's
     render settings, else the defaults).
 
     A technique that does not support a light skips it; with ``strict`` a technique left with no
-    light is an error naming the reason (``wsoft plan`` builds with ``strict=False`` to list it)."""
+    light is an error naming the reason (``wsoft plan`` builds with ``strict=False`` to list it).
+    ``history``: a sequence's :class:`~wsoft.pipeline.history.History` (None: a single frame)."""
     if not scene.lights:
         why = ""
         if scene.unshadowed_lights:
@@ -118,7 +119,8 @@ def build_graph(scene: Scene, technique, *, width: int | None = None, height: in
         m[:3, 3] -= origin
         fr = dataclasses.replace(fr, camera=dataclasses.replace(cam, to_world=m))
     lights = [scene.find_light(str(light))] if light else list(scene.lights)
-    ctx = RenderContext(scene, fr.camera, fr.width, fr.height, device, pixel_samples, framing=fr, origin=origin, origin_warning=origin_warning)
+    ctx = RenderContext(scene, fr.camera, fr.width, fr.height, device, pixel_samples, framing=fr, origin=origin, origin_warning=origin_warning,
+                        history=history)
     built = Built(ctx, labels, techs, {}, {}, {}, {})
     built.instancing = instancing
     for tech, label in zip(techs, labels):

@@ -67,8 +67,9 @@ class RenderContext:
     """What techniques build their passes with; providers register the shared passes once."""
 
     def __init__(self, scene: Scene, camera: Camera, width: int, height: int, device: str, pixel_samples: int = 1,
-                 framing: Framing | None = None, origin: np.ndarray | None = None, origin_warning: str = ""):
+                 framing: Framing | None = None, origin: np.ndarray | None = None, origin_warning: str = "", history=None):
         self.scene = scene
+        self.history = history  # a sequence's wsoft.pipeline.history.History (None: a single frame)
         self.origin = origin  # world position of the frame's origin (None: world space; see wsoft.pipeline.framing.local_origin)
         self.origin_warning = origin_warning
         self.camera = camera
@@ -418,6 +419,28 @@ class TechniqueContext:
         """``base[light]suffix``, or ``base[label:light]suffix`` for a labelled instance."""
         inner = self.label(light) if self.label_ == self.tech.name else f"{self.label_}:{self.label(light)}"
         return f"{base}[{inner}]{suffix}"
+
+    def frame_seed(self, seed: int) -> int:
+        """The seed of this frame's random samples: ``seed`` in a single frame; in a sequence that
+        reseeds (:class:`~wsoft.pipeline.history.History`), ``seed`` plus the frame's index, so the
+        noise of a stochastic estimate changes from frame to frame as it does on screen."""
+        return self.ctx.history.seed(seed) if self.ctx.history is not None else int(seed)
+
+    def previous(self, light: Light) -> dict | None:
+        """What this technique kept for ``light`` in the previous frame of its sequence (:meth:`keep`),
+        or None: a single frame, or the first frame of a sequence."""
+        h = self.ctx.history
+        return h.previous(self.label_, self.label(light)) if h is not None else None
+
+    def keep(self, light: Light, state: dict) -> None:
+        """Keep ``state`` for ``light`` for the next frame of the sequence (nothing in a single frame)."""
+        if self.ctx.history is not None:
+            self.ctx.history.keep(self.label_, self.label(light), state)
+
+    @property
+    def in_sequence(self) -> bool:
+        """Is this frame part of a sequence (a history is kept)?"""
+        return self.ctx.history is not None
 
     def visibility(self, vis: wp.array, stderr: wp.array | None = None) -> Visibility:
         return Visibility(vis, stderr)

@@ -12,10 +12,13 @@ instances moving) builds it again. Each frame's stats say which (``sequence.scen
 ``refit`` or ``built``) and what loading, refitting and uploading cost. Compiled kernels are shared
 by the process.
 
-Techniques with a ``seed`` (the reference, rtdenoise, the object-based techniques' sample sets)
-draw other light samples in each frame (seed + the frame's index) unless ``reseed=False``: what an
-engine does, so that a stochastic technique's noise changes from frame to frame as it would on
-screen (the crawl :func:`wsoft.metrics.temporal.temporal_std` measures).
+Each frame's render gets the sequence's :class:`~wsoft.pipeline.history.History`: the per-pixel
+stochastic techniques (the reference, rtdenoise) draw other light samples in each frame (seed +
+the frame's index) unless ``reseed=False``, as an engine does, so that their noise changes from
+frame to frame as it would on screen (the crawl :func:`wsoft.metrics.temporal.temporal_std`
+measures); time-aware techniques (rtdenoise's temporal accumulation) read what they kept from the
+previous frame. The object-based techniques' sample sets are the papers' fixed patterns, the same
+in every frame.
 
 :func:`compare_sequence` adds a ground truth per frame (the reference at ``samples``, seed 0 in
 every frame: its noise does not crawl) and each technique's error against it, and the temporal
@@ -39,6 +42,7 @@ import numpy as np
 
 from wsoft.errors import ParameterError
 from wsoft.params import parse_frames
+from wsoft.pipeline.history import History
 from wsoft.scene.types import Scene
 
 
@@ -193,22 +197,6 @@ class _Loader:
                        "refit_ms": round(1e3 * (t3 - t2), 3) if how == "refit" else 0.0, "scene": how}
 
 
-def _reseeded(techs: list, index: int, reseed: bool) -> list:
-    """The techniques of frame ``index``: those with a ``seed`` draw seed + index when ``reseed``."""
-    from wsoft.techniques import create
-
-    if not reseed or index == 0:
-        return techs
-    out = []
-    for t in techs:
-        p = dataclasses.asdict(t.params)
-        if "seed" in p:
-            p["seed"] = int(p["seed"] + index) % (2**31 - 1)
-            t = create(t.name, p)
-        out.append(t)
-    return out
-
-
 def _one_frame_stats(fr) -> dict:
     """The frame's own times: the techniques' frame ms (one or several)."""
     if hasattr(fr, "frames"):
@@ -245,14 +233,15 @@ def render_sequence(scene, technique, *, frames, width: int | None = None, heigh
     techs = as_techniques(technique, params)
     several = isinstance(technique, (list, tuple)) and not (isinstance(technique, tuple) and len(technique) == 2 and isinstance(technique[1], dict))
     seq = Sequence(times=times, frames=[], warnings=list(loader.warnings))
+    history = History(reseed)
     for i, t in enumerate(times):
         sc, info = loader.load(t)
         if i == 0:
             seq.render_settings = sc.render_settings
-        mine = _reseeded(techs, i, reseed)
         t0 = _time.perf_counter()
-        fr = render(sc, mine if several else mine[0], width=width, height=height, camera=camera, light=light, device=device,
-                    pixel_samples=pixel_samples)
+        fr = render(sc, techs if several else techs[0], width=width, height=height, camera=camera, light=light, device=device,
+                    pixel_samples=pixel_samples, history=history)
+        history.advance()
         info["render_ms"] = round(1e3 * (_time.perf_counter() - t0), 3)
         info["frame_ms"] = _one_frame_stats(fr)
         _upload_note(fr, info)
@@ -317,6 +306,7 @@ def compare_sequence(scene, techniques, *, frames, samples: int = 256, ground_tr
     loader, times = _frames_and_loader(scene, frames, render_settings, instancing)
     techs = as_techniques(list(techniques) if is_several(techniques) else [techniques], {})
     seq = Sequence(times=times, frames=[], warnings=list(loader.warnings))
+    history = History(reseed)
     truths: list = []
     for i, t in enumerate(times):
         sc, info = loader.load(t)
@@ -330,8 +320,9 @@ def compare_sequence(scene, techniques, *, frames, samples: int = 256, ground_tr
             gt = ground_truth(sc, t)
         info["ground_truth_ms"] = round(1e3 * (_time.perf_counter() - t0), 3)
         t0 = _time.perf_counter()
-        fs = compare(sc, _reseeded(techs, i, reseed), ground_truth=gt, width=width, height=height, camera=camera, light=light,
-                     device=device, pixel_samples=pixel_samples)
+        fs = compare(sc, techs, ground_truth=gt, width=width, height=height, camera=camera, light=light, device=device,
+                     pixel_samples=pixel_samples, history=history)
+        history.advance()
         info["render_ms"] = round(1e3 * (_time.perf_counter() - t0), 3)
         info["frame_ms"] = _one_frame_stats(fs)
         _upload_note(fs, info)

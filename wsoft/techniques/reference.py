@@ -74,7 +74,7 @@ class Reference(Technique):
         L = ctx.light_gpu(light)
         scene = ctx.scene
         dynamic = p.casters == "dynamic"
-        pattern = reference_pattern(p.samples, p.seed, p.jitter)
+        pattern = reference_pattern(p.samples, ctx.frame_seed(p.seed), p.jitter)
         disk = disk_shaped(light)
 
         name = ("reference_alpha" if scene.has_cutouts else "reference") + ("_dynamic" if dynamic else "")
