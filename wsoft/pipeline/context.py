@@ -438,6 +438,11 @@ class TechniqueContext:
             self.ctx.history.keep(self.label_, self.label(light), state)
 
     @property
+    def origin(self):
+        """The render's local origin in world space (None: world space; :func:`~wsoft.pipeline.framing.local_origin`)."""
+        return self.ctx.origin
+
+    @property
     def in_sequence(self) -> bool:
         """Is this frame part of a sequence (a history is kept)?"""
         return self.ctx.history is not None

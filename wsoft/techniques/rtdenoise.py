@@ -56,9 +56,18 @@ light's front fraction (the shared exact pass, :mod:`wsoft.raster.horizon`), so 
 straddles is not noisy where half its rays leave behind it; a pixel none of whose rays is in front
 takes its neighbours' fraction (or 0 when none has one).
 
-A single frame is spatial only: SIGMA's temporal stabilisation and SVGF's temporal accumulation
-need a sequence of frames with motion vectors, which wsoft does not render yet. Bakes need
-``denoiser=none`` (a bake point has no pixel neighbours to filter with).
+**Temporal accumulation** (in a sequence, :mod:`wsoft.pipeline.sequence`; ``history`` frames at
+most): before the spatial filter the visible fraction is accumulated over the frames as SVGF does
+(§4.1; :mod:`wsoft.accel.temporal`): each sample's point reprojected into the previous frame
+through the G-buffer's points and the previous camera, kept where that frame saw the same surface
+(within 2 pixel footprints, normals within 0.9), the history clamped to the current 3 x 3
+neighbourhood's range and averaged with weight ``1 / n`` (``n`` the history's length, at most
+``history``). Each frame draws other rays (the seed plus the frame's index), so the average
+converges. SIGMA orders it the other way (spatial filter, then temporal stabilisation of the
+filtered signal); this reading follows SVGF for both denoisers. The counters say ``history``
+(``first frame`` or ``reprojected``), ``history_samples``, ``disoccluded`` and
+``history_mean_length``. A single frame is spatial only. Bakes need ``denoiser=none`` (a bake point
+has no pixel neighbours to filter with).
 
 **Defaults by measurement** (penumbra MAE against 256 reference samples, ``box_plane``,
 ``contact``, ``penumbra_ramp``, 640 x 480): 2 rays (0.026, 0.029, 0.031; 1 ray: 0.041, 0.040,
@@ -85,6 +94,7 @@ import numpy as np
 import warp as wp
 
 from wsoft.accel.denoise import LIT, UNKNOWN, atrous_filter, penumbra_filter
+from wsoft.accel.temporal import accumulate
 from wsoft.lightspace.light import LightGPU, disk_shaped, in_front, light_point
 from wsoft.lightspace.samples import LightSamples, sample_coords
 from wsoft.params import check_ranges
@@ -120,6 +130,9 @@ class RTDenoiseParams:
     sharp_below: float = param(0.5, "penumbra: below this penumbra radius (pixels) the filter gives way to the pixel's own estimate "
                                     "(a smoothstep; SIGMA: 2, for a signal its temporal pass has accumulated)", range=(0.05, 8.0))
     tile: int = param(16, "penumbra: tile side in pixels for skipping all-lit and all-umbra tiles (8 or 16; SIGMA: 16)", range=(8, 16))
+    history: int = param(8, "in a sequence: temporal accumulation over at most this many frames before the spatial filter (the previous "
+                            "frame reprojected through the G-buffer's points, disocclusions restart, history clamped to the 3 x 3 "
+                            "neighbourhood; 1: this frame only); a single frame has no history", range=(1, 64))
     plane_sensitivity: float = param(0.02, "penumbra: largest distance to the centre's tangent plane a tap may have, a fraction of "
                                            "the frustum's size at the centre (SIGMA's planeDistanceSensitivity)", range=(0.001, 1.0))
 
@@ -298,7 +311,7 @@ class RTDenoise(Technique):
         L = ctx.light_gpu(light)
 
         def run_trace(res):
-            est = trace_estimate(res[scene_key], L, light, res[gbuf], p.samples, p.seed, p.radius_scale)
+            est = trace_estimate(res[scene_key], L, light, res[gbuf], p.samples, ctx.frame_seed(p.seed), p.radius_scale)
             c = ctx.counters(light)
             traced, blocked = est.traced.numpy(), est.blocked.numpy()
             c.update(samples=p.samples, denoiser=p.denoiser, rays=int(traced.astype(np.int64).sum()),
@@ -314,10 +327,16 @@ class RTDenoise(Technique):
             gb, est = res[gbuf], res[rays_key]
             if p.denoiser == "none":
                 return {out: ctx.visibility(est.vis)}
+            frac = est.frac
+            if ctx.in_sequence and p.history > 1:
+                prev = ctx.previous(light)
+                frac, state = accumulate(gb, camera_gpu(ctx.camera), ctx.origin, frac, prev["temporal"] if prev else None, p.history,
+                                         ctx.device, counters=ctx.counters(light))
+                ctx.keep(light, {"temporal": state})
             if p.denoiser == "atrous":
-                frac = atrous_filter(gb, est.frac, p.iterations, p.sigma_z, p.sigma_n, p.sigma_l, ctx.device, boost=p.variance_boost)
+                frac = atrous_filter(gb, frac, p.iterations, p.sigma_z, p.sigma_n, p.sigma_l, ctx.device, boost=p.variance_boost)
             else:
-                frac = penumbra_filter(gb, camera_gpu(ctx.camera), est.frac, est.pen, tile=p.tile, taps=p.taps, max_radius=p.max_radius,
+                frac = penumbra_filter(gb, camera_gpu(ctx.camera), frac, est.pen, tile=p.tile, taps=p.taps, max_radius=p.max_radius,
                                        sharp_below=p.sharp_below, plane_sensitivity=p.plane_sensitivity, seed=p.seed, device=ctx.device,
                                        counters=ctx.counters(light))
             vis = wp.empty(gb.count, dtype=float, device=ctx.device)
