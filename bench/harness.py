@@ -32,7 +32,8 @@ SWEEPS = {"foundation": "wsoft.bench.foundation", "filtered": "wsoft.bench.filte
           "essm-table1": "wsoft.bench.essm_table1", "essm-table2": "wsoft.bench.essm_table2", "ssm": "wsoft.bench.ssm", "izb": "wsoft.bench.izb",
           "ssm-table1": "wsoft.bench.ssm_table1", "ssm-table2": "wsoft.bench.ssm_table2", "pareto": "wsoft.bench.pareto",
           "adversarial": "wsoft.bench.adversarial", "usd_pipeline": "wsoft.bench.usd_pipeline",
-          "instancing": "wsoft.bench.instancing", "stsv": "wsoft.bench.stsv", "modern": "wsoft.bench.modern"}
+          "instancing": "wsoft.bench.instancing", "stsv": "wsoft.bench.stsv", "modern": "wsoft.bench.modern",
+          "temporal": "wsoft.bench.temporal"}
 REFERENCE_VERSION = 4  # bump when the reference changes (2: rows render one named light; 3: the receiver's horizon, ray offsets from the frame's extent; 4: the shaded R, G, B for ꟻLIP)
 _SCENE_DIR: Path | None = None
 
@@ -97,24 +98,30 @@ def first_light(name: str, light: str | None) -> str:
 
 
 def reference(name: str, *, width: int, height: int, light: str | None, samples: int, seed: int = 0, camera: str | None = None,
-              device: str | None = None, casters: str = "all") -> dict:
+              device: str | None = None, casters: str = "all", time: float | None = None, scene=None) -> dict:
     """The cached reference (V, V_stderr, A, its shaded image R, G, B lit by that light alone, and
     the ms it took) for a view of one light of a scene (``light``: a path or name; None: the first
     shadow-casting light).
 
-    ``casters = "dynamic"``: only the dynamic casters occlude (the ground truth of Salzman's mask)."""
+    ``casters = "dynamic"``: only the dynamic casters occlude (the ground truth of Salzman's mask).
+    ``time``: the stage at that time code (a sequence's frame; ``scene``: the stage already loaded
+    there), a key of the cache; None: as :func:`load` reads it."""
     import wsoft
 
     f = scene_file(name)
     st = os.stat(f)
     light = first_light(name, light)
     ident = json.dumps([os.path.abspath(f), st.st_size, st.st_mtime_ns, camera, light, width, height, samples, seed, REFERENCE_VERSION]
-                       + ([casters] if casters != "all" else []))
+                       + ([casters] if casters != "all" else []) + ([float(time)] if time is not None else []))
     path = cache_dir() / (hashlib.sha256(ident.encode()).hexdigest()[:24] + ".npz")
     if path.exists():
         z = np.load(path)
         return {k: z[k] for k in z.files} | {"cached": True, "samples": samples}
-    fr = wsoft.render(load(name), "reference", width=width, height=height, camera=camera, light=light, device=device, samples=samples, seed=seed, casters=casters)
+    if scene is None:
+        from wsoft.pipeline import load_stage
+
+        scene = load(name) if time is None else load_stage(f, time=time)
+    fr = wsoft.render(scene, "reference", width=width, height=height, camera=camera, light=light, device=device, samples=samples, seed=seed, casters=casters)
     out = {"V": fr.V, "V_stderr": fr["V_stderr"], "A": fr["A"], "R": fr["R"], "G": fr["G"], "B": fr["B"],
            "ms": np.float64(fr.stats["timings_ms"]["total"])}
     tmp = path.with_suffix(".tmp.npz")

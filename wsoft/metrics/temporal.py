@@ -153,7 +153,7 @@ def flicker(v_prev: np.ndarray, v_cur: np.ndarray, r_prev: np.ndarray, r_cur: np
     bad = ~np.isfinite(dv)
     diff = np.where(bad, 1.0, np.abs(dv - dr))
     n = len(diff)
-    return {"pixels": n, "flicker": float(diff.mean()) if n else 0.0,
+    return {"pixels": n, "flicker": float(diff.mean()) if n else 0.0, "flicker_sd": float(diff.std()) if n else 0.0,
             "change": float(np.where(bad, 1.0, np.abs(dv)).mean()) if n else 0.0,
             "reference_change": float(np.abs(dr).mean()) if n else 0.0, "nonfinite": int(bad.sum()),
             "disoccluded": pairs.disoccluded, "covered": pairs.covered, "reprojected": pairs.reprojected}
@@ -181,15 +181,21 @@ def temporal_std(vs: list[np.ndarray], covered: np.ndarray) -> float:
     return float(np.std(stack, axis=0, ddof=1).mean())
 
 
-def sequence_summary(per_pair: list[dict], errors: list[dict], times: list[float], noise: list[float] | None = None) -> dict:
+def sequence_summary(per_pair: list[dict], errors: list[dict], times: list[float], noise: list[float] | None = None,
+                     own_noise: list[float] | None = None) -> dict:
     """One technique over a sequence: flicker (mean over frame pairs, each weighted by its paired
-    pixels), the mean and worst per-frame error (``errors``: the metric pass's dicts, one per frame)
-    and, with ``noise`` (the reference's :func:`flicker_noise` per pair), the mean noise floor."""
+    pixels) and its standard error (``flicker_se``: the pixels' spread over the square root of
+    their number, pairs combined), the mean and worst per-frame error (``errors``: the metric pass's
+    dicts, one per frame); with ``noise`` (the reference's :func:`flicker_noise` per pair) the mean
+    noise floor ``flicker_noise``; with ``own_noise`` (the technique's own, from its standard
+    errors) ``own_noise`` and ``flicker_excess`` = flicker − own_noise, what its noise does not
+    explain (within ``flicker_se`` of 0: its frames change by their noise only)."""
     n = sum(p["pixels"] for p in per_pair)
     out = {
         "frames": len(errors),
         "pairs": len(per_pair),
         "flicker": float(sum(p["flicker"] * p["pixels"] for p in per_pair) / n) if n else 0.0,
+        "flicker_se": float(math.sqrt(sum(p["pixels"] * p.get("flicker_sd", 0.0) ** 2 for p in per_pair)) / n) if n else 0.0,
         "change": float(sum(p["change"] * p["pixels"] for p in per_pair) / n) if n else 0.0,
         "reference_change": float(sum(p["reference_change"] * p["pixels"] for p in per_pair) / n) if n else 0.0,
         "paired_pixels": n,
@@ -200,7 +206,10 @@ def sequence_summary(per_pair: list[dict], errors: list[dict], times: list[float
     if errors:
         worst = int(np.argmax([e["mae_penumbra"] if e["penumbra_pixels"] else e["mae"] for e in errors]))
         out["worst_frame"] = {"time": times[worst], "mae": errors[worst]["mae"], "mae_penumbra": errors[worst]["mae_penumbra"]}
+    w = [p["pixels"] for p in per_pair]
     if noise is not None and per_pair:
-        w = [p["pixels"] for p in per_pair]
         out["flicker_noise"] = float(np.average(noise, weights=w)) if sum(w) else 0.0
+    if own_noise is not None and per_pair and sum(w):
+        out["own_noise"] = float(np.average(own_noise, weights=w))
+        out["flicker_excess"] = out["flicker"] - out["own_noise"]
     return out

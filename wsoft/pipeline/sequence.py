@@ -298,7 +298,8 @@ def compare_sequence(scene, techniques, *, frames, samples: int = 256, ground_tr
     ``stats["errors"]`` per technique; ``summary["temporal"][label][light]`` holds
     :func:`~wsoft.metrics.temporal.sequence_summary` (flicker against the ground truth, pixels
     paired through the camera's motion; mean and worst error; the ground truth's noise floor
-    ``flicker_noise``) and, on a static sequence (the stage authors no time sample),
+    ``flicker_noise``; for a technique with standard errors, its own ``own_noise`` and
+    ``flicker_excess``) and, on a static sequence (the stage authors no time sample),
     ``temporal_std`` (a stochastic technique's crawl) beside the reference's own."""
     from wsoft.metrics import compare
     from wsoft.pipeline import as_techniques, is_several
@@ -351,7 +352,8 @@ def temporal_measures(seq: Sequence, truths: list, static: bool) -> dict:
         first = seq.frames[0][label]
         out[label] = {}
         for ll in first.stats["light_labels"]:
-            pairs, noise, errors = [], [], []
+            pairs, noise, own, errors = [], [], [], []
+            noisy = f"V_stderr.{ll}" in first.channels
             for k, fs in enumerate(seq.frames):
                 fr = fs[label]
                 errors.append(fr.stats["errors"][ll])
@@ -362,7 +364,9 @@ def temporal_measures(seq: Sequence, truths: list, static: bool) -> dict:
                 pp = pair_pixels(prev.channels, fr.channels, FrameCamera.of(prev.stats), FrameCamera.of(fr.stats))
                 pairs.append(flicker(prev[f"V.{ll}"], fr[f"V.{ll}"], g0["V"], g1["V"], pp))
                 noise.append(flicker_noise(g0["V_stderr"], g1["V_stderr"], pp))
-            s = sequence_summary(pairs, errors, seq.times, noise)
+                if noisy:
+                    own.append(flicker_noise(prev[f"V_stderr.{ll}"], fr[f"V_stderr.{ll}"], pp))
+            s = sequence_summary(pairs, errors, seq.times, noise, own if noisy else None)
             if static and len(seq.frames) > 1:
                 covered = np.all([np.asarray(fs[label]["A"]) > 0 for fs in seq.frames], axis=0)
                 s["temporal_std"] = temporal_std([fs[label][f"V.{ll}"] for fs in seq.frames], covered)
