@@ -12,15 +12,18 @@ import dataclasses
 import math
 
 
-def param(default, help: str, *, range: tuple[float, float] | None = None, **kw):
+def param(default, help: str, *, range: tuple[float, float] | None = None, choices: tuple[str, ...] | None = None, **kw):
     """A parameter field with its meaning (shown by ``wsoft techniques``).
 
     ``range``: for numbers, the closed interval a value must lie in (checked by
     :func:`check_ranges`, shown in the manual). Floats always must be finite unless the range's
-    upper end is ``inf`` (``budget = inf`` means unbounded)."""
+    upper end is ``inf`` (``budget = inf`` means unbounded). ``choices``: the values a text
+    parameter may take (checked by :func:`check_ranges`, shown in the manual's range column)."""
     meta = {"help": help, **kw}
     if range is not None:
         meta["range"] = range
+    if choices is not None:
+        meta["choices"] = tuple(choices)
     return dataclasses.field(default=default, metadata=meta)
 
 
@@ -32,9 +35,14 @@ def check(cond: bool, msg: str) -> None:
 
 def check_ranges(p) -> None:
     """Check every numeric field of the dataclass ``p`` against its declared ``range``, and that
-    float values are finite (``inf`` only where the range allows it). NaN is never valid."""
+    float values are finite (``inf`` only where the range allows it), and every field with declared
+    ``choices`` against them. NaN is never valid."""
     for f in dataclasses.fields(p):
         v = getattr(p, f.name)
+        choices = f.metadata.get("choices")
+        if choices is not None:
+            check(v in choices, f"{f.name} {v!r} is not one of {', '.join(choices)}")
+            continue
         if isinstance(v, bool) or not isinstance(v, (int, float)):
             continue
         lo, hi = f.metadata.get("range", (-math.inf, math.inf))
@@ -45,12 +53,32 @@ def check_ranges(p) -> None:
 
 
 def range_text(f) -> str:
-    """The declared range of a field as text (empty if none)."""
+    """The declared range (or choices) of a field as text (empty if none)."""
+    if "choices" in f.metadata:
+        return ", ".join(f.metadata["choices"])
     r = f.metadata.get("range")
     if r is None:
         return ""
     lo, hi = r
     return f"{lo:g}..{hi:g}"
+
+
+VIEWS = ("fitted", "stable")
+"""How a shadow-map technique's light view is fitted (:class:`LightViewParams`)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class LightViewParams:
+    """The light view of a technique that reads a light depth map fitted to the receivers (``hard``,
+    ``pcf``, ``pcss``, the prefiltered and SAT-based maps, ``salzman``, ``ssm``): a technique's own
+    ``Params`` subclasses it. ``fitted``: per frame, tight around the receivers the camera sees
+    (:func:`~wsoft.lightspace.fit.fit_light_view`); ``stable``: a view whose texel size and texel grid
+    stay put while the camera turns or moves a little (:func:`~wsoft.lightspace.stable.fit_stable_view`),
+    against shimmering shadow edges in motion."""
+
+    view: str = param("fitted", "light view: fitted (per frame, tight around the receivers in view) or stable (size on a 2^(1/4) ladder, "
+                                "window on whole texels of a fixed grid, depth range snapped: edges that do not shimmer in motion, "
+                                "texels up to 19 % coarser)", choices=VIEWS)
 
 
 def parse_frames(text: str) -> list[float]:

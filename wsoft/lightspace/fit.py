@@ -23,6 +23,16 @@ def _basis_from_axis(z: np.ndarray) -> np.ndarray:
     return np.stack([x, y, z], axis=1)
 
 
+def distant_axes(light: Light) -> np.ndarray:
+    """A distant light's view axes (columns x, y, view axis): its frame, looking along its emission."""
+    return np.stack([light.frame[:, 0], light.frame[:, 1], -light.frame[:, 2]], axis=1)
+
+
+def local_axes(light: Light) -> np.ndarray:
+    """A rect or disk light's view axes (columns x, y, view axis): its frame, right-handed, looking along −Z."""
+    return np.stack([light.frame[:, 0], -light.frame[:, 1], -light.frame[:, 2]], axis=1)
+
+
 def _frame_bounds(p: np.ndarray, origin: np.ndarray, axes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(min, max) per axis of :func:`to_frame` of the points ``p`` (N >= 1), by row blocks over
     the thread pool without keeping the transformed points: the same values as transforming
@@ -299,7 +309,7 @@ def fit_light_view(
     ext = frame_extent_of_bounds(rlo, rhi, light)
     growth = 0.0
     if light.kind == LIGHT_DISTANT:
-        axes = np.stack([light.frame[:, 0], light.frame[:, 1], -light.frame[:, 2]], axis=1)  # view along emission
+        axes = distant_axes(light)
         center = 0.5 * (rlo + rhi)
         vlo, vhi = _frame_bounds(rec, center, axes)
         corners = np.array([[x, y, z] for x in (scene_lo[0], scene_hi[0]) for y in (scene_lo[1], scene_hi[1]) for z in (scene_lo[2], scene_hi[2])])
@@ -330,7 +340,7 @@ def fit_light_view(
             d = rmean - origin
             axes = _basis_from_axis(d if np.linalg.norm(d) > 1e-9 * ext else -light.frame[:, 2])
         else:
-            axes = np.stack([light.frame[:, 0], -light.frame[:, 1], -light.frame[:, 2]], axis=1)  # right-handed, view along −Z
+            axes = local_axes(light)
         zmin_ok = 1e-6 * ext
         # a rect or disk light emits forward only: receivers behind its plane see nothing of it
         # (the horizon rule darkens them), so they are neither fitted nor counted outside, only counted

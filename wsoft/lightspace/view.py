@@ -137,6 +137,9 @@ class LightView:
     receivers_behind: int = 0  # receivers behind a rect or disk light's emitting plane (neither fitted nor outside)
     extent: float = 1.0  # the frame's scale: diagonal of the receivers' bounds with the light's position (see frame_extent)
     growth: float = 0.0  # how far a soft view's window was widened for casters beyond the receivers (window units)
+    # a stable view's quantities (wsoft.lightspace.stable): ladder radius, texel size (window units),
+    # window centre in whole texels from its anchor (snap_offset), depth step; None: a fitted view
+    snap: dict | None = None
 
     def gpu(self) -> ViewGPU:
         g = ViewGPU()

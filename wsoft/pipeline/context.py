@@ -21,7 +21,9 @@ from wsoft.errors import DeclarationError
 from wsoft.graph import FrameGraph, Key, Pass
 from wsoft.lightspace.light import disk_shaped, light_gpu
 from wsoft.lightspace.fit import fit_light_view
+from wsoft.lightspace.stable import fit_stable_view
 from wsoft.lightspace.view import DEPTH_CLEAR, far_light, outside_view_warning
+from wsoft.params import VIEWS
 from wsoft.pipeline.framing import Framing
 from wsoft.raster.camera import camera_gpu
 from wsoft.raster.gbuffer import GBuffer, render_gbuffer
@@ -82,6 +84,12 @@ class RenderContext:
         self.counters: dict[str, Any] = {"frame": {}, "passes": {}, "techniques": {}}
         self._labels = {l.path: scene.light_label(l) for l in scene.lights}
         self.warnings: dict[str, list[str]] = {}  # pass name -> warnings it raised (a frame lists those of its passes)
+        self.fit_receivers: dict[str, np.ndarray] | None = None
+        """Light path -> world points [N, 3] that a stable light view (``view=stable``,
+        :func:`~wsoft.lightspace.stable.fit_stable_view`) is fitted to besides the frame's
+        receivers: a sequence renderer sets it to the receivers of all its frames (or a subset
+        with the same bounds), so the view is fitted once per sequence. None (or a light absent
+        from it): each frame's stable view is fitted to its own receivers. Fitted views ignore it."""
 
     def warn(self, pass_name: str, message: str) -> None:
         """A problem found while running a pass (receivers left unmapped, non-finite values): it
@@ -160,12 +168,17 @@ class RenderContext:
 
         return self.add(Pass("gbuffer_channels", (gk,), (GBUFFER_CHANNELS,), run, kind="resolve"))
 
-    def light_view(self, light: Light, size: int, soft: bool = False) -> Key:
+    def light_view(self, light: Light, size: int, soft: bool = False, view: str = "fitted") -> Key:
         """Resource: a :class:`LightView` of ``light`` fitted to the receivers in view.
 
-        ``soft``: widened so that casters blocking any part of the whole light are mapped."""
+        ``soft``: widened so that casters blocking any part of the whole light are mapped.
+        ``view``: ``fitted`` (:func:`fit_light_view`) or ``stable`` (:func:`fit_stable_view`: its
+        texel grid anchored at the world origin, fitted also to :attr:`fit_receivers`; its pass's
+        counters record ``view``, ``radius``, ``texel``, ``snap_offset``); each is its own resource,
+        shared by the techniques that ask for the same."""
         gk = self.gbuffer()
-        key = Key("light_view", self.label(light), variant=f"@{size}" + ("+soft" if soft else ""))
+        stable = _stable(view)
+        key = Key("light_view", self.label(light), variant=_view_variant(size, soft, stable))
         name = f"fit_{key}"
 
         probe = soft and light.kind != LIGHT_DISTANT and light.extent() > 0.0
@@ -177,12 +190,16 @@ class RenderContext:
             rec = gb.pos.numpy()[prim >= 0]
             lo, hi = self.scene.bounds
             distant = light.kind == LIGHT_DISTANT  # its depth range starts at the nearest caster over the receivers
-            fit = functools.partial(fit_light_view, light, rec, lo, hi, size, casters=self.scene.caster_points if soft or distant else None,
-                                    all_casters=lambda: self.scene.caster_points)
+            extra = {"anchor": self._world_origin(), "region": self._fit_region(light), "down": self._down()} if stable else {}
+            fit = functools.partial(fit_stable_view if stable else fit_light_view, light, rec, lo, hi, size,
+                                    casters=self.scene.caster_points if soft or distant else None, all_casters=lambda: self.scene.caster_points,
+                                    **extra)
             view = fit()
             if probe:
                 view = self._grown_for_casters(res[sk], light, view, fit, name)
             self.pass_counters(name)["receivers_outside"] = view.receivers_outside
+            if view.snap is not None:
+                self.pass_counters(name).update(view="stable", **view.snap)
             if light.one_sided:
                 self.pass_counters(name)["receivers_behind_light"] = view.receivers_behind
             if view.persp and far_light(light, *_bounds_of(rec)):
@@ -196,6 +213,22 @@ class RenderContext:
             return {key: view}
 
         return self.add(Pass(name, (gk,) if sk is None else (gk, sk), (key,), run, kind="light_map", light=self.label(light)))
+
+    def _world_origin(self) -> np.ndarray:
+        """The world origin in the frame's coordinates (a frame far from it works about :attr:`origin`)."""
+        return np.zeros(3) if self.origin is None else -np.asarray(self.origin, np.float64)
+
+    def _down(self) -> np.ndarray:
+        """The stage's downward direction (minus its up axis)."""
+        return -np.eye(3)[2 if self.scene.up_axis == "Z" else 1]
+
+    def _fit_region(self, light: Light) -> np.ndarray | None:
+        """The points :attr:`fit_receivers` gives for ``light``, in the frame's coordinates (None: none)."""
+        pts = None if self.fit_receivers is None else self.fit_receivers.get(light.path)
+        if pts is None:
+            return None
+        pts = np.asarray(pts, np.float64).reshape(-1, 3)
+        return pts if self.origin is None else pts - np.asarray(self.origin, np.float64)
 
     PROBE_SIZE = 64  # texels per side of the coarse map that finds casters a soft view's window must grow for
 
@@ -248,8 +281,9 @@ class RenderContext:
         return view
 
     def light_depth(self, light: Light, size: int, conservative: bool = False, soft: bool = False, inner: bool = False,
-                    opaque: bool = False, faces: str = "all") -> Key:
-        """Resource: a :class:`~wsoft.raster.depth_map.DepthMap` (alpha-tested only if the scene has
+                    opaque: bool = False, faces: str = "all", view: str = "fitted") -> Key:
+        """Resource: a :class:`~wsoft.raster.depth_map.DepthMap` of the :meth:`light_view` ``view``
+        (``fitted`` or ``stable``) of ``light`` (alpha-tested only if the scene has
         cutouts); ``inner``: the map of depths that certainly block a whole texel (inner coverage);
         ``opaque``: cutouts not alpha-tested (each covers every texel it touches: with
         ``conservative``, a map no occluder escapes); ``faces``: ``all``, or only ``back`` faces of
@@ -259,11 +293,11 @@ class RenderContext:
         never share a map."""
         sk = self.scene_arrays()
         casting = self.scene.casting_triangles(light)  # None: every triangle (no list, no extra work)
-        vk = self.light_view(light, size, soft)
+        vk = self.light_view(light, size, soft, view)
         alpha = self.scene.has_cutouts and not opaque
         flavour = (("_alpha" if alpha else "") + ("_inner" if inner else "_conservative" if conservative else "")
                    + ("" if faces == "all" else f"_{faces}"))
-        key = Key("light_depth", self.label(light), variant=f"@{size}" + ("+soft" if soft else ""), flavour=flavour)
+        key = Key("light_depth", self.label(light), variant=_view_variant(size, soft, _stable(view)), flavour=flavour)
         name = str(key)
 
         def run(res):
@@ -352,6 +386,18 @@ class RenderContext:
         return TechniqueContext(self, tech, label)
 
 
+def _stable(view: str) -> bool:
+    """Is ``view`` (a :data:`~wsoft.params.VIEWS` value) the stable one?"""
+    if view not in VIEWS:
+        raise DeclarationError(f"light view {view!r} is not one of {', '.join(VIEWS)}")
+    return view == "stable"
+
+
+def _view_variant(size: int, soft: bool, stable: bool) -> str:
+    """The variant of a light view's (and its depth maps') key: map size, ``+soft``, ``+stable``."""
+    return f"@{size}" + ("+soft" if soft else "") + ("+stable" if stable else "")
+
+
 def light_behind_warning(light: Light, n: int, total: int) -> str:
     """The warning for the ``n`` of ``total`` receivers behind a rect or disk light's plane."""
     d = ", ".join(f"{c:.3g}" for c in np.round(np.asarray(light.direction, np.float64), 6) + 0.0)
@@ -383,12 +429,12 @@ class TechniqueContext:
     def gbuffer(self) -> Key:
         return self.ctx.gbuffer()
 
-    def light_view(self, light: Light, size: int, soft: bool = False) -> Key:
-        return self.ctx.light_view(light, size, soft)
+    def light_view(self, light: Light, size: int, soft: bool = False, view: str = "fitted") -> Key:
+        return self.ctx.light_view(light, size, soft, view)
 
     def light_depth(self, light: Light, size: int, conservative: bool = False, soft: bool = False, inner: bool = False,
-                    opaque: bool = False, faces: str = "all") -> Key:
-        return self.ctx.light_depth(light, size, conservative, soft, inner, opaque, faces)
+                    opaque: bool = False, faces: str = "all", view: str = "fitted") -> Key:
+        return self.ctx.light_depth(light, size, conservative, soft, inner, opaque, faces, view)
 
     def front_fraction(self, light: Light, centre: bool = False) -> Key:
         return self.ctx.front_fraction(light, centre)
@@ -409,9 +455,12 @@ class TechniqueContext:
 
     def shared_key(self, kind: str, light: Light, size: int, *params: str) -> Key:
         """A resource any instance of this technique may share: it depends on the light, the map
-        ``size`` and the named parameters only (non-default values appear in the variant)."""
+        ``size`` and the named parameters only (non-default values appear in the variant), and on the
+        light view (``view``, :class:`~wsoft.params.LightViewParams`) of a technique that has one."""
         p = self.tech.params
         d = self.tech.defaults()
+        if "view" in d and "view" not in params:
+            params = params + ("view",)
         extra = ",".join(f"{n}={getattr(p, n)}" for n in params if getattr(p, n) != d[n])
         return Key(kind, self.label(light), variant=f"@{size}" + (f"{{{extra}}}" if extra else ""))
 

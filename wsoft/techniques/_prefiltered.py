@@ -47,7 +47,7 @@ class Prefiltered(Technique):
     def add_passes(self, ctx, light):
         p = self.params
         gbuf = ctx.gbuffer()
-        depth = ctx.light_depth(light, size=p.shadow_map_size, soft=True)
+        depth = ctx.light_depth(light, size=p.shadow_map_size, soft=True, view=p.view)
         fkey = ctx.shared_key(self.map_kind, light, p.shadow_map_size, *self.map_params)
         out = ctx.visibility_key(light)
 

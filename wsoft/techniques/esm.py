@@ -19,13 +19,13 @@ from wsoft.accel.blur import blur_log
 from wsoft.lightspace.view import ViewGPU, bilinear_cell, normalised_depth
 from wsoft.parallel import launch_chunked
 from wsoft.raster.gbuffer import GBufferGPU, gb_mapped_depth
-from wsoft.params import check_ranges
+from wsoft.params import LightViewParams, check_ranges
 from wsoft.techniques._prefiltered import Prefiltered, normalised_bias, prefiltered_passes
 from wsoft.techniques.base import Quality, Tolerance, check, param
 
 
 @dataclass(frozen=True)
-class ESMParams:
+class ESMParams(LightViewParams):
     shadow_map_size: int = param(1024, "texels per side of the light depth map", range=(256, 8192))
     c: float = param(80.0, "exponent on the normalised depth: larger is sharper and leaks less", range=(0.01, 10000.0))
     filter: str = param("gaussian", "prefilter: box or gaussian")

@@ -60,14 +60,14 @@ from wsoft.lightspace.view import (
 )
 from wsoft.parallel import launch_chunked
 from wsoft.raster.gbuffer import GBufferGPU, gb_covered, gb_mapped_receiver, gb_neighbour
-from wsoft.params import check_ranges
+from wsoft.params import LightViewParams, check_ranges
 from wsoft.techniques.base import PassSpec, Quality, Technique, Tolerance, check, param
 
 FLT_MAX_LOG = math.log(np.finfo(np.float32).max)
 
 
 @dataclass(frozen=True)
-class ESSMParams:
+class ESSMParams(LightViewParams):
     shadow_map_size: int = param(1024, "texels per side of the light depth map (a power of two)", range=(256, 8192))
     sat: str = param("tiles", "summed-area table: tiles (uint32 tile grid), uint32 (full) or float32 (full)")
     build: str = param("doubling", "SAT build: doubling (recursive doubling, counted passes) or scan (row/column scans)")
@@ -555,7 +555,7 @@ class ESSM(Technique):
     def add_passes(self, ctx, light):
         p = self.params
         gbuf = ctx.gbuffer()
-        depth = ctx.light_depth(light, size=p.shadow_map_size, soft=True)
+        depth = ctx.light_depth(light, size=p.shadow_map_size, soft=True, view=p.view)
         out = ctx.visibility_key(light)
         # the basis and its SAT depend on the storage, not on how the kernel is shaded: instances
         # that differ only in H, level, subdivision, epsilon or bias share them

@@ -34,14 +34,14 @@ from wsoft.accel.blur import blur_moments, blur_moments4
 from wsoft.lightspace.moments import EVSM_MAX_EXPONENT, evsm_warp, warped_chebyshev
 from wsoft.lightspace.view import ViewGPU, bilinear, normalised_depth
 from wsoft.parallel import launch_chunked
-from wsoft.params import check_ranges
+from wsoft.params import LightViewParams, check_ranges
 from wsoft.raster.gbuffer import GBufferGPU, gb_mapped_depth
 from wsoft.techniques._prefiltered import Prefiltered, normalised_bias, prefiltered_passes
 from wsoft.techniques.base import Quality, Tolerance, check, param
 
 
 @dataclass(frozen=True)
-class EVSMParams:
+class EVSMParams(LightViewParams):
     shadow_map_size: int = param(1024, "texels per side of the light depth map", range=(256, 8192))
     moments: int = param(4, "4: positive and negative warps (EVSM4); 2: the positive warp only (EVSM2)", range=(2, 4))
     c_pos: float = param(40.0, "positive warp exponent c+ on the depth mapped to [-1, 1] (at most 42: e^{2 c+} finite in float32)",

@@ -27,12 +27,12 @@ from wsoft.lightspace.light import LightGPU, receiver_bias
 from wsoft.lightspace.view import ViewGPU, within_distance
 from wsoft.parallel import launch_chunked
 from wsoft.raster.gbuffer import GBufferGPU, gb_mapped_receiver
-from wsoft.params import check_ranges
+from wsoft.params import LightViewParams, check_ranges
 from wsoft.techniques.base import PassSpec, Technique, Tolerance, param
 
 
 @dataclass(frozen=True)
-class HardParams:
+class HardParams(LightViewParams):
     shadow_map_size: int = param(1024, "texels per side of the light depth map", range=(256, 8192))
     bias: float = param(1e-4, "constant depth bias as a fraction of the frame's extent (receivers in view and the light)", range=(0.0, 0.1))
     slope_bias: float = param(1.5, "slope-scaled depth bias in texels (times tan of the incidence angle, capped at 10)", range=(0.0, 64.0))
@@ -90,7 +90,7 @@ class Hard(Technique):
     def add_passes(self, ctx, light):
         p = self.params
         gbuf = ctx.gbuffer()
-        depth = ctx.light_depth(light, size=p.shadow_map_size, conservative=p.conservative)
+        depth = ctx.light_depth(light, size=p.shadow_map_size, conservative=p.conservative, view=p.view)
         out = ctx.visibility_key(light)
         L = ctx.light_gpu(light)
 

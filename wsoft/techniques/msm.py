@@ -48,7 +48,7 @@ from wsoft.lightspace.moments import (
 )
 from wsoft.lightspace.view import ViewGPU, bilinear, normalised_depth
 from wsoft.parallel import launch_chunked
-from wsoft.params import check_ranges
+from wsoft.params import LightViewParams, check_ranges
 from wsoft.raster.gbuffer import GBufferGPU, gb_mapped_depth
 from wsoft.techniques._prefiltered import Prefiltered, normalised_bias, prefiltered_passes
 from wsoft.techniques.base import Quality, Tolerance, check, param
@@ -58,7 +58,7 @@ UNORM16 = wp.constant(65535.0)
 
 
 @dataclass(frozen=True)
-class MSMParams:
+class MSMParams(LightViewParams):
     shadow_map_size: int = param(1024, "texels per side of the light depth map", range=(256, 8192))
     filter: str = param("gaussian", "prefilter: box or gaussian")
     radius: int = param(2, "prefilter radius in texels (0: none)", range=(0, 64))

@@ -68,7 +68,7 @@ from wsoft.lightspace.moments import (
 )
 from wsoft.lightspace.view import ViewGPU, normalised_depth
 from wsoft.parallel import launch_chunked
-from wsoft.params import check_ranges
+from wsoft.params import LightViewParams, check_ranges
 from wsoft.raster.gbuffer import GBufferGPU, gb_mapped_receiver
 from wsoft.techniques.base import PassSpec, Technique, Tolerance, check, param
 
@@ -88,7 +88,7 @@ def full_uint32_mu(max_radius: float) -> int:
 
 
 @dataclass(frozen=True)
-class MSMSoftParams:
+class MSMSoftParams(LightViewParams):
     shadow_map_size: int = param(1024, "texels per side of the light depth map (a power of two)", range=(256, 8192))
     sat: str = param("tiles", "summed-area table: tiles (uint32 tile grid), uint32 (one full integer SAT, the paper's) or float32 (full)")
     build: str = param("doubling", "SAT build: doubling or scan")
@@ -230,7 +230,7 @@ class MSMSoft(Technique):
     def add_passes(self, ctx, light):
         p = self.params
         gbuf = ctx.gbuffer()
-        depth = ctx.light_depth(light, size=p.shadow_map_size, soft=True)
+        depth = ctx.light_depth(light, size=p.shadow_map_size, soft=True, view=p.view)
         out = ctx.visibility_key(light)
         mkey = ctx.shared_key("msm_soft_moments", light, p.shadow_map_size, "sat")
         skey = ctx.shared_key("msm_soft_sat", light, p.shadow_map_size, "sat", "mu", "max_radius", "build")

@@ -26,12 +26,12 @@ from wsoft.lightspace.light import LightGPU, receiver_bias
 from wsoft.lightspace.view import ViewGPU, map_coords, texel_size, view_dir
 from wsoft.parallel import launch_chunked
 from wsoft.raster.gbuffer import GBufferGPU, gb_receiver
-from wsoft.params import check_ranges
+from wsoft.params import LightViewParams, check_ranges
 from wsoft.techniques.base import PassSpec, Quality, Technique, Tolerance, check, param
 
 
 @dataclass(frozen=True)
-class PCFParams:
+class PCFParams(LightViewParams):
     shadow_map_size: int = param(1024, "texels per side of the light depth map", range=(256, 8192))
     radius: float = param(2.0, "kernel half-width in texels", range=(0.0, 512.0))
     taps: int = param(16, "depth comparisons per sample (a perfect square for the grid pattern)", range=(1, 1024))
@@ -97,7 +97,7 @@ class PCF(Technique):
     def add_passes(self, ctx, light):
         p = self.params
         gbuf = ctx.gbuffer()
-        depth = ctx.light_depth(light, size=p.shadow_map_size)
+        depth = ctx.light_depth(light, size=p.shadow_map_size, view=p.view)
         out = ctx.visibility_key(light)
         L = ctx.light_gpu(light)
 

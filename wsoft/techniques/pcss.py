@@ -46,12 +46,12 @@ from wsoft.lightspace.view import (
 )
 from wsoft.parallel import launch_chunked
 from wsoft.raster.gbuffer import GBufferGPU, gb_receiver
-from wsoft.params import check_ranges
+from wsoft.params import LightViewParams, check_ranges
 from wsoft.techniques.base import PassSpec, Quality, Technique, Tolerance, check, param
 
 
 @dataclass(frozen=True)
-class PCSSParams:
+class PCSSParams(LightViewParams):
     shadow_map_size: int = param(1024, "texels per side of the light depth map", range=(256, 8192))
     blocker_samples: int = param(16, "taps of the blocker search", range=(1, 1024))
     filter_samples: int = param(36, "taps of the percentage-closer filter", range=(1, 4096))
@@ -150,7 +150,7 @@ class PCSS(Technique):
     def add_passes(self, ctx, light):
         p = self.params
         gbuf = ctx.gbuffer()
-        depth = ctx.light_depth(light, size=p.shadow_map_size, soft=True)
+        depth = ctx.light_depth(light, size=p.shadow_map_size, soft=True, view=p.view)
         out = ctx.visibility_key(light)
         k = light_kernel(light)
 

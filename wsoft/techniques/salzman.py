@@ -38,12 +38,12 @@ from wsoft.lightspace.view import DEPTH_CLEAR, ViewGPU, bilinear, normalised_dep
 from wsoft.parallel import launch_chunked
 from wsoft.raster.gbuffer import GBufferGPU, gb_mapped_receiver
 from wsoft.raster.depth_map import rasterize
-from wsoft.params import check_ranges
+from wsoft.params import LightViewParams, check_ranges
 from wsoft.techniques.base import PassSpec, Quality, Technique, Tolerance, check, param
 
 
 @dataclass(frozen=True)
-class SalzmanParams:
+class SalzmanParams(LightViewParams):
     shadow_map_size: int = param(1024, "texels per side of the map", range=(256, 8192))
     filter: str = param("gaussian", "blur: box or gaussian")
     radius: int = param(4, "blur radius in texels", range=(0, 64))
@@ -193,7 +193,7 @@ class Salzman(Technique):
         scene = ctx.scene
         gbuf = ctx.gbuffer()
         sk = ctx.scene_arrays()
-        view_key = ctx.light_view(light, p.shadow_map_size, soft=True)
+        view_key = ctx.light_view(light, p.shadow_map_size, soft=True, view=p.view)
         map_key = ctx.key("salzman_map", light, variant=f"@{p.shadow_map_size}")
         counters = ctx.counters(light)
         out = ctx.visibility_key(light)

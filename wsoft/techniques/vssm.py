@@ -29,14 +29,14 @@ from wsoft.accel.sat import Moments, box_area, build_sat, check_sat_params, mean
 from wsoft.lightspace.light import LightKernel, light_kernel, spread_texels
 from wsoft.lightspace.moments import chebyshev_bound, moments_variance
 from wsoft.lightspace.view import ViewGPU, normalised_depth
-from wsoft.params import check_ranges
+from wsoft.params import LightViewParams, check_ranges
 from wsoft.parallel import launch_chunked
 from wsoft.raster.gbuffer import GBufferGPU, gb_mapped_receiver
 from wsoft.techniques.base import PassSpec, Quality, Technique, Tolerance, param
 
 
 @dataclass(frozen=True)
-class VSSMParams:
+class VSSMParams(LightViewParams):
     shadow_map_size: int = param(1024, "texels per side of the light depth map (a power of two)", range=(256, 8192))
     sat: str = param("float32", "summed-area table: float32 (full), uint32 (full) or tiles (uint32 tile grid)")
     build: str = param("doubling", "SAT build: doubling or scan")
@@ -191,7 +191,7 @@ class VSSM(Technique):
     def add_passes(self, ctx, light):
         p = self.params
         gbuf = ctx.gbuffer()
-        depth = ctx.light_depth(light, size=p.shadow_map_size, soft=True)
+        depth = ctx.light_depth(light, size=p.shadow_map_size, soft=True, view=p.view)
         out = ctx.visibility_key(light)
         mkey = ctx.shared_key("vssm_moments", light, p.shadow_map_size, "sat")
         skey = ctx.shared_key("vssm_sat", light, p.shadow_map_size, "sat", "mu", "build")

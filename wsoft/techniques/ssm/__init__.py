@@ -73,7 +73,7 @@ from wsoft.lightspace.light import light_kernel
 from wsoft.lightspace.samples import SamplePattern
 from wsoft.parallel import launch_chunked
 from wsoft.scene.types import LIGHT_DISTANT, LIGHT_POINT, LIGHT_RECT
-from wsoft.params import check_ranges
+from wsoft.params import LightViewParams, check_ranges
 from wsoft.techniques.base import PassSpec, Quality, Technique, Tolerance, check, param
 from wsoft.techniques.ssm.kernels import (
     OCC_MICROPATCH,
@@ -97,7 +97,7 @@ MSAA_MODES = ("interpolate", "single", "per_sample")
 
 
 @dataclass(frozen=True)
-class SSMParams:
+class SSMParams(LightViewParams):
     shadow_map_size: int = param(1024, "texels per side of the light depth map (a power of two)", range=(256, 8192))
     occluder: str = param("micropatch", "micro-occluders: micropatch, microquad or microrect")
     visibility: str = param("bitmask", "light visibility: area (clamped sum of covered areas) or bitmask")
@@ -361,7 +361,7 @@ class SSM(Technique):
     def add_passes(self, ctx, light):
         p = self.params
         gbuf = ctx.gbuffer()
-        depth = ctx.light_depth(light, size=p.shadow_map_size, soft=True)
+        depth = ctx.light_depth(light, size=p.shadow_map_size, soft=True, view=p.view)
         k = light_kernel(light)
         # the pruning structure and microrects depend on the map only: shared by every budget
         maps_key = ctx.shared_key("ssm_maps", light, p.shadow_map_size, "structure", "ysm_size", "occluder", "microrect_diagonal")
