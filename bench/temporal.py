@@ -257,8 +257,9 @@ def target_rows(rows: list[dict]) -> list[str]:
         m = e["temporal"]
         if "flicker_excess" not in m:
             continue
-        ok = abs(m["flicker_excess"]) <= 2.0 * m["flicker_se"]
-        L.append(f"| reference {e['params']['samples']} spp on the still {r['scene']}: flicker within its standard error of its own noise | "
+        ok = m["flicker_excess"] <= 2.0 * m["flicker_se"]
+        L.append(f"| reference {e['params']['samples']} spp (new samples each frame) on the still {r['scene']}: its flicker no more than its "
+                 f"standard errors allow (own noise: sqrt(2/π) sqrt(se_t² + se_t-1²), excess within 2 se of the flicker) | "
                  f"flicker {m['flicker']:.5f}, own noise {m['own_noise']:.5f}, excess {m['flicker_excess']:+.5f} ± {m['flicker_se']:.5f} "
                  f"(temporal std {m.get('temporal_std', 0):.5f}) | {'yes' if ok else 'no'} |")
     return L
@@ -267,7 +268,8 @@ def target_rows(rows: list[dict]) -> list[str]:
 def report(rows: list[dict], md: Path, ctx: dict) -> None:
     from wsoft.bench.common import report_header
 
-    L = report_header("temporal", rows, md, ctx)
+    L = [line.replace("Times: median of 3 runs after a warm-up.", "Times: one run per frame, the median over the frames.")
+         for line in report_header("temporal", rows, md, ctx)]
     if not rows:
         md.write_text("\n".join(L) + "\n")
         return

@@ -12,7 +12,7 @@ from pxr import Gf, UsdGeom
 
 import wsoft
 from wsoft.metrics import GroundTruth, compare
-from wsoft.metrics.temporal import FrameCamera, flicker, pair_pixels, positions, temporal_std
+from wsoft.metrics.temporal import SAME_POINT, FrameCamera, flicker, pair_pixels, positions, temporal_std
 from wsoft.pipeline.sequence import Sequence, compare_sequence, render_sequence, temporal_measures
 from wsoft.stages import add_box, add_camera, add_point_light, add_quad, add_rect_light, look_at_xform, make_stage
 
@@ -103,17 +103,19 @@ def test_reprojection_keeps_only_surfaces_seen_in_both_frames(tmp_path):
     ca, cb = FrameCamera.of(a.stats), FrameCamera.of(b.stats)
     assert not ca.same_view(cb)
     pairs = pair_pixels(a.channels, b.channels, ca, cb)
-    assert pairs.reprojected and pairs.disoccluded > 0 and len(pairs.cur) > 0.7 * pairs.covered
+    loose = pair_pixels(a.channels, b.channels, ca, cb, same_point=2.0)
+    assert pairs.reprojected and pairs.disoccluded > 0 and len(pairs.cur) > 0.4 * pairs.covered
+    assert len(loose.cur) > 0.8 * loose.covered and set(pairs.cur) <= set(loose.cur)
     pa, pb = positions(a.channels).reshape(-1, 3), positions(b.channels).reshape(-1, 3)
-    foot = cb.footprint(pb[pairs.cur])
-    assert np.all(np.linalg.norm(pa[pairs.prev] - pb[pairs.cur], axis=1) <= 2.0 * foot + 1e-6)
+    foot = np.maximum(ca.footprint(pb[pairs.cur]), cb.footprint(pb[pairs.cur]))
+    assert np.all(np.linalg.norm(pa[pairs.prev] - pb[pairs.cur], axis=1) <= SAME_POINT * foot + 1e-6)
     # a pixel of frame 2 on the ground whose point frame 1 saw hidden behind the box (well above its foot) is left out
     fx, fy, ok = ca.project(pb)
     col, row = np.clip(np.floor(fx).astype(int), 0, 63), np.clip(np.floor(fy).astype(int), 0, 47)
     seen_then = pa[row * 64 + col]
     hidden = ok & (np.asarray(b["A"]).reshape(-1) > 0) & (np.abs(pb[:, 2]) < 1e-4) & (seen_then[:, 2] > 0.2)
     assert hidden.sum() > 5  # the box hid ground that frame 2 sees
-    assert not np.isin(np.flatnonzero(hidden), pairs.cur).any()
+    assert not np.isin(np.flatnonzero(hidden), loose.cur).any()
 
 
 def test_a_still_camera_pairs_the_same_pixels():

@@ -16,6 +16,10 @@ Python API::
     result = wsoft.compare(scene, ["pcss", "essm"], samples=256)
     result["pcss"].stats["error"]["mae_penumbra"]
 
+    # a sequence: the stage at each time code, flicker against the reference
+    seq = wsoft.compare_sequence("usd_scenes/ramp_slide.usda", ["pcss", "hard"], frames="1:24")
+    seq.summary["temporal"]["pcss"]["Light"]["flicker"], seq[3]["pcss"].V
+
     # visibility baked into USD: a layer of overs with primvars:wsoft:visibility:<light> per mesh
     layer = wsoft.bake("usd_scenes/lightmapped_bridge.usda", "pcss", frames="1:48", out="vis.usda")
 
@@ -31,8 +35,8 @@ import importlib.util
 from wsoft.errors import ParameterError, SceneError, WsoftError
 
 __version__ = "0.1.0"
-__all__ = ["Frame", "FrameSet", "ParameterError", "Scene", "SceneError", "TECHNIQUES", "WsoftError", "bake", "compare", "load_scene", "plan",
-           "render"]
+__all__ = ["Frame", "FrameSet", "ParameterError", "Scene", "SceneError", "Sequence", "TECHNIQUES", "WsoftError", "bake", "compare",
+           "compare_sequence", "load_scene", "plan", "render", "render_sequence"]
 
 # name -> the module that defines it, imported at first use
 _LAZY = {
@@ -45,6 +49,9 @@ _LAZY = {
     "TECHNIQUES": "wsoft.techniques",
     "compare": "wsoft.metrics",
     "bake": "wsoft.baking",
+    "Sequence": "wsoft.pipeline.sequence",
+    "render_sequence": "wsoft.pipeline.sequence",
+    "compare_sequence": "wsoft.pipeline.sequence",
 }
 
 

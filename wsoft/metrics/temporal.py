@@ -27,10 +27,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-SAME_POINT = 2.0
+SAME_POINT = 0.5
 """A pixel of frame t reprojected into frame t−1 keeps its pair when the point frame t−1 saw there
 lies within this many pixel footprints (the width a pixel covers at that distance) of its own
-point: the same surface, seen from a slightly different place, lands within a pixel or so."""
+point: the previous frame sampled (nearly) the same world point, so a shadow edge that stays put
+in the world gives the same V in both (a looser pairing compares points a pixel apart, across
+which a sharp edge changes V though nothing moved). A point hidden in the previous frame, off its
+image, or on a surface that moved is left without a pair, as are the points that fell between the
+previous frame's samples."""
 
 
 @dataclass(frozen=True)
@@ -102,7 +106,8 @@ def positions(channels: dict) -> np.ndarray:
 class Pairs:
     """Pixels of frame t (``cur``, flat indices) paired with pixels of frame t−1 (``prev``) that saw
     the same surface point; ``covered`` counts frame t's covered pixels, ``disoccluded`` those left
-    without a pair (seen only in frame t, off frame t−1's image, or on a surface that moved)."""
+    without a pair (seen only in frame t, off frame t−1's image, on a surface that moved, or between
+    the previous frame's samples)."""
 
     cur: np.ndarray
     prev: np.ndarray
@@ -111,10 +116,10 @@ class Pairs:
     reprojected: bool
 
 
-def pair_pixels(prev: dict, cur: dict, cam_prev: FrameCamera, cam_cur: FrameCamera) -> Pairs:
+def pair_pixels(prev: dict, cur: dict, cam_prev: FrameCamera, cam_cur: FrameCamera, same_point: float = SAME_POINT) -> Pairs:
     """Pair the covered pixels of frame t (``cur`` channels) with frame t−1's (``prev``): the same
     pixel when the camera stood still, else the pixel of frame t−1 that frame t's world point
-    projects to, kept when frame t−1 saw a point within :data:`SAME_POINT` pixel footprints of it
+    projects to, kept when frame t−1 saw a point within ``same_point`` pixel footprints of it
     there (:class:`Pairs`)."""
     a_cur = np.asarray(cur["A"]) > 0
     a_prev = np.asarray(prev["A"]) > 0
@@ -136,7 +141,7 @@ def pair_pixels(prev: dict, cur: dict, cam_prev: FrameCamera, cam_cur: FrameCame
     j = row * wp_ + col
     ok &= a_prev.reshape(-1)[j]
     p_prev = positions(prev).reshape(-1, 3)[j]
-    tol = SAME_POINT * np.maximum(cam_prev.footprint(pts), cam_cur.footprint(pts))
+    tol = same_point * np.maximum(cam_prev.footprint(pts), cam_cur.footprint(pts))
     ok &= np.linalg.norm(p_prev - pts, axis=1) <= tol
     return Pairs(idx[ok], j[ok], covered, covered - int(ok.sum()), True)
 

@@ -3,7 +3,9 @@
 :func:`render_sequence` renders one or several techniques at every time code of ``frames``
 (``"A:B"``, ``"A:B:STEP"``, ``"A"`` or a list, within the stage's ``startTimeCode``–``endTimeCode``):
 each frame is the stage at that time code (animated cameras, lights, transforms, points,
-visibility). The stage is opened once; each frame is read from it at its time code. The scene's
+visibility). The stage is opened once; each frame is read from it at its time code, or, when only
+cameras, lights and render settings are animated (:func:`wsoft.scene.usd.static_geometry`), the
+first frame's geometry is kept and only those are read again. The scene's
 device copy (triangles, cutouts, the BVH, and what the techniques cache on it) is kept from one
 frame to the next while the geometry is the same (a moving camera or light; compared by content);
 where only points moved (the same triangles, a walking character) the copy's points are updated
@@ -172,11 +174,21 @@ class _Loader:
         self._prev: Scene | None = None
         self._digest: str | None = None
         self._shape: str | None = None
+        self.static: bool | None = None  # the stage's geometry is not animated (wsoft.scene.usd.static_geometry)
 
     def load(self, t: float) -> tuple[Scene, dict]:
         from wsoft.pipeline.loading import load_stage
+        from wsoft.scene.usd import static_geometry, with_views_at
 
         t0 = _time.perf_counter()
+        if self.static is None:
+            self.static = static_geometry(self.stage)
+        if self.static and self._prev is not None and not self._prev.instanced:
+            scene = with_views_at(self._prev, self.stage, t, self.render_settings)
+            t1 = _time.perf_counter()
+            self._prev = scene
+            return scene, {"time": t, "load_ms": round(1e3 * (t1 - t0), 3), "digest_ms": 0.0, "refit_ms": 0.0, "scene": "reused",
+                           "geometry": "static: lights and cameras read again"}
         scene = load_stage(self.stage, time=t, render_settings=self.render_settings, instancing=self.instancing)
         t1 = _time.perf_counter()
         digest, shape = geometry_digest(scene), geometry_digest(scene, points=False)

@@ -23,7 +23,7 @@ from wsoft.scene.usd_instancing import InstanceBuilder, InstanceReader, light_li
 from wsoft.scene.usd_lights import HANDLED_LIGHTS, UNHANDLED_REASONS, read_camera, read_light, read_shadow_controls
 from wsoft.scene.usd_mesh import MeshReader
 
-__all__ = ["diagnostic_lines", "load_scene", "open_stage", "stage_file"]
+__all__ = ["diagnostic_lines", "load_scene", "open_stage", "stage_file", "static_geometry", "with_views_at"]
 
 
 def load_scene(path_or_stage, time: float | None = None, render_settings: str | None = None, instancing: bool = False) -> Scene:
@@ -151,6 +151,112 @@ def diagnostic_lines(diagnostics, file: str) -> list[str]:
     return out
 
 
+def _read_view_prim(ctx, prim, type_name: str, lights, unshadowed, skipped, cameras, shadow_lights) -> None:
+    """A light or camera prim into its list (anything else: nothing)."""
+    Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = pxr()
+    if type_name in HANDLED_LIGHTS:
+        light = read_light(ctx, prim, type_name)
+        if light is None:
+            return
+        enabled = UsdLux.ShadowAPI(prim).GetShadowEnableAttr().Get(ctx.timecode)
+        (unshadowed if enabled is False else lights).append(light)
+        if enabled is not False:
+            shadow_lights.append((prim, light))
+    elif prim.HasAPI(UsdLux.LightAPI) or type_name.endswith("Light"):
+        reason = UNHANDLED_REASONS.get(type_name, f"{type_name or 'this light'} is not handled")
+        skipped.append(SkippedLight(str(prim.GetPath()), type_name or "light", reason))
+    elif prim.IsA(UsdGeom.Camera):
+        cameras.append(read_camera(ctx, prim))
+
+
+def _finish_views(ctx, stage, cameras, shadow_lights, prims):
+    """The render settings' camera (added when the traversal passed it over) and the shadow-casting
+    lights' UsdLux shadow controls (their links resolved against ``prims``); the render settings."""
+    rs = ctx.render_settings
+    if rs is not None and rs.camera and all(c.path != rs.camera for c in cameras):
+        cameras.append(read_camera(ctx, stage.GetPrimAtPath(rs.camera)))  # hidden or of an excluded purpose: still the view
+    for lp, light in shadow_lights:
+        read_shadow_controls(ctx, lp, light, prims)
+    return rs
+
+
+def static_geometry(stage) -> bool:
+    """Is nothing a render draws animated on ``stage``: every time sample of its layers authored on a
+    camera, a light or a render settings prim of the root layer stack, with no geometry below them,
+    and no value clips? (Then the geometry read at one time code holds at every other.)"""
+    Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = pxr()
+    from pxr import UsdRender
+
+    stack = {l.identifier for l in stage.GetLayerStack()}
+    for layer in stage.GetUsedLayers():
+        sampled, clipped = [], []
+
+        def visit(path, layer=layer, sampled=sampled, clipped=clipped):
+            if path.IsPropertyPath():
+                if layer.GetNumTimeSamplesForPath(path):
+                    sampled.append(path)
+            elif path.IsPrimPath():
+                spec = layer.GetPrimAtPath(path)
+                if spec is not None and "clips" in spec.ListInfoKeys():
+                    clipped.append(path)
+
+        layer.Traverse(Sdf.Path.absoluteRootPath, visit)
+        if clipped:
+            return False
+        if not sampled:
+            continue
+        if layer.identifier not in stack:  # a referenced layer's paths are not the stage's
+            return False
+        for path in sampled:
+            prim = stage.GetPrimAtPath(path.GetPrimPath())
+            if not prim:
+                continue
+            if not (prim.IsA(UsdGeom.Camera) or prim.HasAPI(UsdLux.LightAPI) or prim.IsA(UsdRender.SettingsBase)
+                    or prim.IsA(UsdRender.Var)):
+                return False
+            if any(d.IsA(UsdGeom.Gprim) or d.IsA(UsdGeom.PointInstancer) for d in Usd.PrimRange(prim)):
+                return False
+    return True
+
+
+def with_views_at(scene: Scene, stage, time: float | None, render_settings: str | None = None) -> Scene:
+    """``scene`` (a triangle soup, no instances kept, loaded from ``stage``, whose geometry
+    :func:`static_geometry` says is not animated) with its lights, cameras and render settings read
+    at ``time``: its geometry and what was built from it (the device copy, bounds, caster points)
+    kept. One traversal that reads no mesh."""
+    if scene.instanced:
+        raise ValueError("with_views_at keeps a triangle soup; a scene with instances is loaded again")
+    import dataclasses
+
+    Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = pxr()
+    file = scene.path
+    ctx = StageContext(stage, file, time, render_settings)
+    lights, unshadowed, skipped, cameras, shadow_lights = [], [], [], [], []
+    it = iter(Usd.PrimRange.Stage(stage, Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)))
+    for prim in it:
+        if prim.IsA(UsdGeom.Imageable):
+            img = UsdGeom.Imageable(prim)
+            if img.ComputeVisibility(ctx.timecode) == UsdGeom.Tokens.invisible:
+                it.PruneChildren()
+                continue
+            if img.ComputePurpose() not in ctx.purposes:
+                if prim.IsA(UsdGeom.PointInstancer):
+                    it.PruneChildren()
+                continue
+        if prim.IsA(UsdGeom.Gprim) or prim.IsA(UsdGeom.PointInstancer):
+            it.PruneChildren()
+            continue
+        _read_view_prim(ctx, prim, prim.GetTypeName(), lights, unshadowed, skipped, cameras, shadow_lights)
+    rs = _finish_views(ctx, stage, cameras, shadow_lights, scene.prims)
+    out = dataclasses.replace(scene, lights=lights, unshadowed_lights=unshadowed, skipped_lights=skipped, cameras=cameras, time=ctx.time,
+                              render_settings=rs, render_settings_source=ctx.render_settings_source)
+    for k in ("_device_cache", "bounds", "caster_points", "_adjacency", "_dynamic_subset"):
+        if k in scene.__dict__:
+            out.__dict__[k] = scene.__dict__[k]
+    out.__dict__["_loaded_from"] = (stage, time)
+    return out
+
+
 def read_stage(stage, file: str, time: float | None, render_settings: str | None = None, instancing: bool = False):
     """The :class:`Scene` of ``stage`` (named ``file``) at ``time``, and with ``instancing`` the first
     shadow-casting light whose ``collection:shadowLink`` an instanced load cannot keep (None: none,
@@ -201,26 +307,10 @@ def read_stage(stage, file: str, time: float | None, render_settings: str | None
             add_mesh(mesh, str(prim.GetPath()))
         elif prim.IsA(UsdGeom.Gprim) and not prim.IsA(UsdGeom.Mesh):
             ctx.warn(prim, f"{type_name} is not a Mesh; ignored (convert it to a mesh to cast shadows)")
-        elif type_name in HANDLED_LIGHTS:
-            light = read_light(ctx, prim, type_name)
-            if light is None:
-                continue
-            enabled = UsdLux.ShadowAPI(prim).GetShadowEnableAttr().Get(ctx.timecode)
-            (unshadowed if enabled is False else lights).append(light)
-            if enabled is not False:
-                shadow_lights.append((prim, light))
-        elif prim.HasAPI(UsdLux.LightAPI) or type_name.endswith("Light"):
-            reason = UNHANDLED_REASONS.get(type_name, f"{type_name or 'this light'} is not handled")
-            skipped.append(SkippedLight(str(prim.GetPath()), type_name or "light", reason))
-        elif prim.IsA(UsdGeom.Camera):
-            cameras.append(read_camera(ctx, prim))
+        else:
+            _read_view_prim(ctx, prim, type_name, lights, unshadowed, skipped, cameras, shadow_lights)
 
-    rs = ctx.render_settings
-    if rs is not None and rs.camera and all(c.path != rs.camera for c in cameras):
-        cameras.append(read_camera(ctx, stage.GetPrimAtPath(rs.camera)))  # hidden or of an excluded purpose: still the view
-
-    for lp, light in shadow_lights:
-        read_shadow_controls(ctx, lp, light, prims)
+    rs = _finish_views(ctx, stage, cameras, shadow_lights, prims)
     linked_light = light_linking_instances(shadow_lights, inst) if inst is not None and inst.count else None
     scene = Scene(
         path=file,
