@@ -63,7 +63,7 @@ def range_text(f) -> str:
     return f"{lo:g}..{hi:g}"
 
 
-VIEWS = ("fitted", "stable")
+VIEWS = ("fitted", "stable", "sequence")
 """How a shadow-map technique's light view is fitted (:class:`LightViewParams`)."""
 
 
@@ -74,11 +74,13 @@ class LightViewParams:
     ``Params`` subclasses it. ``fitted``: per frame, tight around the receivers the camera sees
     (:func:`~wsoft.lightspace.fit.fit_light_view`); ``stable``: a view whose texel size and texel grid
     stay put while the camera turns or moves a little (:func:`~wsoft.lightspace.stable.fit_stable_view`),
-    against shimmering shadow edges in motion."""
+    against shimmering shadow edges in motion; ``sequence``: the stable view fitted once to the
+    receivers of every frame of a sequence (:mod:`wsoft.pipeline.sequence`; a single frame: ``stable``)."""
 
-    view: str = param("fitted", "light view: fitted (per frame, tight around the receivers in view) or stable (size on a 2^(1/4) ladder, "
+    view: str = param("fitted", "light view: fitted (per frame, tight around the receivers in view), stable (size on a 2^(1/4) ladder, "
                                 "window on whole texels of a fixed grid, depth range snapped: edges that do not shimmer in motion, "
-                                "texels up to 19 % coarser)", choices=VIEWS)
+                                "texels up to 19 % coarser) or sequence (the stable view fitted once to the receivers of every frame "
+                                "of a sequence)", choices=VIEWS)
 
 
 def parse_frames(text: str) -> list[float]:

@@ -84,12 +84,12 @@ class RenderContext:
         self.counters: dict[str, Any] = {"frame": {}, "passes": {}, "techniques": {}}
         self._labels = {l.path: scene.light_label(l) for l in scene.lights}
         self.warnings: dict[str, list[str]] = {}  # pass name -> warnings it raised (a frame lists those of its passes)
-        self.fit_receivers: dict[str, np.ndarray] | None = None
-        """Light path -> world points [N, 3] that a stable light view (``view=stable``,
-        :func:`~wsoft.lightspace.stable.fit_stable_view`) is fitted to besides the frame's
-        receivers: a sequence renderer sets it to the receivers of all its frames (or a subset
-        with the same bounds), so the view is fitted once per sequence. None (or a light absent
-        from it): each frame's stable view is fitted to its own receivers. Fitted views ignore it."""
+        self.fit_receivers: dict[str, np.ndarray] | None = history.fit_receivers if history is not None else None
+        """Light path -> world points [N, 3] that a ``view=sequence`` light view
+        (:func:`~wsoft.lightspace.stable.fit_stable_view`) is fitted to besides the frame's
+        receivers: the sequence renderer's :class:`~wsoft.pipeline.history.History` gives the
+        receivers of all its frames, so the view is fitted once per sequence. None (a single
+        frame, or a light absent from it): the view is the frame's stable view."""
 
     def warn(self, pass_name: str, message: str) -> None:
         """A problem found while running a pass (receivers left unmapped, non-finite values): it
@@ -172,13 +172,15 @@ class RenderContext:
         """Resource: a :class:`LightView` of ``light`` fitted to the receivers in view.
 
         ``soft``: widened so that casters blocking any part of the whole light are mapped.
-        ``view``: ``fitted`` (:func:`fit_light_view`) or ``stable`` (:func:`fit_stable_view`: its
-        texel grid anchored at the world origin, fitted also to :attr:`fit_receivers`; its pass's
-        counters record ``view``, ``radius``, ``texel``, ``snap_offset``); each is its own resource,
-        shared by the techniques that ask for the same."""
+        ``view``: ``fitted`` (:func:`fit_light_view`), ``stable`` (:func:`fit_stable_view`: its
+        texel grid anchored at the world origin; its pass's counters record ``view``, ``radius``,
+        ``texel``, ``snap_offset``) or ``sequence`` (the stable view fitted also to
+        :attr:`fit_receivers`, the receivers of every frame of the sequence: one view for all its
+        frames); each is its own resource, shared by the techniques that ask for the same."""
         gk = self.gbuffer()
         stable = _stable(view)
-        key = Key("light_view", self.label(light), variant=_view_variant(size, soft, stable))
+        whole_sequence = view == "sequence"
+        key = Key("light_view", self.label(light), variant=_view_variant(size, soft, view))
         name = f"fit_{key}"
 
         probe = soft and light.kind != LIGHT_DISTANT and light.extent() > 0.0
@@ -190,7 +192,8 @@ class RenderContext:
             rec = gb.pos.numpy()[prim >= 0]
             lo, hi = self.scene.bounds
             distant = light.kind == LIGHT_DISTANT  # its depth range starts at the nearest caster over the receivers
-            extra = {"anchor": self._world_origin(), "region": self._fit_region(light), "down": self._down()} if stable else {}
+            region = self._fit_region(light) if whole_sequence else None
+            extra = {"anchor": self._world_origin(), "region": region, "down": self._down()} if stable else {}
             fit = functools.partial(fit_stable_view if stable else fit_light_view, light, rec, lo, hi, size,
                                     casters=self.scene.caster_points if soft or distant else None, all_casters=lambda: self.scene.caster_points,
                                     **extra)
@@ -297,7 +300,7 @@ class RenderContext:
         alpha = self.scene.has_cutouts and not opaque
         flavour = (("_alpha" if alpha else "") + ("_inner" if inner else "_conservative" if conservative else "")
                    + ("" if faces == "all" else f"_{faces}"))
-        key = Key("light_depth", self.label(light), variant=_view_variant(size, soft, _stable(view)), flavour=flavour)
+        key = Key("light_depth", self.label(light), variant=_view_variant(size, soft, view), flavour=flavour)
         name = str(key)
 
         def run(res):
@@ -387,15 +390,15 @@ class RenderContext:
 
 
 def _stable(view: str) -> bool:
-    """Is ``view`` (a :data:`~wsoft.params.VIEWS` value) the stable one?"""
+    """Is ``view`` (a :data:`~wsoft.params.VIEWS` value) a stable one (``stable`` or ``sequence``)?"""
     if view not in VIEWS:
         raise DeclarationError(f"light view {view!r} is not one of {', '.join(VIEWS)}")
-    return view == "stable"
+    return view != "fitted"
 
 
-def _view_variant(size: int, soft: bool, stable: bool) -> str:
-    """The variant of a light view's (and its depth maps') key: map size, ``+soft``, ``+stable``."""
-    return f"@{size}" + ("+soft" if soft else "") + ("+stable" if stable else "")
+def _view_variant(size: int, soft: bool, view: str) -> str:
+    """The variant of a light view's (and its depth maps') key: map size, ``+soft``, ``+stable`` or ``+sequence``."""
+    return f"@{size}" + ("+soft" if soft else "") + (f"+{view}" if view != "fitted" else "")
 
 
 def light_behind_warning(light: Light, n: int, total: int) -> str:

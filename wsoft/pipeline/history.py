@@ -19,6 +19,7 @@ class History:
         self.reseed = reseed
         self._previous: dict[tuple[str, str], dict] = {}
         self._kept: dict[tuple[str, str], dict] = {}
+        self.fit_receivers: dict | None = None  # light path -> world points of every frame (view=sequence light views)
 
     def previous(self, technique: str, light: str) -> dict | None:
         """The state ``technique`` (a label) kept for ``light`` (a label) in the previous frame, or None."""

@@ -246,6 +246,9 @@ def render_sequence(scene, technique, *, frames, width: int | None = None, heigh
     several = isinstance(technique, (list, tuple)) and not (isinstance(technique, tuple) and len(technique) == 2 and isinstance(technique[1], dict))
     seq = Sequence(times=times, frames=[], warnings=list(loader.warnings))
     history = History(reseed)
+    if _wants_sequence_views(techs):
+        history.fit_receivers = sequence_receivers(loader, times, width=width, height=height, camera=camera, light=light, device=device,
+                                                   pixel_samples=pixel_samples)
     for i, t in enumerate(times):
         sc, info = loader.load(t)
         if i == 0:
@@ -275,6 +278,39 @@ def _stamp(fr, info: dict, index: int, count: int) -> None:
             f.stats["sequence"] = mark
     else:
         fr.stats["sequence"] = mark
+
+
+def _wants_sequence_views(techs: list) -> bool:
+    return any(getattr(t.params, "view", None) == "sequence" for t in techs)
+
+
+def sequence_receivers(loader: "_Loader", times: list[float], *, width, height, camera, light, device, pixel_samples: int = 1) -> dict:
+    """Light path -> the world points the camera sees in every frame of ``times`` (the covered
+    G-buffer samples of each, a G-buffer-only pass per frame): what ``view=sequence`` light views
+    are fitted to, one view for the whole sequence."""
+    import warp as wp
+
+    from wsoft.parallel import resolve_device
+    from wsoft.pipeline import build_graph
+    from wsoft.pipeline.context import GBUFFER
+
+    dev = resolve_device(device)
+    pts = []
+    lights: list[str] = []
+    for t in times:
+        sc, _ = loader.load(t)
+        built = build_graph(sc, "hard", width=width, height=height, camera=camera, light=light, device=dev, pixel_samples=pixel_samples,
+                            strict=False)
+        with wp.ScopedDevice(dev):
+            res, _ = built.ctx.graph.execute([GBUFFER], dev)
+        gb = res[GBUFFER]
+        p = gb.pos.numpy()[gb.prim.numpy() >= 0].astype(np.float64)
+        if built.ctx.origin is not None:
+            p += np.asarray(built.ctx.origin, np.float64)
+        pts.append(p)
+        lights = [l.path for l in sc.lights]
+    allp = np.concatenate(pts) if pts else np.zeros((0, 3))
+    return {path: allp for path in lights}
 
 
 def _cost_summary(seq: Sequence) -> dict:
@@ -320,6 +356,9 @@ def compare_sequence(scene, techniques, *, frames, samples: int = 256, ground_tr
     techs = as_techniques(list(techniques) if is_several(techniques) else [techniques], {})
     seq = Sequence(times=times, frames=[], warnings=list(loader.warnings))
     history = History(reseed)
+    if _wants_sequence_views(techs):
+        history.fit_receivers = sequence_receivers(loader, times, width=width, height=height, camera=camera, light=light, device=device,
+                                                   pixel_samples=pixel_samples)
     truths: list = []
     for i, t in enumerate(times):
         sc, info = loader.load(t)
