@@ -157,6 +157,47 @@ def time_to_reach(entries: list[dict], target: float, metric: str = "mae_penumbr
     return min(ok, key=lambda e: e["frame_ms"]) if ok else None
 
 
+MODERN = ("rtdenoise", "msm", "msm_soft", "evsm")  # what engines ship today
+PAPERS = ("salzman", "essm", "vssm", "ssm", "izb", "dcs", "pwedge")  # the five papers' techniques
+
+
+def dominates(a: list[tuple[float, float]], b: list[tuple[float, float]]) -> bool:
+    """Does the set of (time, error) points ``a`` dominate ``b``: every point of ``b`` has a point of
+    ``a`` at most as slow and at most as wrong, strictly better in one of the two?"""
+    return bool(a) and bool(b) and all(any(ta <= tb and ea <= eb and (ta < tb or ea < eb) for ta, ea in a) for tb, eb in b)
+
+
+def dominance_section(rows: list[dict], techs: list[str]) -> list[str]:
+    """Where a modern baseline dominates a paper's technique (its Pareto front lies at or below every
+    setting of the paper's front, in time and error) and where it does not, per scene and light."""
+    modern = [m for m in MODERN if m in techs]
+    papers = [p for p in PAPERS if p in techs]
+    if not modern or not papers:
+        return []
+    L = ["## Where a modern baseline dominates a paper's technique", "",
+         "A modern technique *dominates* a paper's on a frame when every setting of the paper's Pareto front has a setting of the "
+         "modern one at most as slow and at most as wrong (the row's error: penumbra MAE, or all pixels' MAE for a point light). "
+         "Cells: frames (scene and light) where it dominates / frames where both ran; then the frames where it does not.", "",
+         "| paper's technique | " + " | ".join(modern) + " |", "|---|" + "---|" * len(modern)]
+    detail = []
+    for p in papers:
+        cells = []
+        for m in modern:
+            won, lost = [], []
+            for r in sorted(rows, key=lambda r: (r["scene"], r["light"])):
+                metric = row_metric(r)
+                pts = {t: pareto_front([(e["frame_ms"], _err(e, metric), e) for e in r["entries"] if e["technique"] == t]) for t in (p, m)}
+                if not pts[p] or not pts[m]:
+                    continue
+                name = f"{r['scene']}/{r['light'].split('/')[-1]}"
+                (won if dominates([(t, e) for t, e, _ in pts[m]], [(t, e) for t, e, _ in pts[p]]) else lost).append(name)
+            cells.append(f"{len(won)} / {len(won) + len(lost)}")
+            if won or lost:
+                detail.append(f"* `{m}` over `{p}`: dominates on {', '.join(won) or 'none'}; not on {', '.join(lost) or 'none'}.")
+        L.append(f"| {p} | " + " | ".join(cells) + " |")
+    return L + [""] + detail + [""]
+
+
 def plot(row: dict, path: Path) -> None:
     import matplotlib
 
@@ -167,10 +208,11 @@ def plot(row: dict, path: Path) -> None:
     entries = row["entries"]
     techs = sorted({e["technique"] for e in entries})
     fig, ax = plt.subplots(figsize=(6.4, 4.4))
-    markers = "os^Dvx*P<>h"
-    for i, t in enumerate(techs):
+    from wsoft.bench.palette import style
+
+    for t in techs:
         mine = [(e["frame_ms"], max(_err(e, metric), 1e-4), e) for e in entries if e["technique"] == t]
-        color = "k" if t == "reference" else f"C{i % 10}"
+        color, marker = style(t)["color"], style(t)["marker"]
         if t == "reference":
             pts = sorted(mine, key=lambda p: p[0])
             ax.plot([p[0] for p in pts], [p[1] for p in pts], "-", color=color, marker=".",
@@ -178,9 +220,9 @@ def plot(row: dict, path: Path) -> None:
             for x, y, e in pts:
                 ax.annotate(str(e["params"]["samples"]), (x, y), fontsize=6)
             continue
-        ax.scatter([p[0] for p in mine], [p[1] for p in mine], s=10, color=color, marker=markers[i % len(markers)], alpha=0.45)
+        ax.scatter([p[0] for p in mine], [p[1] for p in mine], s=10, color=color, marker=marker, alpha=0.45)
         front = pareto_front(mine)
-        ax.plot([p[0] for p in front], [p[1] for p in front], "--", color=color, marker=markers[i % len(markers)], markersize=4, label=t)
+        ax.plot([p[0] for p in front], [p[1] for p in front], "--", color=color, marker=marker, markersize=4, label=t)
     for target in TARGETS:
         ax.axhline(target, color="grey", linewidth=0.6, linestyle=":")
     ax.set_xscale("log")
@@ -250,6 +292,7 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
                 cells.append("-" if e is None else f"{e['frame_ms']:.0f} ms ({setting_text(e).split(' ', 1)[1] if ' ' in setting_text(e) else ''})")
             L.append(f"| {r['scene']} | {_light_cell(r)} | " + " | ".join(cells) + " |")
         L.append("")
+    L += dominance_section(rows, techs)
     L += ["## Pareto-optimal settings per scene and light (all techniques together)", ""]
     L.append("| scene | light | setting | frame ms | penumbra MAE | MAE | MAE facing the light | penumbra pixels | ꟻLIP |")
     L.append("|---|---|---|---|---|---|---|---|---|")

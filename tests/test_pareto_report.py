@@ -49,3 +49,18 @@ def test_the_tables_carry_flip_and_a_dash_where_a_row_has_none(tmp_path):
     optimal = text.split("## Pareto-optimal settings")[1].split("##")[0]
     assert "| penumbra pixels | ꟻLIP |" in optimal
     assert "| reference 16 spp | 40.0 | 0.0100 | 0.0000 | 0.0000 | 500 | 0.0056 |" in optimal and "| 500 | - |" in optimal
+
+
+def test_a_modern_technique_dominates_a_paper_s_only_where_its_front_is_below_every_setting(tmp_path):
+    assert pareto.dominates([(10.0, 0.05)], [(20.0, 0.05), (30.0, 0.06)])
+    assert not pareto.dominates([(10.0, 0.05)], [(20.0, 0.05), (30.0, 0.01)])  # the paper's slow setting is more accurate
+    assert not pareto.dominates([(10.0, 0.05)], [(10.0, 0.05)])  # equal is not better
+    assert not pareto.dominates([], [(1.0, 1.0)])
+    won, lost = _row("contact", 500), _row("box_plane", 500)
+    won["entries"] += [_entry("essm", 30.0, 0.02, 0.10, 500), _entry("msm_soft", 15.0, 0.02, 0.08, 500)]
+    lost["entries"] += [_entry("essm", 30.0, 0.02, 0.05, 500), _entry("msm_soft", 15.0, 0.02, 0.08, 500)]
+    md = tmp_path / "pareto.md"
+    pareto.report([won, lost], md, {"quick": False, "command": "wsoft bench pareto", "stem": "pareto"})
+    text = md.read_text()
+    assert "| essm | 1 / 2 |" in text
+    assert "`msm_soft` over `essm`: dominates on contact/Light; not on box_plane/Light." in text
