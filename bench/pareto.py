@@ -198,6 +198,30 @@ def dominance_section(rows: list[dict], techs: list[str]) -> list[str]:
     return L + [""] + detail + [""]
 
 
+def motion_section(temporal_rows: Path) -> list[str]:
+    """Each technique's flicker and ꟻLIP at its defaults on the animated stages, from the rows of
+    ``wsoft bench temporal`` beside this report (nothing when there are none)."""
+    from wsoft.bench.harness import read_rows
+
+    rows = read_rows(temporal_rows)
+    if not rows:
+        return []
+    stages = [f"{r['scene']}/{r['light'].split('/')[-1]}" for r in rows]
+    labels = sorted({e["label"] for r in rows for e in r["entries"]})
+    L = ["## In motion: flicker and ꟻLIP on the animated stages", "",
+         f"From `wsoft bench temporal` ([temporal.md](temporal.md), {rows[0]['width']}x{rows[0]['height']}, every technique at its defaults "
+         "with 1024² maps): flicker against the reference (mean |ΔV − ΔV_ref| at the same surface point over the frame pairs) and "
+         "the mean ꟻLIP over the frames, `flicker / ꟻLIP` per stage (`n/a`: not applicable).", "",
+         "| setting | " + " | ".join(stages) + " |", "|---|" + "---|" * len(stages)]
+    for label in labels:
+        cells = []
+        for r in rows:
+            e = next((e for e in r["entries"] if e["label"] == label), None)
+            cells.append("n/a" if e is None else f"{e['temporal']['flicker']:.4f} / " + (f"{e['flip']:.4f}" if e.get("flip") is not None else "-"))
+        L.append(f"| {label} | " + " | ".join(cells) + " |")
+    return L + [""]
+
+
 def plot(row: dict, path: Path) -> None:
     import matplotlib
 
@@ -293,6 +317,7 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
             L.append(f"| {r['scene']} | {_light_cell(r)} | " + " | ".join(cells) + " |")
         L.append("")
     L += dominance_section(rows, techs)
+    L += motion_section(md.parent / "temporal.jsonl")
     L += ["## Pareto-optimal settings per scene and light (all techniques together)", ""]
     L.append("| scene | light | setting | frame ms | penumbra MAE | MAE | MAE facing the light | penumbra pixels | ꟻLIP |")
     L.append("|---|---|---|---|---|---|---|---|---|")

@@ -311,6 +311,10 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
         if r.get("strip"):
             L += [f"![{r['scene']} four frames]({r['strip']})", ""]
         c = r["cost"]
+        floor = next((e["temporal"].get("flicker_noise") for e in r["entries"]), None)
+        if floor is not None:
+            L.append(f"The ground truth's own frame-to-frame noise, from its standard errors (an upper bound: its seed is the same in every "
+                     f"frame): {floor:.5f}.")
         L.append(f"Scene on the device: {c['scene_built']} built, {c.get('scene_refit', 0)} refit, {c['scene_reused']} reused; loading "
                  f"{c['load_ms'] / max(c['frames'], 1):.0f} ms a frame, refits {c.get('refit_ms', 0):.0f} ms, uploads {c['upload_ms']:.0f} ms in all.")
         L.append("")

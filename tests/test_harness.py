@@ -100,3 +100,30 @@ def test_modern_sweep_states_its_targets(tmp_path):
         assert f"| box_plane | Light | {t}" in md, t
     assert "## Light leak per technique" in md and "(images/modern-quick/box_plane-rtdenoise.png)" in md
     assert (out / "images" / "modern-quick" / "box_plane-rtdenoise.png").is_file()
+
+
+@pytest.mark.slow
+def test_temporal_sweep_measures_flicker_per_technique(tmp_path):
+    """``wsoft bench temporal --quick``: every technique over the quick sequences with its flicker, mean
+    error and ꟻLIP, stable views and rtdenoise's history beside the defaults, the crawl target as a row,
+    and a rerun that resumes (no row computed twice)."""
+    out = tmp_path / "reports"
+    assert harness.run_sweep("temporal", quick=True, device=["cpu"], out_dir=str(out)) == 0
+    rows = harness.read_rows(out / "temporal-quick.jsonl")
+    assert [r["scene"] for r in rows] == ["ramp_slide", "ramp_static"]
+    for r in rows:
+        labels = {e["label"] for e in r["entries"]}
+        assert {"hard(shadow_map_size=256)", "rtdenoise", "rtdenoise(history=1)"} <= labels
+        assert any("view=stable" in l for l in labels) and any("view=sequence" in l for l in labels)
+        for e in r["entries"]:
+            assert e["temporal"]["pairs"] == 2 and e["temporal"]["paired_pixels"] > 0 and e["flip"] is not None
+    static = next(r for r in rows if r["scene"] == "ramp_static")
+    assert static["static"] and all("temporal_std" in e["temporal"] for e in static["entries"])
+    hard = next(e for e in static["entries"] if e["label"] == "hard(shadow_map_size=256)")
+    assert hard["temporal"]["flicker"] == 0.0 and hard["temporal"]["temporal_std"] == 0.0  # a still stage, a deterministic map
+    md = (out / "temporal-quick.md").read_text()
+    assert "## Targets" in md and "on the still ramp_static" in md and "| ramp_slide | Light |" in md
+    assert (out / "images" / "temporal-quick" / "ramp_slide-Light-flicker.png").is_file()
+    first = (out / "temporal-quick.jsonl").read_text()
+    assert harness.run_sweep("temporal", quick=True, device=["cpu"], out_dir=str(out)) == 0
+    assert (out / "temporal-quick.jsonl").read_text() == first

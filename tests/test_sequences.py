@@ -96,6 +96,7 @@ def _truth(scene, samples: int) -> GroundTruth:
     return gt
 
 
+@pytest.mark.slow
 def test_reprojection_keeps_only_surfaces_seen_in_both_frames(tmp_path):
     p = _moving_camera_stage(str(tmp_path / "pan.usda"))
     seq = render_sequence(p, "hard", frames="1:2", width=64, height=48, shadow_map_size=512)
@@ -155,6 +156,7 @@ def test_a_stage_without_time_samples_renders_the_same_frames_and_says_so():
     assert np.array_equal(still[0].V, still[1].V)
 
 
+@pytest.mark.slow
 def test_the_reference_crawls_by_its_standard_error_on_a_static_sequence():
     """On a still stage the reference at N samples with new samples each frame changes only by its
     noise: its flicker against a fixed-seed ground truth and its temporal std match what its own
@@ -170,6 +172,7 @@ def test_the_reference_crawls_by_its_standard_error_on_a_static_sequence():
     assert out[64][0]["flicker"] < 0.5 * out[4][0]["flicker"]
 
 
+@pytest.mark.slow
 def test_moving_points_are_refitted_and_give_the_fresh_render():
     p = scene_path("lightmapped_bridge.usda")
     seq = render_sequence(p, ["hard", ("reference", {"samples": 4})], frames="1:3", width=48, height=36, light="Sun", reseed=False)

@@ -33,6 +33,7 @@ def _pan_stage(path: str, frames: int = 3):
     return path
 
 
+@pytest.mark.slow
 def test_accumulation_lowers_the_error_of_a_still_frame_and_says_so():
     seq = compare_sequence(scene_path("box_plane.usda"), [("rtdenoise", {"samples": 1}), ("rtdenoise", {"samples": 1, "history": 1})],
                            frames=[1, 2, 3, 4, 5, 6], samples=64, width=64, height=48)
@@ -65,6 +66,7 @@ def test_a_moving_camera_reprojects_and_disoccludes(tmp_path):
     assert np.isfinite(seq[2].V).all()
 
 
+@pytest.mark.slow
 def test_a_light_view_fitted_once_for_the_sequence(tmp_path):
     p = _pan_stage(str(tmp_path / "pan.usda"))
     techs = [("hard", {"shadow_map_size": 512, "view": v}) for v in ("stable", "sequence")]

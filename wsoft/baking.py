@@ -60,7 +60,6 @@ import warp as wp
 from wsoft.errors import NonFiniteWarning, ParameterError, SceneError
 from wsoft.graph import Pass
 from wsoft.io import nonfinite_counts, write_exr
-from wsoft.params import parse_frames
 from wsoft.parallel import compile_time, resolve_device
 from wsoft.raster.gbuffer import GBuffer, bake_gbuffer
 from wsoft.pipeline.build import as_techniques, supported_lights, visibility_of
@@ -275,24 +274,9 @@ def fill_from_nearest(values: np.ndarray, covered: np.ndarray) -> np.ndarray:
 
 def _frames(stage, frames, file: str) -> list[float] | None:
     """The time codes to bake (None: the loader's default time, written as a default value)."""
-    if frames is None:
-        return None
-    if isinstance(frames, str):
-        try:
-            times = parse_frames(frames)
-        except ValueError as exc:
-            raise ParameterError(f"--frames {exc}", file=file) from None
-    else:
-        times = [float(t) for t in (frames if hasattr(frames, "__iter__") else [frames])]
-        if not times or not all(math.isfinite(t) for t in times):
-            raise ParameterError(f"frames {frames!r}: need one or more finite time codes", file=file)
-    if stage.HasAuthoredTimeCodeRange():
-        lo, hi = stage.GetStartTimeCode(), stage.GetEndTimeCode()
-        out = [t for t in times if not lo - 1e-9 <= t <= hi + 1e-9]
-        if out:
-            raise ParameterError(f"frames {min(times):g}..{max(times):g} lie outside the stage's time range "
-                                 f"[{lo:g}, {hi:g}] (startTimeCode, endTimeCode)", file=file)
-    return times
+    from wsoft.pipeline.sequence import stage_time_codes
+
+    return None if frames is None else stage_time_codes(stage, frames, file)
 
 
 def _frame_token(t: float) -> str:

@@ -224,6 +224,18 @@ def _frames_and_loader(scene, frames, render_settings, instancing):
     return loader, times
 
 
+def _start(scene, frames, render_settings, instancing, techs: list, reseed: bool, **view):
+    """A sequence's loader, its empty :class:`Sequence` and its :class:`History` (with the receivers
+    of every frame when a technique asks for ``view=sequence``); ``view``: the render's size, camera,
+    light, device and pixel samples."""
+    loader, times = _frames_and_loader(scene, frames, render_settings, instancing)
+    seq = Sequence(times=times, frames=[], warnings=list(loader.warnings))
+    history = History(reseed)
+    if _wants_sequence_views(techs):
+        history.fit_receivers = sequence_receivers(loader, times, **view)
+    return loader, seq, history
+
+
 def _upload_note(fr, info: dict) -> None:
     """The scene upload's cost in ``info`` (near 0 when the device copy was reused)."""
     info["upload_ms"] = round(float(fr.stats["timings_ms"].get("upload_scene", 0.0)), 3)
@@ -239,17 +251,13 @@ def render_sequence(scene, technique, *, frames, width: int | None = None, heigh
     ``progress``: called as ``progress(done, total, time_code)`` after each frame. The other
     arguments as :func:`wsoft.render` takes them. A stage without time samples renders the same
     stage at every time code and says so in ``warnings``."""
-    from wsoft.pipeline import as_techniques, render
+    from wsoft.pipeline import as_techniques, is_several, render
 
-    loader, times = _frames_and_loader(scene, frames, render_settings, instancing)
     techs = as_techniques(technique, params)
-    several = isinstance(technique, (list, tuple)) and not (isinstance(technique, tuple) and len(technique) == 2 and isinstance(technique[1], dict))
-    seq = Sequence(times=times, frames=[], warnings=list(loader.warnings))
-    history = History(reseed)
-    if _wants_sequence_views(techs):
-        history.fit_receivers = sequence_receivers(loader, times, width=width, height=height, camera=camera, light=light, device=device,
-                                                   pixel_samples=pixel_samples)
-    for i, t in enumerate(times):
+    several = is_several(technique)
+    loader, seq, history = _start(scene, frames, render_settings, instancing, techs, reseed, width=width, height=height, camera=camera,
+                                  light=light, device=device, pixel_samples=pixel_samples)
+    for i, t in enumerate(seq.times):
         sc, info = loader.load(t)
         if i == 0:
             seq.render_settings = sc.render_settings
@@ -260,11 +268,11 @@ def render_sequence(scene, technique, *, frames, width: int | None = None, heigh
         info["render_ms"] = round(1e3 * (_time.perf_counter() - t0), 3)
         info["frame_ms"] = _one_frame_stats(fr)
         _upload_note(fr, info)
-        _stamp(fr, info, i, len(times))
+        _stamp(fr, info, i, len(seq.times))
         seq.frames.append(fr)
         seq.stats.append(info)
         if progress is not None:
-            progress(i + 1, len(times), t)
+            progress(i + 1, len(seq.times), t)
     seq.summary = _cost_summary(seq)
     return seq
 
@@ -352,13 +360,10 @@ def compare_sequence(scene, techniques, *, frames, samples: int = 256, ground_tr
     from wsoft.metrics import compare
     from wsoft.pipeline import as_techniques, is_several
 
-    loader, times = _frames_and_loader(scene, frames, render_settings, instancing)
     techs = as_techniques(list(techniques) if is_several(techniques) else [techniques], {})
-    seq = Sequence(times=times, frames=[], warnings=list(loader.warnings))
-    history = History(reseed)
-    if _wants_sequence_views(techs):
-        history.fit_receivers = sequence_receivers(loader, times, width=width, height=height, camera=camera, light=light, device=device,
-                                                   pixel_samples=pixel_samples)
+    loader, seq, history = _start(scene, frames, render_settings, instancing, techs, reseed, width=width, height=height, camera=camera,
+                                  light=light, device=device, pixel_samples=pixel_samples)
+    times = seq.times
     truths: list = []
     for i, t in enumerate(times):
         sc, info = loader.load(t)

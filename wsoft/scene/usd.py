@@ -151,6 +151,25 @@ def diagnostic_lines(diagnostics, file: str) -> list[str]:
     return out
 
 
+def _passed_over(ctx, prim, it) -> bool:
+    """Is ``prim`` left out of the load: invisible (its subtree pruned from the traversal ``it``) or
+    of a purpose the render settings leave out (a PointInstancer's prototypes pruned with it, since
+    they are drawn only where it places them; otherwise not pruned: a descendant may author a
+    purpose of its own that is included)?"""
+    Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = pxr()
+    if not prim.IsA(UsdGeom.Imageable):
+        return False
+    img = UsdGeom.Imageable(prim)
+    if img.ComputeVisibility(ctx.timecode) == UsdGeom.Tokens.invisible:
+        it.PruneChildren()
+        return True
+    if img.ComputePurpose() not in ctx.purposes:
+        if prim.IsA(UsdGeom.PointInstancer):
+            it.PruneChildren()
+        return True
+    return False
+
+
 def _read_view_prim(ctx, prim, type_name: str, lights, unshadowed, skipped, cameras, shadow_lights) -> None:
     """A light or camera prim into its list (anything else: nothing)."""
     Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = pxr()
@@ -234,15 +253,8 @@ def with_views_at(scene: Scene, stage, time: float | None, render_settings: str 
     lights, unshadowed, skipped, cameras, shadow_lights = [], [], [], [], []
     it = iter(Usd.PrimRange.Stage(stage, Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)))
     for prim in it:
-        if prim.IsA(UsdGeom.Imageable):
-            img = UsdGeom.Imageable(prim)
-            if img.ComputeVisibility(ctx.timecode) == UsdGeom.Tokens.invisible:
-                it.PruneChildren()
-                continue
-            if img.ComputePurpose() not in ctx.purposes:
-                if prim.IsA(UsdGeom.PointInstancer):
-                    it.PruneChildren()
-                continue
+        if _passed_over(ctx, prim, it):
+            continue
         if prim.IsA(UsdGeom.Gprim) or prim.IsA(UsdGeom.PointInstancer):
             it.PruneChildren()
             continue
@@ -283,15 +295,8 @@ def read_stage(stage, file: str, time: float | None, render_settings: str | None
         if inst is not None and prim.IsInstance() and instancers.read_instance(prim, inst):
             it.PruneChildren()  # its prototype is placed, not flattened
             continue
-        if prim.IsA(UsdGeom.Imageable):
-            img = UsdGeom.Imageable(prim)
-            if img.ComputeVisibility(ctx.timecode) == UsdGeom.Tokens.invisible:
-                it.PruneChildren()
-                continue
-            if img.ComputePurpose() not in ctx.purposes:
-                if prim.IsA(UsdGeom.PointInstancer):
-                    it.PruneChildren()  # its prototypes are drawn only where it places them
-                continue  # otherwise not pruned: a descendant may author a purpose of its own that is included
+        if _passed_over(ctx, prim, it):
+            continue
         type_name = prim.GetTypeName()
         if prim.IsA(UsdGeom.PointInstancer):
             it.PruneChildren()  # its prototypes are drawn only where it places them
