@@ -7,8 +7,8 @@ turning over ``lightmapped_bridge`` while its character walks, a rect light slid
 light it names, every frame of :data:`FRAMES` is one frame graph holding every registered technique
 that supports the light at its defaults (its map at :data:`MAP`), the shadow-map techniques again
 with ``view=stable`` (a texel grid that stays put), ``hard`` and ``pcss`` also with
-``view=sequence`` (one light view for every frame), ``rtdenoise`` without history (``history=1``)
-beside its default temporal accumulation, and the reference at :data:`REFERENCE_SAMPLES` samples
+``view=sequence`` (one light view for every frame), ``rtdenoise`` with 8 frames of history (``history=8``)
+beside its default (none), and the reference at :data:`REFERENCE_SAMPLES` samples
 (new samples each frame, as an engine draws them). The ground truth of each frame is the reference
 at :data:`GROUND_TRUTH` samples with seed 0 in every frame, cached by time code
 (:func:`wsoft.bench.harness.reference`). Errors and flicker come from
@@ -83,7 +83,7 @@ def settings(scene, light, map_size: int, quick: bool) -> list[tuple[str, dict]]
             if name in SEQUENCE_VIEWS:
                 out.append((name, {**base, "view": "sequence"}))
         if name == "rtdenoise" and "history" in fields:
-            out.append((name, {**base, "history": 1}))
+            out.append((name, {**base, "history": 8}))
     return out
 
 
@@ -289,7 +289,7 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
         return
     L.append("Every registered technique that supports the light at its defaults (maps "
              f"{rows[0]['entries'][0]['params'].get('shadow_map_size', MAP)}² where it has one), the shadow-map techniques again with "
-             "`view=stable`, `rtdenoise` with and without temporal accumulation (`history=1`: none), and the reference at "
+             "`view=stable` (`hard` and `pcss` also `view=sequence`), `rtdenoise` without and with temporal accumulation (`history=8`), and the reference at "
              f"{', '.join(str(n) for n in REFERENCE_SAMPLES)} samples drawing new samples each frame, all in one frame graph per frame.")
     L.append(f"Ground truth: the reference at {rows[0]['ground_truth_samples']} samples, seed 0 in every frame (its noise does not crawl).")
     L.append("**Flicker**: the mean over pixels and frame pairs of |ΔV − ΔV_ref| at the same surface point (the same pixel while the camera")

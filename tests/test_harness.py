@@ -113,7 +113,7 @@ def test_temporal_sweep_measures_flicker_per_technique(tmp_path):
     assert [r["scene"] for r in rows] == ["ramp_slide", "ramp_static"]
     for r in rows:
         labels = {e["label"] for e in r["entries"]}
-        assert {"hard(shadow_map_size=256)", "rtdenoise", "rtdenoise(history=1)"} <= labels
+        assert {"hard(shadow_map_size=256)", "rtdenoise", "rtdenoise(history=8)"} <= labels
         assert any("view=stable" in l for l in labels) and any("view=sequence" in l for l in labels)
         for e in r["entries"]:
             assert e["temporal"]["pairs"] == 2 and e["temporal"]["paired_pixels"] > 0 and e["flip"] is not None

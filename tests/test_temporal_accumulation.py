@@ -35,32 +35,32 @@ def _pan_stage(path: str, frames: int = 3):
 
 @pytest.mark.slow
 def test_accumulation_lowers_the_error_of_a_still_frame_and_says_so():
-    seq = compare_sequence(scene_path("box_plane.usda"), [("rtdenoise", {"samples": 1}), ("rtdenoise", {"samples": 1, "history": 1})],
+    seq = compare_sequence(scene_path("box_plane.usda"), [("rtdenoise", {"samples": 1, "history": 8}), ("rtdenoise", {"samples": 1})],
                            frames=[1, 2, 3, 4, 5, 6], samples=64, width=64, height=48)
-    acc = [fs["rtdenoise(samples=1)"].stats["error"]["mae_penumbra"] for fs in seq.frames]
-    one = [fs["rtdenoise(samples=1,history=1)"].stats["error"]["mae_penumbra"] for fs in seq.frames]
+    acc = [fs["rtdenoise(samples=1,history=8)"].stats["error"]["mae_penumbra"] for fs in seq.frames]
+    one = [fs["rtdenoise(samples=1)"].stats["error"]["mae_penumbra"] for fs in seq.frames]
     assert acc[0] == one[0]  # the first frame has no history
     assert np.mean(acc[3:]) < 0.8 * np.mean(one[3:])
-    c0 = seq[0]["rtdenoise(samples=1)"].counters()
-    c5 = seq[5]["rtdenoise(samples=1)"].counters()
+    c0 = seq[0]["rtdenoise(samples=1,history=8)"].counters()
+    c5 = seq[5]["rtdenoise(samples=1,history=8)"].counters()
     assert c0["history"] == "first frame" and c0["history_samples"] == 0
     assert c5["history"] == "reprojected" and c5["disoccluded"] < 0.02 * 64 * 48 and c5["history_mean_length"] > 5.5
-    assert "history" not in seq[5]["rtdenoise(samples=1,history=1)"].counters()
+    assert "history" not in seq[5]["rtdenoise(samples=1)"].counters()
     m = seq.summary["temporal"]
-    assert m["rtdenoise(samples=1)"]["Light"]["temporal_std"] < m["rtdenoise(samples=1,history=1)"]["Light"]["temporal_std"]
+    assert m["rtdenoise(samples=1,history=8)"]["Light"]["temporal_std"] < m["rtdenoise(samples=1)"]["Light"]["temporal_std"]
 
 
 def test_a_single_frame_has_no_history():
     f = wsoft.render(scene_path("box_plane.usda"), "rtdenoise", width=32, height=24)
     assert "history" not in f.counters()
     h = History()
-    f0 = wsoft.render(scene_path("box_plane.usda"), "rtdenoise", width=32, height=24, history=h)
+    f0 = wsoft.render(scene_path("box_plane.usda"), ("rtdenoise", {"history": 8}), width=32, height=24, frame_history=h)
     assert f0.counters()["history"] == "first frame" and np.array_equal(f0.V, f.V)  # frame 0: the single frame's rays
 
 
 def test_a_moving_camera_reprojects_and_disoccludes(tmp_path):
     p = _pan_stage(str(tmp_path / "pan.usda"))
-    seq = render_sequence(p, "rtdenoise", frames="1:3", width=64, height=48)
+    seq = render_sequence(p, ("rtdenoise", {"history": 8}), frames="1:3", width=64, height=48)
     c = seq[1].counters()
     assert c["history"] == "reprojected" and c["history_samples"] > 0.5 * 64 * 48 and c["disoccluded"] > 0
     assert np.isfinite(seq[2].V).all()

@@ -35,7 +35,7 @@ from wsoft.parallel import launch_chunked
 from wsoft.raster.camera import CameraGPU
 from wsoft.raster.gbuffer import GBufferGPU, gb_covered, gb_index, gb_layer, gb_pixel
 
-SAME_POINT = 2.0  # the previous point within this many pixel footprints: the same surface
+SAME_POINT = 0.5  # the previous point within this many pixel footprints: the same surface point
 SAME_NORMAL = 0.9  # and its normal's cosine to this one at least this
 
 REPROJECTED = wp.constant(1)

@@ -164,7 +164,7 @@ def add_error_pass(ctx, technique_label: str, channels: Key, reference: Key, lig
 
 def compare(scene, techniques, *, samples: int = 256, ground_truth: GroundTruth | None = None, width: int | None = None,
             height: int | None = None, camera=None, light=None, device: str | None = None, pixel_samples: int = 1,
-            time_code: float | None = None, render_settings: str | None = None, progress=None, history=None):
+            time_code: float | None = None, render_settings: str | None = None, progress=None, frame_history=None):
     """Render ``techniques`` (as :func:`wsoft.render` takes a list) and the reference in one graph,
     and measure each technique's error against the reference on the same pixels.
 
@@ -173,7 +173,7 @@ def compare(scene, techniques, *, samples: int = 256, ground_truth: GroundTruth 
     :class:`~wsoft.pipeline.FrameSet`; each technique's ``stats["errors"]`` maps light label ->
     error (:func:`add_error_pass`: with ꟻLIP where both shaded images exist), ``stats["error"]`` is
     the first light's, and ``error_maps["flip"]`` holds its ꟻLIP map (float32 [H, W]). ``width``,
-    ``height``, ``camera``, ``render_settings``, ``progress``, ``history``: as :func:`wsoft.render` takes them
+    ``height``, ``camera``, ``render_settings``, ``progress``, ``frame_history``: as :func:`wsoft.render` takes them
     (errors are measured on the data window's pixels when the settings have one)."""
     import time
 
@@ -192,7 +192,7 @@ def compare(scene, techniques, *, samples: int = 256, ground_truth: GroundTruth 
     dev = resolve_device(device)
     t0 = time.perf_counter()
     built = build_graph(scene, techs, width=width, height=height, camera=camera, light=light, device=dev, pixel_samples=pixel_samples,
-                        history=history)
+                        history=frame_history)
     ctx = built.ctx
     if ground_truth is None:
         ref_label = next(label for t, label in zip(built.techniques, built.labels) if t.name == "reference")

@@ -42,7 +42,7 @@ def render(
     time_code: float | None = None,
     render_settings: str | None = None,
     progress=None,
-    history=None,
+    frame_history=None,
     **params,
 ) -> Frame | FrameSet:
     """Render on ``scene`` (a :class:`Scene` or a USD path) and return a :class:`Frame`, or a
@@ -64,7 +64,7 @@ def render(
     ``progress``: called as ``progress(done, total, pass_name)`` before each pass of the graph and
     ``progress(total, total, None)`` after the last (the command line's progress bar).
 
-    ``history``: a sequence's :class:`~wsoft.pipeline.history.History` (:mod:`wsoft.pipeline.sequence`
+    ``frame_history``: a sequence's :class:`~wsoft.pipeline.history.History` (:mod:`wsoft.pipeline.sequence`
     passes one through its frames): time-aware techniques read their previous frame from it and
     stochastic ones seed with the frame's index; None renders a single frame.
 
@@ -79,7 +79,7 @@ def render(
 
     t0 = time.perf_counter()
     built = build_graph(scene, technique, width=width, height=height, camera=camera, light=light, device=dev,
-                        pixel_samples=pixel_samples, params=params, history=history)
+                        pixel_samples=pixel_samples, params=params, history=frame_history)
     res, records, _ = execute(built, dev, progress=progress)
     t1 = time.perf_counter()
     fs = frames_of(built, res, records, 1e3 * (t1 - t0), compile_ms=1e3 * compile_time(t0, t1)[0])

@@ -263,7 +263,7 @@ def render_sequence(scene, technique, *, frames, width: int | None = None, heigh
             seq.render_settings = sc.render_settings
         t0 = _time.perf_counter()
         fr = render(sc, techs if several else techs[0], width=width, height=height, camera=camera, light=light, device=device,
-                    pixel_samples=pixel_samples, history=history)
+                    pixel_samples=pixel_samples, frame_history=history)
         history.advance()
         info["render_ms"] = round(1e3 * (_time.perf_counter() - t0), 3)
         info["frame_ms"] = _one_frame_stats(fr)
@@ -378,7 +378,7 @@ def compare_sequence(scene, techniques, *, frames, samples: int = 256, ground_tr
         info["ground_truth_ms"] = round(1e3 * (_time.perf_counter() - t0), 3)
         t0 = _time.perf_counter()
         fs = compare(sc, techs, ground_truth=gt, width=width, height=height, camera=camera, light=light, device=device,
-                     pixel_samples=pixel_samples, history=history)
+                     pixel_samples=pixel_samples, frame_history=history)
         history.advance()
         info["render_ms"] = round(1e3 * (_time.perf_counter() - t0), 3)
         info["frame_ms"] = _one_frame_stats(fs)
