@@ -199,10 +199,10 @@ def test_sequence_receivers_fit_one_view_for_every_frame(device, light):
     foot = np.array([lamp.position[0], lamp.position[1], 0.0]) if lamp.kind_name != "distant" else np.zeros(3)
     ring = foot + [[10.0 * math.cos(a), 10.0 * math.sin(a), 0.0] for a in np.linspace(0.0, 2.0 * math.pi, 24, endpoint=False)]
     built = build_graph(scene, "hard", width=W, height=H, device=device, light=light, camera=Camera("/c1", look_at(*turn[1])),
-                        params={"view": "stable", "shadow_map_size": SIZE})
+                        params={"view": "sequence", "shadow_map_size": SIZE})
     built.ctx.fit_receivers = {lamp.path: ring}
     execute(built, device)
-    c = built.ctx.counters["passes"][f"fit_light_view[{light}]@{SIZE}+stable"]
+    c = built.ctx.counters["passes"][f"fit_light_view[{light}]@{SIZE}+sequence"]
     v = fit_stable_view(lamp, recs[1], lo, hi, SIZE, casters=casters, region=ring, down=DOWN)
     assert c["snap_offset"] == v.snap["snap_offset"] and c["radius"] == v.snap["radius"] and c["texel"] == v.snap["texel"]
     assert c["radius"] != fit_pass(frames[1])["radius"]  # the ring, not the frame's receivers, set its size
@@ -217,7 +217,7 @@ def test_every_shadow_map_technique_has_the_option():
     assert {"hard", "pcf", "pcss", "vsm", "esm", "evsm", "msm", "msm_soft", "essm", "vssm", "ssm", "salzman"} <= set(VIEW_TECHNIQUES)
     for name in VIEW_TECHNIQUES:
         assert TECHNIQUES[name].defaults()["view"] == "fitted"
-        with pytest.raises(wsoft.ParameterError, match=r"^" + name + r": view 'wobbly' is not one of fitted, stable$"):
+        with pytest.raises(wsoft.ParameterError, match=r"^" + name + r": view 'wobbly' is not one of fitted, stable, sequence$"):
             TECHNIQUES[name].make_params({"view": "wobbly"})
     table = wsoft.techniques.markdown_table()
     assert table.count("`view` ('fitted')") == len([n for n in VIEW_TECHNIQUES if n in wsoft.techniques.bundled_names()])
