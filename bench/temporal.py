@@ -131,15 +131,17 @@ def run_case(case: dict, ctx: dict) -> dict:
 # -- images -------------------------------------------------------------------------------------------
 
 
-def _window(frames: list, label: str, ll: str, w: int, h: int) -> tuple[int, int, int, int, int]:
+def _window(frames: list, label: str, ref: str, ll: str, w: int, h: int) -> tuple[int, int, int, int, int]:
     """The 4 consecutive frames and the ``w x h`` crop where ``label``'s V changes most between
-    consecutive frames beyond the reference's change: (first frame, x0, y0, x1, y1)."""
+    consecutive frames beyond the reference's (``ref``) change at the same pixels: (first frame, x0,
+    y0, x1, y1)."""
     best = (0, 0, 0, -1.0)
     for k in range(len(frames) - 3):
         d = np.zeros_like(np.asarray(frames[k][label][f"V.{ll}"], np.float64))
         for j in range(k, k + 3):
-            dv = np.abs(frames[j + 1][label][f"V.{ll}"] - frames[j][label][f"V.{ll}"])
-            d += np.nan_to_num(dv)
+            dv = frames[j + 1][label][f"V.{ll}"] - frames[j][label][f"V.{ll}"]
+            dr = frames[j + 1][ref][f"V.{ll}"] - frames[j][ref][f"V.{ll}"]
+            d += np.nan_to_num(np.abs(dv - dr), nan=1.0)
         H, W = d.shape
         c = np.cumsum(np.cumsum(np.pad(d, ((1, 0), (1, 0))), 0), 1)
         sums = c[h:, w:] - c[:-h, w:] - c[h:, :-w] + c[:-h, :-w]
@@ -158,25 +160,22 @@ def strip(seq, ll: str, row: dict, ctx: dict) -> str | None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    labels = [l for l in STRIP if l in seq.frames[0]]
+    from wsoft.metrics.temporal import FrameCamera
+
     refs = [l for l in seq.frames[0] if l.startswith("reference")]
-    if "hard" not in labels or not refs:
+    if "hard" not in seq.frames[0] or not refs:
         return None
+    big = max(refs, key=lambda l: seq.frames[0][l].stats["params"]["samples"])  # the most samples stands for the ground truth
+    labels = [big if l == "reference" else l for l in STRIP if l == "reference" or l in seq.frames[0]]
     frames = seq.frames
     H, W = np.asarray(frames[0]["hard"]["A"]).shape
-    k, x0, y0, x1, y1 = _window(frames, "hard", ll, max(W // 4, 8), max(H // 4, 6))
+    k, x0, y0, x1, y1 = _window(frames, "hard", big, ll, max(W // 4, 8), max(H // 4, 6))
     rel = Path("images") / ctx["stem"] / f"{row['scene']}-{ll}-strip.png"
     fig, axes = plt.subplots(len(labels), 4, figsize=(7.2, 1.9 * len(labels)), squeeze=False)
     for r, label in enumerate(labels):
         for c in range(4):
-            fs = frames[k + c]
-            v = fs[label][f"V.{ll}"] if label != "reference" else None
-            if label == "reference":  # the row's ground truth is not a frame of the graph: the 64-sample reference stands for it
-                big = max((l for l in refs), key=lambda l: fs[l].stats["params"]["samples"])
-                v = fs[big][f"V.{ll}"]
-                name = big
-            else:
-                name = label
+            v = frames[k + c][label][f"V.{ll}"]
+            name = label
             ax = axes[r][c]
             ax.imshow(np.asarray(v)[y0:y1, x0:x1], cmap="gray", vmin=0.0, vmax=1.0, interpolation="nearest")
             ax.set_xticks([])
@@ -185,7 +184,9 @@ def strip(seq, ll: str, row: dict, ctx: dict) -> str | None:
                 ax.set_ylabel(name, fontsize=7)
             if r == 0:
                 ax.set_title(f"frame {seq.times[k + c]:g}", fontsize=7)
-    fig.suptitle(f"{row['scene']} / {ll}: V in a {x1 - x0}x{y1 - y0} crop at ({x0}, {y0}), four consecutive frames", fontsize=8)
+    moving = any(not FrameCamera.of(frames[j]["hard"].stats).same_view(FrameCamera.of(frames[j + 1]["hard"].stats)) for j in range(k, k + 3))
+    fig.suptitle(f"{row['scene']} / {ll}: V in a {x1 - x0}x{y1 - y0} crop at ({x0}, {y0}) of four consecutive frames, where hard changes "
+                 "most beyond the reference" + (" (the camera moves: the crop stays put in the image)" if moving else ""), fontsize=7)
     fig.tight_layout()
     path = ctx["out_dir"] / rel
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -327,8 +328,10 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
         if floor is not None:
             L.append(f"The ground truth's own frame-to-frame noise, from its standard errors (an upper bound: its seed is the same in every "
                      f"frame): {floor:.5f}.")
+        pre = c.get("receivers_ms", 0.0)
         L.append(f"Scene on the device: {c['scene_built']} built, {c.get('scene_refit', 0)} refit, {c['scene_reused']} reused; loading "
-                 f"{c['load_ms'] / max(c['frames'], 1):.0f} ms a frame, refits {c.get('refit_ms', 0):.0f} ms, uploads {c['upload_ms']:.0f} ms in all.")
+                 f"{c['load_ms'] / max(c['frames'], 1):.0f} ms a frame, refits {c.get('refit_ms', 0):.0f} ms, uploads {c['upload_ms']:.0f} ms in all"
+                 + (f"; the G-buffer pass over every frame for `view=sequence` (where the first copy was built) {pre / 1e3:.1f} s." if pre else "."))
         L.append("")
         static = r["static"]
         L.append("| setting | frame ms | flicker ± se | own change | mean MAE | mean penumbra MAE | worst frame (penumbra MAE) | ꟻLIP |"

@@ -135,6 +135,7 @@ class Sequence:
     summary: dict = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
     render_settings: object = None  # the first frame's RenderSettings (wsoft.scene.render_settings), or None
+    receivers_ms: float = 0.0  # the G-buffer pass over every frame for view=sequence light views (0: none)
 
     def __len__(self) -> int:
         return len(self.frames)
@@ -232,7 +233,9 @@ def _start(scene, frames, render_settings, instancing, techs: list, reseed: bool
     seq = Sequence(times=times, frames=[], warnings=list(loader.warnings))
     history = History(reseed)
     if _wants_sequence_views(techs):
+        t0 = _time.perf_counter()
         history.fit_receivers = sequence_receivers(loader, times, **view)
+        seq.receivers_ms = round(1e3 * (_time.perf_counter() - t0), 3)
     return loader, seq, history
 
 
@@ -327,7 +330,7 @@ def _cost_summary(seq: Sequence) -> dict:
             "scene_built": sum(1 for s in st if s["scene"] == "built"), "scene_refit": sum(1 for s in st if s["scene"] == "refit"),
             "scene_reused": sum(1 for s in st if s["scene"] == "reused"), "refit_ms": round(sum(s["refit_ms"] for s in st), 3),
             "load_ms": round(sum(s["load_ms"] for s in st), 3), "upload_ms": round(sum(s.get("upload_ms", 0.0) for s in st), 3),
-            "render_ms": round(sum(s["render_ms"] for s in st), 3)}
+            "render_ms": round(sum(s["render_ms"] for s in st), 3), "receivers_ms": seq.receivers_ms}
 
 
 def ground_truth_frame(scene: Scene, samples: int, *, width, height, camera, light, device, pixel_samples: int = 1):
