@@ -238,10 +238,9 @@ def run_sweep(name: str, *, quick: bool = False, device: list[str] | None = None
     if name not in SWEEPS:
         raise ParameterError(f"unknown sweep {name!r}; sweeps: {', '.join(sorted(SWEEPS))}")
     mod = importlib.import_module(SWEEPS[name])
-    set_scenes_dir(scenes)
-    scenes_dir()  # a bad --scenes is an error before anything runs
-    if scenes and not Path(scenes).is_dir():
+    if scenes and not Path(scenes).is_dir():  # a bad --scenes is an error before anything runs (or is remembered)
         raise ParameterError(f"--scenes {scenes}: no such folder")
+    set_scenes_dir(scenes)
     devices = [resolve_device(d) for d in (device or [None])]
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

@@ -88,7 +88,7 @@ def settings(scene, light, map_size: int, quick: bool) -> list[tuple[str, dict]]
 
 
 def run_case(case: dict, ctx: dict) -> dict:
-    from wsoft.pipeline.sequence import compare_sequence
+    from wsoft.metrics.sequences import compare_sequence
 
     name, light = case["scene"], case["light"]
     scene = load(name)

@@ -13,7 +13,8 @@ from pxr import Gf, UsdGeom
 import wsoft
 from wsoft.metrics import GroundTruth, compare
 from wsoft.metrics.temporal import SAME_POINT, FrameCamera, flicker, pair_pixels, positions, temporal_std
-from wsoft.pipeline.sequence import Sequence, compare_sequence, render_sequence, temporal_measures
+from wsoft.metrics.sequences import compare_sequence, temporal_measures
+from wsoft.pipeline.sequence import Sequence, render_sequence
 from wsoft.stages import add_box, add_camera, add_point_light, add_quad, add_rect_light, look_at_xform, make_stage
 
 from conftest import scene_path, wsoft_cli
@@ -90,7 +91,7 @@ def test_a_jittered_map_is_measured_as_flickering(tmp_path):
 
 
 def _truth(scene, samples: int) -> GroundTruth:
-    from wsoft.pipeline.sequence import ground_truth_frame
+    from wsoft.metrics.sequences import ground_truth_frame
 
     gt, _ = ground_truth_frame(scene, samples, width=64, height=48, camera=None, light=None, device=None)
     return gt

@@ -9,7 +9,8 @@ from pxr import Gf, UsdGeom
 
 import wsoft
 from wsoft.pipeline import History
-from wsoft.pipeline.sequence import compare_sequence, render_sequence
+from wsoft.metrics.sequences import compare_sequence
+from wsoft.pipeline.sequence import render_sequence
 from wsoft.scene.usd import open_stage, static_geometry
 from wsoft.stages import add_box, add_camera, add_quad, add_rect_light, look_at_xform, make_stage
 

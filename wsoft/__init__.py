@@ -51,7 +51,7 @@ _LAZY = {
     "bake": "wsoft.baking",
     "Sequence": "wsoft.pipeline.sequence",
     "render_sequence": "wsoft.pipeline.sequence",
-    "compare_sequence": "wsoft.pipeline.sequence",
+    "compare_sequence": "wsoft.metrics.sequences",
 }
 
 

@@ -426,7 +426,8 @@ def _compare_frames(args, techs) -> int:
     """``compare --frames``: per time code each technique's EXR/PNG/JSON (``<stage>-<label>.0012.exr``),
     and ``<stage>-compare.md`` / ``<stage>-sequence.json`` with the temporal measures (flicker against
     the reference, mean and worst error) and each frame's times and errors."""
-    from wsoft.pipeline.sequence import compare_sequence, frame_path
+    from wsoft.metrics.sequences import compare_sequence
+    from wsoft.pipeline.sequence import frame_path
 
     _frames_args(args)
     seq = compare_sequence(scene_arg(args.scene), techs, frames=args.frames, samples=args.samples, width=args.width, height=args.height,

@@ -22,10 +22,8 @@ measures); time-aware techniques (rtdenoise's temporal accumulation) read what t
 previous frame. The object-based techniques' sample sets are the papers' fixed patterns, the same
 in every frame.
 
-:func:`compare_sequence` adds a ground truth per frame (the reference at ``samples``, seed 0 in
-every frame: its noise does not crawl) and each technique's error against it, and the temporal
-measures of :mod:`wsoft.metrics.temporal` over the frames: flicker against the reference (pixels
-paired through the camera's motion), mean and worst error, the reference's own noise floor.
+:func:`wsoft.metrics.sequences.compare_sequence` adds a ground truth per frame and the temporal
+measures of :mod:`wsoft.metrics.temporal` over the frames.
 
 Frames are written as render delegates write a sequence: ``name.0012.exr`` (:func:`frame_path`).
 """
@@ -127,7 +125,7 @@ class Sequence:
     per time code, or a :class:`~wsoft.pipeline.FrameSet` for several techniques), ``stats`` per
     frame (time, load / upload / render ms, whether the scene's device copy was ``built`` or
     ``reused``), ``summary`` (totals, the techniques' temporal measures after
-    :func:`compare_sequence`) and ``warnings`` (the sequence's own, once)."""
+    :func:`wsoft.metrics.sequences.compare_sequence`) and ``warnings`` (the sequence's own, once)."""
 
     times: list[float]
     frames: list
@@ -210,7 +208,7 @@ class _Loader:
                        "refit_ms": round(1e3 * (t3 - t2), 3) if how == "refit" else 0.0, "scene": how}
 
 
-def _one_frame_stats(fr) -> dict:
+def frame_costs(fr) -> dict:
     """The frame's own times: the techniques' frame ms (one or several)."""
     if hasattr(fr, "frames"):
         return {label: f.stats["timings_ms"]["total"] for label, f in fr.items()}
@@ -225,7 +223,7 @@ def _frames_and_loader(scene, frames, render_settings, instancing):
     return loader, times
 
 
-def _start(scene, frames, render_settings, instancing, techs: list, reseed: bool, **view):
+def start_sequence(scene, frames, render_settings, instancing, techs: list, reseed: bool, **view):
     """A sequence's loader, its empty :class:`Sequence` and its :class:`History` (with the receivers
     of every frame when a technique asks for ``view=sequence``); ``view``: the render's size, camera,
     light, device and pixel samples."""
@@ -239,7 +237,7 @@ def _start(scene, frames, render_settings, instancing, techs: list, reseed: bool
     return loader, seq, history
 
 
-def _upload_note(fr, info: dict) -> None:
+def note_upload(fr, info: dict) -> None:
     """The scene upload's cost in ``info`` (near 0 when the device copy was reused)."""
     info["upload_ms"] = round(float(fr.stats["timings_ms"].get("upload_scene", 0.0)), 3)
 
@@ -258,7 +256,7 @@ def render_sequence(scene, technique, *, frames, width: int | None = None, heigh
 
     techs = as_techniques(technique, params)
     several = is_several(technique)
-    loader, seq, history = _start(scene, frames, render_settings, instancing, techs, reseed, width=width, height=height, camera=camera,
+    loader, seq, history = start_sequence(scene, frames, render_settings, instancing, techs, reseed, width=width, height=height, camera=camera,
                                   light=light, device=device, pixel_samples=pixel_samples)
     for i, t in enumerate(seq.times):
         sc, info = loader.load(t)
@@ -269,18 +267,18 @@ def render_sequence(scene, technique, *, frames, width: int | None = None, heigh
                     pixel_samples=pixel_samples, frame_history=history)
         history.advance()
         info["render_ms"] = round(1e3 * (_time.perf_counter() - t0), 3)
-        info["frame_ms"] = _one_frame_stats(fr)
-        _upload_note(fr, info)
-        _stamp(fr, info, i, len(seq.times))
+        info["frame_ms"] = frame_costs(fr)
+        note_upload(fr, info)
+        stamp_frame(fr, info, i, len(seq.times))
         seq.frames.append(fr)
         seq.stats.append(info)
         if progress is not None:
             progress(i + 1, len(seq.times), t)
-    seq.summary = _cost_summary(seq)
+    seq.summary = cost_summary(seq)
     return seq
 
 
-def _stamp(fr, info: dict, index: int, count: int) -> None:
+def stamp_frame(fr, info: dict, index: int, count: int) -> None:
     """Record the frame's place in its sequence in its stats (and in each technique's)."""
     mark = {**info, "index": index, "frames": count}
     if hasattr(fr, "frames"):
@@ -324,111 +322,10 @@ def sequence_receivers(loader: "_Loader", times: list[float], *, width, height, 
     return {path: allp for path in lights}
 
 
-def _cost_summary(seq: Sequence) -> dict:
+def cost_summary(seq: Sequence) -> dict:
     st = seq.stats
     return {"frames": len(st), "time_codes": [seq.times[0], seq.times[-1]] if seq.times else [],
             "scene_built": sum(1 for s in st if s["scene"] == "built"), "scene_refit": sum(1 for s in st if s["scene"] == "refit"),
             "scene_reused": sum(1 for s in st if s["scene"] == "reused"), "refit_ms": round(sum(s["refit_ms"] for s in st), 3),
             "load_ms": round(sum(s["load_ms"] for s in st), 3), "upload_ms": round(sum(s.get("upload_ms", 0.0) for s in st), 3),
             "render_ms": round(sum(s["render_ms"] for s in st), 3), "receivers_ms": seq.receivers_ms}
-
-
-def ground_truth_frame(scene: Scene, samples: int, *, width, height, camera, light, device, pixel_samples: int = 1):
-    """The reference at ``samples`` light samples (seed 0) on ``scene`` as a
-    :class:`~wsoft.metrics.GroundTruth` (every light it renders), and the frame itself."""
-    from wsoft.metrics import GroundTruth
-    from wsoft.pipeline import render
-
-    fr = render(scene, "reference", width=width, height=height, camera=camera, light=light, device=device, pixel_samples=pixel_samples,
-                samples=samples, seed=0)
-    lights = {label: {"V": fr[f"V.{label}"], "V_stderr": fr[f"V_stderr.{label}"], "A": fr["A"]} for label in fr.stats["light_labels"]}
-    return GroundTruth(lights, samples, shaded={c: fr[c] for c in "RGB"}), fr
-
-
-def compare_sequence(scene, techniques, *, frames, samples: int = 256, ground_truth=None, width: int | None = None,
-                     height: int | None = None, camera=None, light=None, device: str | None = None, pixel_samples: int = 1,
-                     render_settings: str | None = None, instancing: str = "auto", reseed: bool = True, progress=None) -> Sequence:
-    """Render ``techniques`` at every time code of ``frames`` beside a ground truth and measure each
-    frame's error (as :func:`wsoft.compare`) and the sequence's temporal error.
-
-    The ground truth of frame t is the reference at ``samples`` light samples with seed 0 in every
-    frame, or ``ground_truth(scene_t, t)`` returning a :class:`~wsoft.metrics.GroundTruth` (the
-    benchmark's cached references). Each frame is a :class:`~wsoft.pipeline.FrameSet` with
-    ``stats["errors"]`` per technique; ``summary["temporal"][label][light]`` holds
-    :func:`~wsoft.metrics.temporal.sequence_summary` (flicker against the ground truth, pixels
-    paired through the camera's motion; mean and worst error; the ground truth's noise floor
-    ``flicker_noise``; for a technique with standard errors, its own ``own_noise`` and
-    ``flicker_excess``) and, on a static sequence (the stage authors no time sample),
-    ``temporal_std`` (a stochastic technique's crawl) beside the reference's own."""
-    from wsoft.metrics import compare
-    from wsoft.pipeline import as_techniques, is_several
-
-    techs = as_techniques(list(techniques) if is_several(techniques) else [techniques], {})
-    loader, seq, history = _start(scene, frames, render_settings, instancing, techs, reseed, width=width, height=height, camera=camera,
-                                  light=light, device=device, pixel_samples=pixel_samples)
-    times = seq.times
-    truths: list = []
-    for i, t in enumerate(times):
-        sc, info = loader.load(t)
-        if i == 0:
-            seq.render_settings = sc.render_settings
-        t0 = _time.perf_counter()
-        if ground_truth is None:
-            gt, _ = ground_truth_frame(sc, samples, width=width, height=height, camera=camera, light=light, device=device,
-                                       pixel_samples=pixel_samples)
-        else:
-            gt = ground_truth(sc, t)
-        info["ground_truth_ms"] = round(1e3 * (_time.perf_counter() - t0), 3)
-        t0 = _time.perf_counter()
-        fs = compare(sc, techs, ground_truth=gt, width=width, height=height, camera=camera, light=light, device=device,
-                     pixel_samples=pixel_samples, frame_history=history)
-        history.advance()
-        info["render_ms"] = round(1e3 * (_time.perf_counter() - t0), 3)
-        info["frame_ms"] = _one_frame_stats(fs)
-        _upload_note(fs, info)
-        _stamp(fs, info, i, len(times))
-        seq.frames.append(fs)
-        seq.stats.append(info)
-        truths.append(gt)
-        if progress is not None:
-            progress(i + 1, len(times), t)
-    seq.summary = _cost_summary(seq)
-    seq.summary["temporal"] = temporal_measures(seq, truths, static=not stage_is_animated(loader.stage))
-    seq.summary["ground_truth_samples"] = truths[0].samples if truths else samples
-    return seq
-
-
-def temporal_measures(seq: Sequence, truths: list, static: bool) -> dict:
-    """Per technique label and light label: :func:`~wsoft.metrics.temporal.sequence_summary` over
-    the frames of ``seq`` (each a FrameSet with errors) against ``truths`` (a GroundTruth per frame)."""
-    from wsoft.metrics.temporal import FrameCamera, flicker, flicker_noise, pair_pixels, sequence_summary, temporal_std
-
-    out: dict[str, dict] = {}
-    if not seq.frames:
-        return out
-    labels = list(seq.frames[0])
-    for label in labels:
-        first = seq.frames[0][label]
-        out[label] = {}
-        for ll in first.stats["light_labels"]:
-            pairs, noise, own, errors = [], [], [], []
-            noisy = f"V_stderr.{ll}" in first.channels
-            for k, fs in enumerate(seq.frames):
-                fr = fs[label]
-                errors.append(fr.stats["errors"][ll])
-                if k == 0:
-                    continue
-                prev = seq.frames[k - 1][label]
-                g0, g1 = truths[k - 1].lights[ll], truths[k].lights[ll]
-                pp = pair_pixels(prev.channels, fr.channels, FrameCamera.of(prev.stats), FrameCamera.of(fr.stats))
-                pairs.append(flicker(prev[f"V.{ll}"], fr[f"V.{ll}"], g0["V"], g1["V"], pp))
-                noise.append(flicker_noise(g0["V_stderr"], g1["V_stderr"], pp))
-                if noisy:
-                    own.append(flicker_noise(prev[f"V_stderr.{ll}"], fr[f"V_stderr.{ll}"], pp))
-            s = sequence_summary(pairs, errors, seq.times, noise, own if noisy else None)
-            if static and len(seq.frames) > 1:
-                covered = np.all([np.asarray(fs[label]["A"]) > 0 for fs in seq.frames], axis=0)
-                s["temporal_std"] = temporal_std([fs[label][f"V.{ll}"] for fs in seq.frames], covered)
-                s["reference_temporal_std"] = temporal_std([g.lights[ll]["V"] for g in truths], covered)
-            out[label][ll] = s
-    return out
