@@ -201,7 +201,7 @@ class _Loader:
             from wsoft.scene.device import refit_scene
 
             scene.__dict__["_device_cache"] = {dev: refit_scene(ds, scene) for dev, ds in cache.items()}
-            self._prev.__dict__.pop("_device_cache", None)  # its copy now holds this frame's points: built again if it renders
+            self._prev.__dict__.pop("_device_cache", None)  # its copy holds this frame's points: built again if it renders
             how = "refit"
         t3 = _time.perf_counter()
         self._prev, self._digest, self._shape = scene, digest, shape

@@ -260,8 +260,9 @@ def with_views_at(scene: Scene, stage, time: float | None, render_settings: str 
             continue
         _read_view_prim(ctx, prim, prim.GetTypeName(), lights, unshadowed, skipped, cameras, shadow_lights)
     rs = _finish_views(ctx, stage, cameras, shadow_lights, scene.prims)
+    warnings = list(scene.warnings) + [w for w in ctx.warnings if w not in scene.warnings]  # the lights' and cameras' own at this time too
     out = dataclasses.replace(scene, lights=lights, unshadowed_lights=unshadowed, skipped_lights=skipped, cameras=cameras, time=ctx.time,
-                              render_settings=rs, render_settings_source=ctx.render_settings_source)
+                              render_settings=rs, render_settings_source=ctx.render_settings_source, warnings=warnings)
     for k in ("_device_cache", "bounds", "caster_points", "_adjacency", "_dynamic_subset"):
         if k in scene.__dict__:
             out.__dict__[k] = scene.__dict__[k]
