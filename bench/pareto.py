@@ -240,7 +240,7 @@ def plot(row: dict, path: Path) -> None:
     entries = row["entries"]
     techs = sorted({e["technique"] for e in entries})
     fig, ax = plt.subplots(figsize=(6.4, 4.4))
-    from wsoft.bench.palette import style
+    from wsoft.palette import style
 
     for t in techs:
         mine = [(e["frame_ms"], max(_err(e, metric), 1e-4), e) for e in entries if e["technique"] == t]

@@ -203,7 +203,7 @@ def plot(row: dict, path: Path) -> None:
     import matplotlib.pyplot as plt
 
     from wsoft.bench.pareto import pareto_front
-    from wsoft.bench.palette import style
+    from wsoft.palette import style
 
     fig, ax = plt.subplots(figsize=(6.4, 4.4))
     pts = []

@@ -216,6 +216,7 @@ def test_cli_render_and_compare_write_numbered_frames(tmp_path):
     assert r.returncode == 0, r.stderr
     md = (tmp_path / "c" / "slide-compare.md").read_text()
     assert "| hard | Light |" in md and "flicker" in md and "| 3 |" in md
+    assert "![the first frame beside the reference](slide-compare.png)" in md and (tmp_path / "c" / "slide-compare.png").is_file()
     seq = json.loads((tmp_path / "c" / "slide-sequence.json").read_text())
     assert set(seq["summary"]["temporal"]) == {"hard", "pcss"}
     assert (tmp_path / "c" / "slide-pcss.0002.exr").is_file()

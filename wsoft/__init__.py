@@ -15,6 +15,7 @@ Python API::
     # and their error against the reference, measured by a metric pass
     result = wsoft.compare(scene, ["pcss", "essm"], samples=256)
     result["pcss"].stats["error"]["mae_penumbra"]
+    wsoft.write_compare_grid("compare.png", result)   # shaded images and V - reference V, one grid
 
     # a sequence: the stage at each time code, flicker against the reference
     seq = wsoft.compare_sequence("usd_scenes/ramp_slide.usda", ["pcss", "hard"], frames="1:24")
@@ -36,7 +37,7 @@ from wsoft.errors import ParameterError, SceneError, WsoftError
 
 __version__ = "0.1.0"
 __all__ = ["Frame", "FrameSet", "ParameterError", "Scene", "SceneError", "Sequence", "TECHNIQUES", "WsoftError", "bake", "compare",
-           "compare_sequence", "load_scene", "plan", "render", "render_sequence"]
+           "compare_sequence", "load_scene", "plan", "render", "render_sequence", "write_compare_grid"]
 
 # name -> the module that defines it, imported at first use
 _LAZY = {
@@ -52,6 +53,7 @@ _LAZY = {
     "Sequence": "wsoft.pipeline.sequence",
     "render_sequence": "wsoft.pipeline.sequence",
     "compare_sequence": "wsoft.metrics.sequences",
+    "write_compare_grid": "wsoft.metrics.figures",
 }
 
 

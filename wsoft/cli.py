@@ -347,11 +347,22 @@ def _technique_sets(names: list[str], sets: list[str] | None) -> list[tuple[str,
     return [(n, params[n]) for n in names]
 
 
+def _short_table(frames, reference: str | None) -> list[str]:
+    """Markdown rows: each technique's frame ms, MAE and penumbra MAE (its first light), the reference first."""
+    rows = ["| technique | frame ms | MAE | penumbra MAE |", "|---|---:|---:|---:|"]
+    for label in sorted(frames, key=lambda l: l != reference):
+        st = frames[label].stats
+        e = st.get("error")
+        rows.append(f"| {label} | {st['timings_ms']['total']:.1f} | " + (f"{e['mae']:.4f} | {e['mae_penumbra']:.4f} |" if e else "- | - |"))
+    return rows
+
+
 def cmd_compare(args) -> int:
     """Render techniques and the reference in one graph; write EXR/PNG of each, each technique's ꟻLIP
-    map (magma) and a time / error table."""
+    map (magma), one grid image of them all beside the reference and a time / error table."""
     import wsoft
     from wsoft.io import write_gray_png
+    from wsoft.metrics.figures import write_compare_grid
     from wsoft.metrics.flip import write_flip_png
     from wsoft.pipeline import load_stage
 
@@ -377,6 +388,8 @@ def cmd_compare(args) -> int:
         if "flip" in fr.error_maps:
             write_flip_png(base + "-flip.png", fr.error_maps["flip"])
         written.append(base + ".exr/.png/-V.png/.json" + ("/-flip.png" if "flip" in fr.error_maps else ""))
+    grid = os.path.join(args.out_dir, f"{stem}-compare.png")
+    write_compare_grid(grid, fs)
     labels = list(fs)
     gstats = fs.stats
     shared = gstats["shared_passes"]
@@ -402,8 +415,12 @@ def cmd_compare(args) -> int:
                             f"{e['facing']['mae']:.4f} | {e['not_facing']['mae']:.4f} | {e.get('frac_outside_3se', 0):.3f} | {e['nan_pixels']} | {flip} |")
     cmd = "wsoft " + " ".join(sys.argv[1:]) if sys.argv[1:2] == ["compare"] else f"wsoft compare {args.scene}"
     ref = gstats["reference"]
+    several = any(len(fs[l].stats["light_labels"]) > 1 for l in labels if l != ref)
     lines = [f"# {', '.join(l for l in labels if l != ref)} vs {ref} on {stem} ({gstats['width']}x{gstats['height']}, {gstats['device']})", "",
-             f"Command: `{cmd}`", "",
+             f"Command: `{cmd}`", "", *_short_table(fs, ref), "",
+             f"![each technique beside the reference]({os.path.basename(grid)})", "",
+             f"`{os.path.basename(grid)}`: each technique's shaded image and its V minus the reference's (red: lighter, blue: darker)"
+             + (", for its first light; every light's errors are below." if several else "."), "",
              "One frame graph: passes marked *shared* ran once for several techniques; a technique's frame time counts every pass it needs.", "",
              "## Time (ms)", "", *table, "",
              f"Kernel compilation: {gstats['timings_ms']['compile']:.1f} ms for the whole graph (Warp compiles or loads a module at its first launch; "
@@ -418,14 +435,16 @@ def cmd_compare(args) -> int:
     print("\n".join(lines))
     for w in sorted({w for fr in fs.values() for w in fr.stats["warnings"]}):
         print(f"warning: {w}", file=sys.stderr)
-    print(f"\nwrote {', '.join(written)}, {md}")
+    print(f"\nwrote {', '.join(written)}, {grid}, {md}")
     return 0
 
 
 def _compare_frames(args, techs) -> int:
     """``compare --frames``: per time code each technique's EXR/PNG/JSON (``<stage>-<label>.0012.exr``),
-    and ``<stage>-compare.md`` / ``<stage>-sequence.json`` with the temporal measures (flicker against
-    the reference, mean and worst error) and each frame's times and errors."""
+    ``<stage>-compare.md`` / ``<stage>-sequence.json`` with the temporal measures (flicker against
+    the reference, mean and worst error) and each frame's times and errors, and ``<stage>-compare.png``,
+    the first frame's grid (:func:`wsoft.metrics.figures.write_compare_grid`)."""
+    from wsoft.metrics.figures import write_compare_grid
     from wsoft.metrics.sequences import compare_sequence
     from wsoft.pipeline.sequence import frame_path
 
@@ -443,6 +462,11 @@ def _compare_frames(args, techs) -> int:
             fr.write_png(frame_path(base[:-4] + ".png", t))
             with open(frame_path(base[:-4] + ".json", t), "w") as f:
                 json.dump(fr.stats, f, indent=2, default=str)
+    t0 = seq.times[0]
+    grid = os.path.join(args.out_dir, f"{stem}-compare.png")
+    write_compare_grid(grid, seq.frames[0], seq.ground_truths[0], reference_ms=seq.stats[0].get("ground_truth_ms"),
+                       title=f"{stem} at time {t0:g} (the first frame): {seq.frames[0].stats['width']}x{seq.frames[0].stats['height']}, "
+                             f"{seq.frames[0].stats['device']}")
     temporal = seq.summary["temporal"]
     static = any("temporal_std" in m for per in temporal.values() for m in per.values())
     head = "| technique | light | mean MAE | mean penumbra MAE | worst frame (penumbra MAE) | flicker | own change | reference change |"
@@ -469,7 +493,9 @@ def _compare_frames(args, techs) -> int:
              "change: mean |ΔV_ref|." + (f" The reference's own noise floor (from its standard errors): {noise:.5f}." if noise is not None else "")
              + (" The stage authors no time sample: temporal std is each pixel's standard deviation over the frames (a stochastic "
                 "technique's crawl; the reference's own is in `" + stem + "-sequence.json`)." if static else ""), "",
-             "## Over the sequence", "", *rows, "", f"Scene: {_sequence_line(seq)}.", "", "## Per frame", "", *per_frame]
+             "## Over the sequence", "", *rows, "", f"![the first frame beside the reference]({os.path.basename(grid)})", "",
+             f"`{os.path.basename(grid)}`: the first frame (time {t0:g}), each technique's shaded image and its V minus the reference's "
+             "(red: lighter, blue: darker).", "", f"Scene: {_sequence_line(seq)}.", "", "## Per frame", "", *per_frame]
     md = os.path.join(args.out_dir, f"{stem}-compare.md")
     with open(md, "w") as f:
         f.write("\n".join(lines) + "\n")
@@ -479,7 +505,8 @@ def _compare_frames(args, techs) -> int:
     print("\n".join(lines))
     for w in seq.warnings + sorted({w for fs in seq.frames for fr in fs.values() for w in fr.stats["warnings"]}):
         print(f"warning: {w}", file=sys.stderr)
-    print(f"\nwrote {len(seq.times)} frames of {', '.join(labels)} ({stem}-<technique>{frame_path('', seq.times[0])}.exr/.png/.json ...), {md}, {js}")
+    print(f"\nwrote {len(seq.times)} frames of {', '.join(labels)} ({stem}-<technique>{frame_path('', seq.times[0])}.exr/.png/.json ...), "
+          f"{grid}, {md}, {js}")
     return 0
 
 
@@ -596,9 +623,11 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--png", help="shaded PNG")
     r.set_defaults(fn=cmd_render)
 
-    c = sub.add_parser("compare", help="render techniques and the reference in one graph; EXR/PNG of each, a time and error table",
+    c = sub.add_parser("compare", help="render techniques and the reference in one graph; EXR/PNG of each, a grid image, a time and error table",
                        formatter_class=fmt, description="Writes OUT_DIR/<stage>-<technique>.exr/.png/-V.png/.json per technique, "
                        "<stage>-<technique>-flip.png (its ꟻLIP map against the reference, magma) per technique compared, "
+                       "OUT_DIR/<stage>-compare.png (every technique's shaded image and its difference from the reference's V, "
+                       "titled with its parameters, frame ms and penumbra MAE) "
                        "and OUT_DIR/<stage>-compare.md (times and errors against the reference: MAE of V, ꟻLIP of the shaded image).")
     c.add_argument("scene", help="a .usda/.usdc/.usdz file or a bundled stage's name (box_plane)")
     c.add_argument("--technique", "-t", action="append", metavar="TECHNIQUE",

@@ -44,7 +44,8 @@ def compare_sequence(scene, techniques, *, frames, samples: int = 256, ground_tr
     paired through the camera's motion; mean and worst error; the ground truth's noise floor
     ``flicker_noise``; for a technique with standard errors, its own ``own_noise`` and
     ``flicker_excess``) and, on a static sequence (the stage authors no time sample),
-    ``temporal_std`` (a stochastic technique's crawl) beside the reference's own."""
+    ``temporal_std`` (a stochastic technique's crawl) beside the reference's own.
+    ``ground_truths`` holds each frame's :class:`~wsoft.metrics.GroundTruth`."""
     from wsoft.metrics import compare
     from wsoft.pipeline import as_techniques, is_several
 
@@ -77,6 +78,7 @@ def compare_sequence(scene, techniques, *, frames, samples: int = 256, ground_tr
         truths.append(gt)
         if progress is not None:
             progress(i + 1, len(times), t)
+    seq.ground_truths = truths
     seq.summary = cost_summary(seq)
     seq.summary["temporal"] = temporal_measures(seq, truths, static=not stage_is_animated(loader.stage))
     seq.summary["ground_truth_samples"] = truths[0].samples if truths else samples

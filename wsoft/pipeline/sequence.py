@@ -134,6 +134,7 @@ class Sequence:
     warnings: list[str] = field(default_factory=list)
     render_settings: object = None  # the first frame's RenderSettings (wsoft.scene.render_settings), or None
     receivers_ms: float = 0.0  # the G-buffer pass over every frame for view=sequence light views (0: none)
+    ground_truths: list = field(default_factory=list)  # compare_sequence: each frame's wsoft.metrics.GroundTruth
 
     def __len__(self) -> int:
         return len(self.frames)

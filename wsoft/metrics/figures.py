@@ -1,0 +1,209 @@
+"""A comparison as one picture a person reads: :func:`write_compare_grid`.
+
+Each technique of a :func:`wsoft.compare` (or of one frame of a
+:func:`wsoft.compare_sequence`) gets a cell of two tiles: its shaded image as its PNG shows it
+(:func:`wsoft.metrics.flip.ldr_image`; ``V`` in grey without a colour), and below it the signed
+difference ``V − V_ref`` of its first light against the reference in a diverging colour map
+(``RdBu_r``: red where the technique is lighter than the reference, blue where it is darker),
+with one symmetric limit for every cell and a colour bar. The reference's cell comes first: its
+shaded image and its ``V`` (grey, 0 to 1). Background pixels (the reference's ``A`` = 0) are
+grey in the difference; a pixel whose ``V`` is NaN or inf is drawn in lime and counted in the
+tile's title, never hidden. Every cell is framed in the technique's colour of the one palette
+(:func:`wsoft.palette.style`).
+
+matplotlib (Agg) is imported at the first call.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import textwrap
+
+import numpy as np
+
+from wsoft.metrics.flip import has_rgb, ldr_image
+
+DIFF_CMAP = "RdBu_r"
+NAN_COLOUR = (0.55, 1.0, 0.0, 1.0)  # lime: a non-finite V
+BACKGROUND = "#c8c8c8"  # uncovered pixels in the difference tiles
+MIN_LIMIT = 0.05  # the smallest colour-bar limit: reference noise does not fill the scale
+TILE_IN = (2.6, 4.2)  # a tile's width in inches: the frame's pixels at the figure's dpi, within these bounds
+COLOURBAR_IN = 0.75  # beside each tile, its colour bar
+TITLES_IN = 0.9  # above a cell's two tiles, their titles
+SUPTITLE_IN = 0.45
+
+
+def grid_size(cells: int, width: int, height: int, columns: int = 4, dpi: int = 110) -> tuple[float, float, int, int]:
+    """The figure of :func:`write_compare_grid`: its size in inches and its columns and rows of
+    cells, for ``cells`` cells (the techniques and the reference) of ``width`` x ``height`` frames."""
+    ncol = max(1, min(columns, cells))
+    nrow = math.ceil(cells / ncol)
+    tile_w = min(TILE_IN[1], max(TILE_IN[0], width / dpi))
+    return ncol * (tile_w + COLOURBAR_IN), nrow * (2 * tile_w * height / width + TITLES_IN) + SUPTITLE_IN, ncol, nrow
+
+
+def short_params(technique: str, params: dict) -> str:
+    """The parameters of ``technique`` that differ from its defaults, ``shadow_map_size=512,
+    filter_samples=16`` (``defaults`` when none does; every parameter for a technique that is not
+    installed)."""
+    try:
+        from wsoft.techniques import get_technique
+
+        defaults = get_technique(technique).defaults()
+    except Exception:  # noqa: BLE001  (a technique of another installation: show what the stats hold)
+        defaults = {}
+    changed = {k: v for k, v in params.items() if k not in defaults or not _same(v, defaults[k])}
+    return ", ".join(f"{k}={_fmt(v)}" for k, v in changed.items()) or "defaults"
+
+
+def _same(a, b) -> bool:
+    if isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b):
+        return True
+    return a == b
+
+
+def _fmt(v) -> str:
+    return f"{v:g}" if isinstance(v, float) else str(v)
+
+
+def tile_title(technique: str, params: dict, frame_ms: float | None, error: dict | None, width: int = 44) -> str:
+    """The title of a cell: the technique and its short parameters (wrapped at ``width``
+    characters), then its frame time and its error against the reference (penumbra MAE and MAE)."""
+    head = textwrap.wrap(f"{technique} ({short_params(technique, params)})", width, break_on_hyphens=False) or [technique]
+    nums = [] if frame_ms is None else [f"{frame_ms:.1f} ms"]
+    if error is not None:
+        nums.append(f"penumbra MAE {error['mae_penumbra']:.4f}, MAE {error['mae']:.4f}")
+        if error.get("nan_pixels"):
+            nums.append(f"NaN {error['nan_pixels']} px")
+    return "\n".join(head + ([", ".join(nums)] if nums else []))
+
+
+def _shaded(channels: dict) -> tuple[np.ndarray, str | None]:
+    """The shaded image (RGB in [0, 1]) and None, or V in grey and the colour map for it."""
+    if has_rgb(channels):
+        return ldr_image(channels), None
+    return np.clip(np.nan_to_num(np.asarray(channels["V"], np.float32)), 0.0, 1.0), "gray"
+
+
+def _reference_channels(frames, reference) -> tuple[dict, dict]:
+    """The reference's channels (``V.<light>``, ``A``, ``R G B`` where it has them) and its tile's
+    description: a frame of ``frames`` (``stats["reference"]``) or a GroundTruth handed in."""
+    if reference is None:
+        label = frames.stats.get("reference")
+        if label is None or label not in frames:
+            raise ValueError("the frames hold no reference frame (compared against a ground truth): pass it as reference=")
+        fr = frames[label]
+        return fr.channels, {"technique": "reference", "label": label, "params": fr.stats["params"],
+                             "ms": fr.stats["timings_ms"]["total"]}
+    ch = {f"V.{ll}": g["V"] for ll, g in reference.lights.items()}
+    ch["A"] = next(iter(reference.lights.values()))["A"]
+    ch["V"] = next(iter(reference.lights.values()))["V"]
+    if reference.shaded is not None:
+        ch.update(reference.shaded)
+    return ch, {"technique": "reference", "label": "reference", "params": {"samples": reference.samples}, "ms": None}
+
+
+def write_compare_grid(path: str, frames, reference=None, *, reference_ms: float | None = None, title: str | None = None, columns: int = 4,
+                       dpi: int = 110) -> dict[str, str]:
+    """Write the comparison of ``frames`` (a :class:`~wsoft.pipeline.FrameSet` from
+    :func:`wsoft.compare`, each technique carrying ``stats["error"]``) as one PNG at ``path``.
+
+    ``reference``: the :class:`~wsoft.metrics.GroundTruth` the frames were measured against, when
+    they hold no reference frame (``compare(ground_truth=...)``, a frame of
+    :func:`wsoft.compare_sequence`, its ``ground_truths[i]``), with ``reference_ms`` its time if
+    known; by default the reference is the frame ``stats["reference"]`` names. The cells (see the module) run ``columns`` to a row, the reference first; ``title``
+    goes above them (default: the stage, the frame size and the device).
+
+    Returns ``{label: title}``: each cell's title as drawn (technique, short parameters, frame ms,
+    penumbra MAE and MAE), the reference's under its label."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.cm
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import Normalize
+
+    from wsoft.palette import style
+
+    ref_ch, ref_info = _reference_channels(frames, reference)
+    if reference is not None:
+        ref_info["ms"] = reference_ms
+    labels = [l for l in frames if reference is not None or l != ref_info["label"]]
+    cover = np.asarray(ref_ch["A"]) > 0
+    ref_v = f"V.{frames[labels[0]].stats['light_labels'][0]}" if labels else "V"
+    multi = any(len(frames[l].stats["light_labels"]) > 1 for l in labels)
+    shaded, scmap = _shaded(ref_ch)
+    cells = [{"label": ref_info["label"], "technique": "reference", "title": tile_title("reference", ref_info["params"], ref_info["ms"], None),
+              "shaded": shaded, "cmap": scmap, "v": np.asarray(ref_ch[ref_v], np.float64)}]
+    for label in labels:
+        st = frames[label].stats
+        light = st["light_labels"][0]
+        shaded, scmap = _shaded(frames[label].channels)
+        cells.append({"label": label, "technique": st["technique"],
+                      "title": tile_title(st["technique"], st["params"], st["timings_ms"]["total"], st.get("error")),
+                      "shaded": shaded, "cmap": scmap, "light": light if len(st["light_labels"]) > 1 else None,
+                      "diff": np.asarray(frames[label][f"V.{light}"], np.float64) - np.asarray(ref_ch[f"V.{light}"], np.float64)})
+
+    # one symmetric limit for every difference: the largest 99.5th percentile of |d| on covered pixels
+    lim, absmax = MIN_LIMIT, 0.0
+    for c in cells[1:]:
+        d = np.abs(c["diff"][cover & np.isfinite(c["diff"])])
+        if d.size:
+            lim = max(lim, float(np.percentile(d, 99.5)))
+            absmax = max(absmax, float(d.max()))
+    lim = min(1.0, lim)
+
+    h, w = cover.shape
+    fig_w, fig_h, ncol, nrow = grid_size(len(cells), w, h, columns, dpi)
+    fig = plt.figure(figsize=(fig_w, fig_h), dpi=dpi, layout="constrained")
+    subfigs = np.atleast_1d(fig.subfigures(nrow, ncol, wspace=0.02, hspace=0.02)).reshape(nrow, ncol)
+    diff_cmap = matplotlib.colormaps[DIFF_CMAP].with_extremes(bad=BACKGROUND)
+    grey = matplotlib.colormaps["gray"].with_extremes(bad=BACKGROUND)
+    interp = "nearest" if w <= 320 else "antialiased"
+    titles = {}
+    any_bad = False
+    for k, sf in enumerate(subfigs.flat):
+        if k >= len(cells):
+            sf.set_visible(False)
+            continue
+        c = cells[k]
+        titles[c["label"]] = c["title"]
+        top, bottom = sf.subplots(2, 1)
+        top.imshow(c["shaded"], cmap=c["cmap"], vmin=0.0, vmax=1.0, interpolation=interp)
+        top.set_title(c["title"], fontsize=8, loc="left")
+        spacer = sf.colorbar(matplotlib.cm.ScalarMappable(cmap=grey), ax=top, fraction=0.05, pad=0.02)  # the tiles line up
+        spacer.ax.set_visible(False)
+        if "diff" not in c:  # the reference: its V
+            im = bottom.imshow(np.where(cover, np.nan_to_num(c["v"]), np.nan), cmap=grey, vmin=0.0, vmax=1.0, interpolation=interp)
+            bottom.set_title("reference V" + (f" ({ref_v[2:]})" if multi else ""), fontsize=7)
+            cb = sf.colorbar(im, ax=bottom, fraction=0.05, pad=0.02)
+        else:
+            d = c["diff"]
+            im = bottom.imshow(np.ma.masked_invalid(np.where(cover, d, np.nan)), cmap=diff_cmap, norm=Normalize(-lim, lim), interpolation=interp)
+            bad = cover & ~np.isfinite(d)
+            if bad.any():
+                any_bad = True
+                overlay = np.zeros((h, w, 4), np.float32)
+                overlay[bad] = NAN_COLOUR
+                bottom.imshow(overlay, interpolation="nearest")
+            bottom.set_title("V − reference V" + (f" ({c['light']})" if c["light"] else ""), fontsize=7)
+            cb = sf.colorbar(im, ax=bottom, fraction=0.05, pad=0.02, extend="both" if absmax > lim else "neither")
+        cb.ax.tick_params(labelsize=6)
+        colour = style(c["technique"])["color"]
+        for ax in (top, bottom):
+            ax.set_xticks([])
+            ax.set_yticks([])
+            for sp in ax.spines.values():
+                sp.set_edgecolor(colour)
+                sp.set_linewidth(1.0 if c["technique"] == "reference" else 2.5)
+    if title is None:
+        st0 = frames[labels[0]].stats if labels else {}
+        stage = os.path.splitext(os.path.basename(st0.get("scene", {}).get("path") or "stage"))[0]
+        title = f"{stage}: {st0.get('width', w)}x{st0.get('height', h)}, {st0.get('device', '')}"
+    fig.suptitle(f"{title}\nred: lighter than the reference, blue: darker; grey: background" + ("; lime: V not finite" if any_bad else "")
+                 + f"; colour limit ±{lim:.2f}" + (f" (largest |difference| {absmax:.2f})" if absmax > lim else ""), fontsize=8)
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+    return titles
