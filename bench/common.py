@@ -4,6 +4,7 @@ stats' namespaced counters and pass kinds (reports never parse pass names)."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -32,8 +33,7 @@ def render_row(case: dict, ctx: dict, extra=None) -> dict:
     if extra is not None:
         row.update(extra(fr, ref))
     if case.get("image"):
-        label = f"{case['technique']} " + " ".join(f"{k}={v}" for k, v in case["params"].items())
-        row["image"] = side_by_side(case, label, fr.V, ref["V"], ref["A"], ctx)
+        row["image"] = side_by_side(case, params_label(case["technique"], case["params"]), fr.V, ref["V"], ref["A"], ctx)
     return row
 
 
@@ -65,25 +65,55 @@ def params_text(p: dict) -> str:
     return ", ".join(f"{k}={v}" for k, v in p.items())
 
 
+def params_label(technique: str, params: dict) -> str:
+    """A technique and its parameters for a picture's label, ``hard: shadow_map_size=1024, bias=0.002``."""
+    return f"{technique}: {params_text(params)}" if params else technique
+
+
 # -- images ----------------------------------------------------------------------------------------
 
 
+LABEL_PX = 12  # the labels' font size in pixels
+
+
+def wrap_label(draw, text: str, font, width: int) -> list[str]:
+    """``text`` in lines no wider than ``width`` pixels, broken at spaces (a word wider than that, within it)."""
+    lines: list[str] = []
+    for word in text.split(" "):
+        if lines and draw.textlength(f"{lines[-1]} {word}", font=font) <= width:
+            lines[-1] += f" {word}"
+            continue
+        lines.append("")
+        for ch in word:
+            if lines[-1] and draw.textlength(lines[-1] + ch, font=font) > width:
+                lines.append("")
+            lines[-1] += ch
+    return lines
+
+
 def side_by_side(case: dict, label: str, v: np.ndarray, ref: np.ndarray, cov: np.ndarray, ctx: dict) -> str:
-    """A PNG of the technique's V, the reference's V and 4x their absolute difference; returns its path under the report."""
-    from PIL import Image, ImageDraw
+    """A PNG of the technique's V, the reference's V and 4x their absolute difference, each under
+    its label (wrapped to its panel's width); returns its path under the report."""
+    from PIL import Image, ImageDraw, ImageFont
 
     from wsoft.io import to_srgb8
 
     diff = np.clip(np.abs(v - ref) * 4.0, 0, 1)
     panels = [to_srgb8(v * (cov > 0) + (cov == 0) * 0.15), to_srgb8(ref * (cov > 0) + (cov == 0) * 0.15), (diff * 255).astype(np.uint8)]
     h, w = v.shape
-    img = Image.new("L", (3 * w, h + 18), 255)
-    for i, p in enumerate(panels):
-        img.paste(Image.fromarray(p, "L"), (i * w, 18))
-    d = ImageDraw.Draw(img)
+    font = ImageFont.load_default(size=LABEL_PX)
     ref_label = f"reference {case['ref_samples']} spp" + (" (dynamic casters)" if case.get("ref_casters", "all") != "all" else "")
-    for i, text in enumerate([label, ref_label, "|difference| x4"]):
-        d.text((i * w + 4, 3), text, fill=0)
+    measure = ImageDraw.Draw(Image.new("L", (1, 1)))
+    texts = [wrap_label(measure, t, font, w - 8) for t in (label, ref_label, "|difference| x4")]
+    line_h = LABEL_PX + 3
+    top = max(len(t) for t in texts) * line_h + 6
+    img = Image.new("L", (3 * w, h + top), 255)
+    for i, p in enumerate(panels):
+        img.paste(Image.fromarray(p, "L"), (i * w, top))
+    d = ImageDraw.Draw(img)
+    for i, lines in enumerate(texts):
+        for k, line in enumerate(lines):
+            d.text((i * w + 4, 3 + k * line_h), line, fill=0, font=font)
     light = (case.get("light") or "light").split("/")[-1]
     name = f"{case['scene']}-{light}-{case['technique']}-{case['device'].replace(':', '')}.png"
     rel = Path("images") / ctx["stem"] / name
@@ -140,46 +170,81 @@ def lowest_mae(renders: list[dict]) -> dict[tuple[str, str], dict]:
     return best
 
 
+LIGHT_LINES = ("-", "--", ":", "-.")  # the first, second, ... light of a panel
+
+
 def error_vs_time(renders: list[dict], md: Path, ctx: dict, title: str) -> list[str]:
-    """One panel per scene: MAE against frame time, a line per (light, technique) over its sweep."""
+    """One panel per scene: MAE against frame time, a line per (light, device, technique) over its
+    sweep. Each technique in its colour and marker of the one palette (:mod:`wsoft.palette`; a
+    technique's several series, ``row["technique"]`` naming a group of ``row["case"]["technique"]``,
+    in its shades), a panel's lights told apart by the line, other devices by open markers; one
+    legend for the figure, where no data lies."""
     if not renders:
         return []
     import matplotlib
     import matplotlib.ticker
+    from matplotlib.lines import Line2D
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from wsoft.palette import variant_style
+
     plot_rel = Path("images") / ctx["stem"] / "error_vs_time.png"
     width = max(x["width"] for x in renders)
     scenes = sorted({r["scene"] for r in renders})
-    techniques = sorted({r["technique"] for r in renders})
-    several_devices = len({r["device"] for r in renders}) > 1
-    markers = "so^Dvx*P"
+    devices = sorted({r["device"] for r in renders})
+
+    def tech(r: dict) -> str:  # the palette's technique of a row whose "technique" may name a group
+        return r.get("case", {}).get("technique", r["technique"])
+
+    series = sorted({(tech(r), r["technique"]) for r in renders}, key=lambda s: (s[0] == "reference", s))
+    styles = {}
+    for t, label in series:
+        k = sum(1 for t2, _ in styles if t2 == t)
+        styles[(t, label)] = variant_style(t, k)
     ncols = min(3, len(scenes))
     nrows = (len(scenes) + ncols - 1) // ncols
-    fig, axes = plt.subplots(nrows, ncols, figsize=(4.6 * ncols, 3.6 * nrows), squeeze=False)
+    spare = ncols * nrows - len(scenes)
+    n_handles = len(series) + (len(devices) if len(devices) > 1 else 0)
+    legend_cols = min(n_handles, 6)
+    legend_in = 0 if spare else 0.3 + 0.2 * math.ceil(n_handles / legend_cols)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(4.6 * ncols, 3.6 * nrows + legend_in), squeeze=False)
     for ax, scene in zip(axes.flat, scenes):
         mine = [r for r in renders if r["scene"] == scene and r["width"] == width]
-        groups = sorted({(r["light"].split("/")[-1], r["device"], r["technique"]) for r in mine})
-        for i, (light, dev, tech) in enumerate(groups):
-            pts = sorted((r["timings_ms"]["total"], max(r["error"]["mae"], 1e-5)) for r in mine
-                         if (r["light"].split("/")[-1], r["device"], r["technique"]) == (light, dev, tech))
-            ax.plot(*zip(*pts), marker=markers[techniques.index(tech) % len(markers)], linestyle="-" if tech == "reference" else "--",
-                    color=f"C{i % 10}", label=f"{light} {tech}" + (f" ({dev})" if several_devices else ""))
+        lights = sorted({r["light"].split("/")[-1] for r in mine})
+        for (t, label) in series:
+            for light in lights:
+                for dev in devices:
+                    pts = sorted((r["timings_ms"]["total"], max(r["error"]["mae"], 1e-5)) for r in mine
+                                 if (tech(r), r["technique"], r["light"].split("/")[-1], r["device"]) == (t, label, light, dev))
+                    if not pts:
+                        continue
+                    st = styles[(t, label)]
+                    ax.plot(*zip(*pts), marker=st["marker"], color=st["color"], markersize=5, linewidth=1.0,
+                            linestyle=LIGHT_LINES[lights.index(light) % len(LIGHT_LINES)],
+                            markerfacecolor=st["color"] if dev == devices[0] else "none")
         ax.set_xscale("log")
         ax.set_yscale("log")
-        ax.set_title(scene, fontsize=9)
+        ax.set_title(scene + (" (lights: " + ", ".join(f"{l} {LIGHT_LINES[i % len(LIGHT_LINES)]}" for i, l in enumerate(lights)) + ")"
+                              if len(lights) > 1 else ""), fontsize=9)
         ax.set_xlabel("frame time (ms)", fontsize=8)
         ax.set_ylabel("MAE of V", fontsize=8)
         ax.tick_params(labelsize=7)
         ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         ax.yaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
-        ax.legend(fontsize=6)
+    handles = [Line2D([], [], color=styles[s]["color"], marker=styles[s]["marker"], markersize=5, linewidth=1.0, label=s[1]) for s in series]
+    handles += [Line2D([], [], color="grey", marker="o", markerfacecolor="none" if i else "grey", linestyle="none", label=f"on {d}")
+                for i, d in enumerate(devices) if len(devices) > 1]
     for ax in list(axes.flat)[len(scenes):]:
         ax.axis("off")
     fig.suptitle(f"{title} ({width} px wide)", fontsize=9)
-    fig.tight_layout()
+    if spare:  # the legend in the first empty panel
+        list(axes.flat)[len(scenes)].legend(handles=handles, loc="center", fontsize=8, ncols=1 + len(handles) // 12, frameon=False)
+        fig.tight_layout()
+    else:  # below the panels
+        fig.legend(handles=handles, loc="lower center", fontsize=8, ncols=legend_cols, frameon=False)
+        fig.tight_layout(rect=(0, legend_in / fig.get_figheight(), 1, 1))
     (md.parent / plot_rel).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(md.parent / plot_rel, dpi=110)
     plt.close(fig)

@@ -9,7 +9,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from wsoft.bench.common import accuracy_table, error_vs_time, image_list, lowest_mae, params_text, render_row, report_header, side_by_side
+from wsoft.bench.common import (accuracy_table, error_vs_time, image_list, lowest_mae, params_label, params_text, render_row, report_header,
+                                side_by_side)
 
 FULL_VIEWS = [("ogre", None), ("plants", None), ("dinosaurs", None), ("city", "Rect")]
 QUICK_VIEWS = [("box_plane", None)]
@@ -87,7 +88,7 @@ def hard_case(case: dict, ctx: dict) -> dict:
     kw = {"width": case["width"], "height": case["height"], "device": case["device"]}
     fs = wsoft.compare(scene, [("essm", params)], samples=256, **kw)
     fr, ref = fs["essm"], fs["reference"]
-    label = "essm " + " ".join(f"{k}={v}" for k, v in params.items())
+    label = params_label("essm", params)
     info = {"scene": case["name"], "light": None, "technique": "essm", "device": case["device"], "ref_samples": 256}
     image = side_by_side(info, label, fr.V, ref.V, ref["A"], ctx)
     brighter = float((fr.V - ref.V)[ref["A"] > 0].max())

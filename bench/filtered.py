@@ -75,7 +75,7 @@ def run_case(case: dict, ctx: dict) -> dict:
 def failure_images(case: dict, ctx: dict) -> dict:
     """A known failure (wsoft.stages.failures): the technique, the reference and their difference."""
     import wsoft
-    from wsoft.bench.common import side_by_side
+    from wsoft.bench.common import params_label, side_by_side
     from wsoft.stages.failures import FAILURES
 
     build, tech, params, ref_params = FAILURES[case["name"]]
@@ -83,7 +83,7 @@ def failure_images(case: dict, ctx: dict) -> dict:
     kw = dict(width=case["width"], height=case["height"], device=case["device"])
     fs = wsoft.compare(scene, [(tech, params), ("reference", ref_params)], **kw)
     fr, ref = fs[tech], fs["reference"]
-    label = f"{tech} " + " ".join(f"{k}={v}" for k, v in params.items())
+    label = params_label(tech, params)
     info = {"scene": case["name"], "light": None, "technique": tech, "device": case["device"], "ref_samples": ref_params["samples"],
             "ref_casters": ref_params.get("casters", "all")}
     image = side_by_side(info, label, fr.V, ref.V, ref["A"], ctx)

@@ -362,7 +362,7 @@ def plot(renders: list[dict], md: Path, ctx: dict) -> list[str]:
     for ax, scene in zip(axes.flat, scenes):
         mine = [r for r in renders if r["scene"] == scene]
         groups = sorted({_label(r["case"]["params"]) for r in mine})
-        for i, g in enumerate(groups):
+        for i, g in enumerate(groups):  # variants of the one technique ssm: matplotlib's cycle tells them apart (the palette colours techniques)
             pts = sorted((r["timings_ms"]["total"], r["error"]["mae"], r["case"]["params"]) for r in mine
                          if _label(r["case"]["params"]) == g and r["case"]["params"].get("shadow_map_size") == 1024 and math.isfinite(r["case"]["params"]["budget"]))
             if pts:

@@ -124,3 +124,43 @@ def test_every_bundled_technique_has_its_own_colour_and_the_reference_is_black()
 @pytest.mark.parametrize("columns,cells,shape", [(4, 3, (3, 1)), (4, 6, (4, 2)), (2, 5, (2, 3))])
 def test_grid_size_wraps_cells_into_rows(columns, cells, shape):
     assert grid_size(cells, 640, 480, columns)[2:] == shape
+
+
+def test_a_side_by_side_label_wraps_inside_its_panel(tmp_path):
+    from PIL import Image, ImageDraw, ImageFont
+
+    from wsoft.bench.common import LABEL_PX, params_label, side_by_side, wrap_label
+
+    label = params_label("salzman", {"radius": 16, "shadow_map_size": 512, "far_bound": False})
+    assert label == "salzman: radius=16, shadow_map_size=512, far_bound=False"
+    font = ImageFont.load_default(size=LABEL_PX)
+    draw = ImageDraw.Draw(Image.new("L", (1, 1)))
+    lines = wrap_label(draw, label, font, 96 - 8)
+    assert len(lines) >= 3 and all(draw.textlength(l, font=font) <= 88 for l in lines)
+    assert "shadow_map_size=512," not in lines and "".join(lines).replace(" ", "") == label.replace(" ", "")  # a long word broken within
+    v = np.zeros((40, 96), np.float32)
+    case = {"scene": "s", "light": None, "technique": "salzman", "device": "cpu", "ref_samples": 1, "ref_casters": "dynamic"}
+    rel = side_by_side(case, label, v, v, np.ones_like(v), {"stem": "t", "out_dir": tmp_path})
+    img = np.asarray(Image.open(tmp_path / rel))
+    top = img.shape[0] - 40
+    assert img.shape[1] == 3 * 96 and top >= 3 * (LABEL_PX + 3)  # the header grew to the longest label's lines
+    assert (img[:top, 96 - 3:96 + 3] == 255).all() and (img[:top, 2 * 96 - 3:2 * 96 + 3] == 255).all()  # no text across a panel's edge
+
+
+def test_error_vs_time_colours_each_technique_from_the_palette(tmp_path):
+    from PIL import Image
+
+    from wsoft.bench.common import error_vs_time
+
+    def row(scene, tech, ms, mae, group=None):
+        return {"scene": scene, "technique": group or tech, "case": {"technique": tech}, "light": "/World/Light", "device": "cpu",
+                "width": 64, "timings_ms": {"total": ms}, "error": {"mae": mae}}
+
+    rows = [row(s, t, ms, e) for s in ("a", "b") for t, ms, e in (("pcss", 10, 0.01), ("pcss", 20, 0.005), ("vsm", 12, 0.02),
+                                                                     ("vsm", 24, 0.015), ("reference", 30, 0.002), ("reference", 60, 0.001))]
+    lines = error_vs_time(rows, tmp_path / "r.md", {"stem": "t"}, "test")
+    img = np.asarray(Image.open(tmp_path / "images" / "t" / "error_vs_time.png").convert("RGB"))
+    assert lines[-1] == "![error vs time](images/t/error_vs_time.png)"
+    for tech in ("pcss", "vsm"):
+        assert _palette_pixels(img, tech) > 30, tech
+    assert _palette_pixels(img, "hard") == 0  # no colour that is not a technique's in the plot

@@ -19,3 +19,25 @@ def style(technique: str) -> dict:
     i = ORDER.index(technique) if technique in ORDER else len(ORDER) + sum(map(ord, technique)) % (20 - len(ORDER))
     cmap = colormaps["tab20"]
     return {"color": cmap((2 * i) % 20 + (i // 10) % 2), "marker": MARKERS[i % len(MARKERS)]}
+
+
+# how a technique's k-th variant (a swept parameter, another light or device) shifts its colour:
+# < 0 towards black, > 0 towards white, in this order
+_SHADES = (0.0, -0.45, 0.45, -0.25, 0.25, -0.65, 0.65, -0.12, 0.12, -0.55, 0.55, -0.35, 0.35)
+
+
+def variant_style(technique: str, k: int) -> dict:
+    """``{"color", "marker"}`` of the ``k``-th variant of ``technique`` in one figure (several lines
+    of one technique: a parameter swept apart, ESSM's ``H`` beside its ``c``): variant 0 is
+    :func:`style`, the others keep its hue, darker or lighter, each with the next marker."""
+    from matplotlib.colors import to_rgb
+
+    base = style(technique)
+    if k == 0:
+        return base
+    f = _SHADES[k % len(_SHADES)]
+    rgb = [c * (1.0 + f) if f < 0 else c + (1.0 - c) * f for c in to_rgb(base["color"])]
+    if technique == "reference":  # black: variants in greys
+        rgb = [0.12 * k % 0.7] * 3
+    marker = MARKERS[(MARKERS.index(base["marker"]) + k) % len(MARKERS)] if base["marker"] in MARKERS else MARKERS[k % len(MARKERS)]
+    return {"color": tuple(rgb), "marker": marker}
