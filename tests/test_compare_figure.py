@@ -34,7 +34,7 @@ def test_the_grid_of_a_compare_names_each_technique_its_time_and_error(tmp_path)
     path = tmp_path / "box_plane-compare.png"
     titles = write_compare_grid(str(path), fs)
     assert list(titles) == ["reference", "hard", "pcss"]  # the reference first
-    assert titles["reference"].startswith("reference (samples=8)")
+    assert titles["reference"].startswith("reference (8 samples)")
     for label in ("hard", "pcss"):
         e, ms = fs[label].stats["error"], fs[label].stats["timings_ms"]["total"]
         assert titles[label].startswith(label) and f"{ms:.1f} ms" in titles[label]
@@ -80,10 +80,25 @@ def test_a_nan_in_v_is_drawn_and_counted_never_hidden(tmp_path):
                    "reference": _frame(ref, "reference", {"samples": 64}, 40.0, None)}, {"reference": "reference"})
     path = tmp_path / "hand.png"
     titles = write_compare_grid(str(path), fs, title="by hand")
+    assert titles["reference"] == "reference (64 samples)\n40.0 ms"
     assert "NaN 9 px" in titles["hard"] and "3.0 ms" in titles["hard"] and "40.0 ms" in titles["reference"]
     img = np.asarray(Image.open(path).convert("RGB")).astype(int)
     lime = (img[..., 0] > 120) & (img[..., 0] < 160) & (img[..., 1] > 240) & (img[..., 2] < 20)
     assert lime.sum() > 20  # 9 pixels of V, drawn magnified
+
+
+def test_frames_compared_against_a_ground_truth_need_it(tmp_path):
+    from wsoft.errors import ParameterError
+    from wsoft.metrics import GroundTruth
+    from wsoft.pipeline import FrameSet
+
+    v = np.ones((12, 16), np.float32)
+    fs = FrameSet({"hard": _frame(v, "hard", {}, 1.0, {"mae": 0.0, "mae_penumbra": 0.0})}, {"reference": None})
+    with pytest.raises(ParameterError, match="pass that GroundTruth as reference="):
+        write_compare_grid(str(tmp_path / "g.png"), fs)
+    truth = GroundTruth({"Key": {"V": v, "V_stderr": 0 * v, "A": v}}, 32)
+    titles = write_compare_grid(str(tmp_path / "g.png"), fs, truth, reference_ms=12.5)
+    assert titles["reference"] == "reference (32 samples)\n12.5 ms" and (tmp_path / "g.png").is_file()
 
 
 def test_short_params_keep_what_differs_from_the_defaults():
@@ -121,7 +136,7 @@ def test_every_bundled_technique_has_its_own_colour_and_the_reference_is_black()
     assert plugin not in {c for c, _ in styles}  # a plugin takes a colour no bundled technique has
 
 
-@pytest.mark.parametrize("columns,cells,shape", [(4, 3, (3, 1)), (4, 6, (4, 2)), (2, 5, (2, 3))])
+@pytest.mark.parametrize("columns,cells,shape", [(4, 3, (3, 1)), (4, 4, (4, 1)), (4, 5, (3, 2)), (4, 9, (3, 3)), (2, 5, (2, 3))])
 def test_grid_size_wraps_cells_into_rows(columns, cells, shape):
     assert grid_size(cells, 640, 480, columns)[2:] == shape
 

@@ -22,6 +22,7 @@ import textwrap
 
 import numpy as np
 
+from wsoft.errors import ParameterError
 from wsoft.metrics.flip import has_rgb, ldr_image
 
 DIFF_CMAP = "RdBu_r"
@@ -36,9 +37,10 @@ SUPTITLE_IN = 0.45
 
 def grid_size(cells: int, width: int, height: int, columns: int = 4, dpi: int = 110) -> tuple[float, float, int, int]:
     """The figure of :func:`write_compare_grid`: its size in inches and its columns and rows of
-    cells, for ``cells`` cells (the techniques and the reference) of ``width`` x ``height`` frames."""
-    ncol = max(1, min(columns, cells))
-    nrow = math.ceil(cells / ncol)
+    cells, for ``cells`` cells (the techniques and the reference) of ``width`` x ``height`` frames:
+    at most ``columns`` to a row, the rows as even as they can be (5 cells: 3 and 2)."""
+    nrow = math.ceil(max(1, cells) / max(1, columns))
+    ncol = math.ceil(max(1, cells) / nrow)
     tile_w = min(TILE_IN[1], max(TILE_IN[0], width / dpi))
     return ncol * (tile_w + COLOURBAR_IN), nrow * (2 * tile_w * height / width + TITLES_IN) + SUPTITLE_IN, ncol, nrow
 
@@ -70,7 +72,12 @@ def _fmt(v) -> str:
 def tile_title(technique: str, params: dict, frame_ms: float | None, error: dict | None, width: int = 44) -> str:
     """The title of a cell: the technique and its short parameters (wrapped at ``width``
     characters), then its frame time and its error against the reference (penumbra MAE and MAE)."""
-    head = textwrap.wrap(f"{technique} ({short_params(technique, params)})", width, break_on_hyphens=False) or [technique]
+    if technique == "reference" and "samples" in params:  # its sample count, always
+        rest = short_params(technique, {k: v for k, v in params.items() if k != "samples"})
+        text = f"{params['samples']} samples" + (f", {rest}" if rest != "defaults" else "")
+    else:
+        text = short_params(technique, params)
+    head = textwrap.wrap(f"{technique} ({text})", width, break_on_hyphens=False) or [technique]
     nums = [] if frame_ms is None else [f"{frame_ms:.1f} ms"]
     if error is not None:
         nums.append(f"penumbra MAE {error['mae_penumbra']:.4f}, MAE {error['mae']:.4f}")
@@ -92,7 +99,8 @@ def _reference_channels(frames, reference) -> tuple[dict, dict]:
     if reference is None:
         label = frames.stats.get("reference")
         if label is None or label not in frames:
-            raise ValueError("the frames hold no reference frame (compared against a ground truth): pass it as reference=")
+            raise ParameterError("write_compare_grid: the frames hold no reference frame (they were compared against a ground truth); "
+                                 "pass that GroundTruth as reference=")
         fr = frames[label]
         return fr.channels, {"technique": "reference", "label": label, "params": fr.stats["params"],
                              "ms": fr.stats["timings_ms"]["total"]}
@@ -112,8 +120,9 @@ def write_compare_grid(path: str, frames, reference=None, *, reference_ms: float
     ``reference``: the :class:`~wsoft.metrics.GroundTruth` the frames were measured against, when
     they hold no reference frame (``compare(ground_truth=...)``, a frame of
     :func:`wsoft.compare_sequence`, its ``ground_truths[i]``), with ``reference_ms`` its time if
-    known; by default the reference is the frame ``stats["reference"]`` names. The cells (see the module) run ``columns`` to a row, the reference first; ``title``
-    goes above them (default: the stage, the frame size and the device).
+    known; by default the reference is the frame ``stats["reference"]`` names. The cells (see the
+    module) run ``columns`` to a row, the reference first (:func:`grid_size`); ``title`` goes
+    above them (default: the stage, the frame size and the device).
 
     Returns ``{label: title}``: each cell's title as drawn (technique, short parameters, frame ms,
     penumbra MAE and MAE), the reference's under its label."""
