@@ -148,7 +148,7 @@ def test_light_inside_the_scene_stays_finite(device):
     st = make_stage()
     add_quad(st, "/World/G", (0, 0, 0), 5)
     add_quad(st, "/World/Roof", (0, 0, 4), 5)  # a ceiling above the light: entirely behind it
-    UsdGeom.Cube.Define(st, "/World/NotMesh")
+    UsdGeom.NurbsPatch.Define(st, "/World/NotMesh")
     from pxr import Vt
 
     wall = UsdGeom.Mesh.Define(st, "/World/Wall")  # crosses the light's plane
@@ -159,7 +159,7 @@ def test_light_inside_the_scene_stays_finite(device):
     lt.CreateRadiusAttr(0.1)
     UsdGeom.XformCommonAPI(lt).SetTranslate(Gf.Vec3d(0, 0, 2))
     scene = wsoft.load_scene(st)
-    assert any("Cube is not a Mesh" in w for w in scene.warnings)
+    assert any("NurbsPatch is not a Mesh" in w for w in scene.warnings)
     f = wsoft.render(scene, "hard", width=48, height=48, device=device, camera=None)
     assert np.all(np.isfinite(f.V)) and f.V.min() >= 0 and f.V.max() <= 1
     ref = wsoft.render(scene, "reference", width=48, height=48, device=device, samples=1, jitter=False)

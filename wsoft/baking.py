@@ -420,6 +420,11 @@ def bake(scene, technique, *, light: str | None = None, frames=None, out: str | 
                 note(f"{file}: {name}: inside an instanceable prim, which cannot carry per-instance primvars; not baked "
                      f"(make its instance not instanceable to bake it)")
                 continue
+            if not prim.IsA(UsdGeom.Mesh):
+                report["skipped_meshes"][name] = f"a {prim.GetTypeName()} (one of UsdGeom's shapes): no authored points or faces"
+                note(f"{file}: {name}: a {prim.GetTypeName()} has no authored points or faces to carry primvars; not baked "
+                     "(make it a mesh to bake it)")
+                continue
             off, cnt = sc.prim_points[j]
             M = np.array(xf.GetLocalToWorldTransform(prim), dtype=np.float64).T
             s = read_mesh_surface(prim, tc, sc.points[off:off + cnt], M, crease_angle)

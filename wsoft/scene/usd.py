@@ -16,6 +16,7 @@ import os
 import numpy as np
 
 from wsoft.errors import SceneError
+from wsoft.scene.shapes import not_drawn, shape_type
 from wsoft.scene.soup import Soup
 from wsoft.scene.types import Scene, SkippedLight
 from wsoft.scene.usd_context import StageContext, pxr
@@ -275,9 +276,10 @@ def read_stage(stage, file: str, time: float | None, render_settings: str | None
     shadow-casting light whose ``collection:shadowLink`` an instanced load cannot keep (None: none,
     or a flat load): one traversal with instance proxies, invisible prims and their subtrees
     skipped, prims of a purpose the render settings leave out skipped (their descendants still
-    visited). Meshes go to the soup (:class:`~wsoft.scene.soup.Soup`) or, kept instanced, to the
-    instances (:mod:`wsoft.scene.usd_instancing`); lights and cameras to their lists
-    (:mod:`wsoft.scene.usd_lights`)."""
+    visited). Meshes and UsdGeom's shapes (tessellated, :mod:`wsoft.scene.shapes`) go to the soup
+    (:class:`~wsoft.scene.soup.Soup`) or, kept instanced, to the instances
+    (:mod:`wsoft.scene.usd_instancing`); other gprims (curves, points, NURBS) are warned about and
+    cast nothing; lights and cameras go to their lists (:mod:`wsoft.scene.usd_lights`)."""
     Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = pxr()
     ctx = StageContext(stage, file, time, render_settings)
     meshes = MeshReader(ctx)
@@ -306,13 +308,13 @@ def read_stage(stage, file: str, time: float | None, render_settings: str | None
                 continue
             for mesh, name in instancers.read_instancer(prim):
                 add_mesh(mesh, name)
-        elif prim.IsA(UsdGeom.Mesh):
-            mesh = meshes.read_mesh(prim)
+        elif prim.IsA(UsdGeom.Mesh) or shape_type(prim):
+            mesh = meshes.read(prim)
             if mesh is None:
                 continue
             add_mesh(mesh, str(prim.GetPath()))
-        elif prim.IsA(UsdGeom.Gprim) and not prim.IsA(UsdGeom.Mesh):
-            ctx.warn(prim, f"{type_name} is not a Mesh; ignored (convert it to a mesh to cast shadows)")
+        elif prim.IsA(UsdGeom.Gprim):
+            ctx.warn(prim, not_drawn(type_name))
         else:
             _read_view_prim(ctx, prim, type_name, lights, unshadowed, skipped, cameras, shadow_lights)
 

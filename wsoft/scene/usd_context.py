@@ -97,7 +97,7 @@ class StageContext:
         return v
 
     def size(self, prim, name: str, value) -> float:
-        """A light's size attribute: finite and >= 0."""
+        """A size attribute (a light's, a shape's): finite and >= 0."""
         v = self.finite(prim, name, value)
         if v < 0:
             raise self.err(prim, f"{name} = {v:g} is negative")
@@ -110,11 +110,12 @@ class StageContext:
         v = attr.Get(self.timecode)
         return default if v is None else v
 
-    def is_dynamic(self, prim, mesh) -> bool:
-        """A *dynamic caster* (Salzman's sense): time-sampled points, a time-varying transform on the
-        prim or an ancestor, or ``wsoft:dynamic = true`` on the prim or an ancestor."""
+    def is_dynamic(self, prim, shaping=()) -> bool:
+        """A *dynamic caster* (Salzman's sense): time-sampled ``shaping`` attributes (a mesh's points,
+        a shape's size, radius, height...), a time-varying transform on the prim or an ancestor, or
+        ``wsoft:dynamic = true`` on the prim or an ancestor."""
         Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = pxr()
-        if mesh is not None and mesh.GetPointsAttr().GetNumTimeSamples() > 1:
+        if any(a and a.GetNumTimeSamples() > 1 for a in shaping):
             return True
         p = prim
         while p and not p.IsPseudoRoot() and p != self.dynamic_stop:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from wsoft.scene.shapes import not_drawn, shape_type
 from wsoft.scene.soup import MeshPart, Soup
 from wsoft.scene.types import Instances, Prototype
 from wsoft.scene.usd_context import StageContext, pxr
@@ -129,7 +130,7 @@ class InstanceReader:
         M_pi = self.ctx.world(prim)
         # dynamic when the instancer moves its instances over time (or is moved)
         attrs = (pi.GetPositionsAttr(), pi.GetOrientationsAttr(), pi.GetScalesAttr(), pi.GetProtoIndicesAttr(), pi.GetInvisibleIdsAttr())
-        moving = any(a and a.GetNumTimeSamples() > 1 for a in attrs) or self.ctx.is_dynamic(prim, None)
+        moving = any(a and a.GetNumTimeSamples() > 1 for a in attrs) or self.ctx.is_dynamic(prim)
         meshes_of = {}
         for j, path in enumerate(protos):
             root = self.ctx.stage.GetPrimAtPath(path)
@@ -144,10 +145,10 @@ class InstanceReader:
                 if q.IsA(UsdGeom.PointInstancer):
                     self.ctx.warn(q, "a PointInstancer inside a prototype is not expanded; ignored")
                     sub.PruneChildren()
-                elif q.IsA(UsdGeom.Mesh):
+                elif q.IsA(UsdGeom.Mesh) or shape_type(q):
                     found.append(q)
                 elif q.IsA(UsdGeom.Gprim):
-                    self.ctx.warn(q, f"{q.GetTypeName()} is not a Mesh; ignored (convert it to a mesh to cast shadows)")
+                    self.ctx.warn(q, not_drawn(q.GetTypeName()))
             meshes_of[j] = (root, found)
         return indices, xforms, keep, M_pi, moving, meshes_of
 
@@ -168,7 +169,7 @@ class InstanceReader:
             self.ctx.world_override = (root, M_pi @ np.array(xforms[int(i)], dtype=np.float64).T)
             try:
                 for q in found:
-                    mesh = self.meshes.read_mesh(q)
+                    mesh = self.meshes.read(q)
                     if mesh is not None:
                         if moving:
                             mesh = mesh._replace(dynamic=True)
@@ -195,7 +196,7 @@ class InstanceReader:
             if key not in inst.proto_of:
                 self.ctx.world_override = (root, np.eye(4))  # the root's own frame
                 try:
-                    meshes = [(m, str(q.GetPath())) for q in found for m in [self.meshes.read_mesh(q)] if m is not None]
+                    meshes = [(m, str(q.GetPath())) for q in found for m in [self.meshes.read(q)] if m is not None]
                 finally:
                     self.ctx.world_override = None
                 inst.add_prototype(key, str(root.GetPath()), str(root.GetPath()), meshes)
@@ -232,7 +233,7 @@ class InstanceReader:
                 if placed_apart(q, UsdGeom, UsdLux):
                     mixed = True
                     break
-                if q.IsA(UsdGeom.Mesh):
+                if q.IsA(UsdGeom.Mesh) or shape_type(q):
                     meshes.append(q.GetPath().MakeRelativePath(ipath))
                 elif q.IsA(UsdGeom.Gprim):
                     others.append(q.GetPath().MakeRelativePath(ipath))
@@ -256,10 +257,10 @@ class InstanceReader:
             for rel in others:
                 q = self.ctx.stage.GetPrimAtPath(ipath.AppendPath(rel))
                 if UsdGeom.Imageable(q).ComputePurpose() in self.ctx.purposes:
-                    self.ctx.warn(q, f"{q.GetTypeName()} is not a Mesh; ignored (convert it to a mesh to cast shadows)")
+                    self.ctx.warn(q, not_drawn(q.GetTypeName()))
             self.ctx.world_override, self.ctx.dynamic_stop = (prim, np.eye(4)), prim  # the instance prim's frame
             try:
-                read = [(m, str(q.GetPath())) for q in proxies for m in [self.meshes.read_mesh(q)] if m is not None]
+                read = [(m, str(q.GetPath())) for q in proxies for m in [self.meshes.read(q)] if m is not None]
             finally:
                 self.ctx.world_override, self.ctx.dynamic_stop = None, None
             inst.add_prototype(key, ppath, str(ipath), read)
@@ -269,7 +270,7 @@ class InstanceReader:
         M = self.ctx.world(prim)
         if not np.all(np.isfinite(M)):
             raise self.ctx.err(prim, "world transform is not finite (NaN or inf in its xformOps or an ancestor's)")
-        inst.add(np.array([j]), M[None], inst.add_prim(str(ipath)), np.array([-1]), self.ctx.is_dynamic(prim, None))
+        inst.add(np.array([j]), M[None], inst.add_prim(str(ipath)), np.array([-1]), self.ctx.is_dynamic(prim))
         return True
 
     def material_key(self, prim, ipath):

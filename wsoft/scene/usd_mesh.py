@@ -1,6 +1,7 @@
 """USD meshes with their materials and alpha textures -> :class:`~wsoft.scene.soup.MeshPart`.
 
-:class:`MeshReader` reads a ``UsdGeom.Mesh`` at the context's time code (:mod:`wsoft.scene.usd_context`):
+:class:`MeshReader` reads a ``UsdGeom.Mesh``, or one of UsdGeom's shapes tessellated into one
+(:mod:`wsoft.scene.shapes`), at the context's time code (:mod:`wsoft.scene.usd_context`):
 its faces triangulated (:mod:`wsoft.scene.polygons`; the faces of ``holeIndices`` left out), its
 points placed in the world, per triangle the material bound to the mesh or its ``GeomSubset``
 faces, and per corner ``primvars:wsoft:bakedLight`` and the texture coordinates the triangle's
@@ -19,6 +20,7 @@ from dataclasses import replace
 import numpy as np
 
 from wsoft.scene.polygons import Triangles, triangulate
+from wsoft.scene.shapes import ShapeMesh, tessellate
 from wsoft.scene.soup import MeshPart
 from wsoft.scene.types import Material, Texture
 from wsoft.scene.usd_context import StageContext, pxr
@@ -36,6 +38,31 @@ class MeshReader:
         self.textures: list[Texture] = self.network.textures
         self.tile_index: dict[tuple[int, int], int] = {}  # (UDIM material, tile) -> the tile's material
         self.prototype_triangles: dict[str, Triangles] = {}  # a PointInstancer prototype's mesh path -> its triangles
+        self.prototype_shapes: dict[str, ShapeMesh | None] = {}  # a PointInstancer prototype's shape path -> its tessellation
+
+    def read(self, prim) -> MeshPart | None:
+        """A ``UsdGeom.Mesh`` (:meth:`read_mesh`) or one of UsdGeom's shapes (:meth:`read_shape`)."""
+        Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = pxr()
+        return self.read_mesh(prim) if prim.IsA(UsdGeom.Mesh) else self.read_shape(prim)
+
+    def read_shape(self, prim) -> MeshPart | None:
+        """One of UsdGeom's shapes (``Cube``, ``Sphere``, ``Cylinder``, ``Cone``, ``Capsule``, their
+        ``_1`` forms, ``Plane``) tessellated in its local space (:func:`~wsoft.scene.shapes.tessellate`)
+        and read as a mesh of those points and faces is (:meth:`place`): its ``orientation``,
+        ``doubleSided`` (a plane's falls back to true), material or ``displayColor``, world transform;
+        a dynamic caster when an attribute that shapes it is time-sampled. Its primvars are read only
+        where constant (a shape has no authored faces or points to vary over). None (with a warning)
+        for a shape with no area."""
+        key = str(prim.GetPath()) if self.ctx.world_override is not None else None
+        if key is not None and key in self.prototype_shapes:
+            shape = self.prototype_shapes[key]
+        else:
+            shape = tessellate(self.ctx, prim)
+            if key is not None:
+                self.prototype_shapes[key] = shape
+        if shape is None:
+            return None
+        return self.place(prim, shape.points, shape.counts, shape.indices, None, shape.attrs)
 
     def read_mesh(self, prim) -> MeshPart | None:
         """The mesh ``prim`` triangulated (:func:`~wsoft.scene.polygons.triangulate`: a fan from each
@@ -68,16 +95,26 @@ class MeshReader:
             raise self.ctx.err(prim, f"faceVertexIndices[{bad}] = {int(idx[bad])} is out of range for {len(p)} points")
         if np.any(counts < 3):
             self.ctx.warn(prim, f"{int(np.sum(counts < 3))} faces with fewer than 3 vertices ignored")
+        return self.place(prim, p, counts, idx, mesh, (mesh.GetPointsAttr(),))
 
+    def place(self, prim, p, counts, idx, mesh, shaping) -> MeshPart | None:
+        """The gprim ``prim`` whose polygons are the points ``p`` (local space, float64), face counts
+        and face indices given (checked), as a :class:`MeshPart`: triangulated (a ``UsdGeom.Mesh``
+        ``mesh`` with its ``holeIndices``; None: a shape's convex faces), wound by its
+        ``orientation`` and flipped under a mirroring transform, in the world, zero-area triangles
+        dropped, with its materials, texture coordinates, sidedness, closedness and baked light;
+        dynamic when one of the ``shaping`` attributes is time-sampled (or its transform is)."""
+        Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = pxr()
+        gprim = UsdGeom.Gprim(prim)
         # a prototype a PointInstancer places many times is triangulated (and warned about) once
         key = str(prim.GetPath()) if self.ctx.world_override is not None else None
         tri = self.prototype_triangles.get(key) if key is not None else None
         if tri is None:
-            tri = self.triangulate(prim, mesh, p, counts, idx)
+            tri = self.triangulate(prim, mesh, p, counts, idx) if mesh is not None else triangulate(p, counts, idx)
             if key is not None:
                 self.prototype_triangles[key] = tri
         corners, face_of_tri = tri.corners, tri.faces
-        orient = self.ctx.get(mesh.GetOrientationAttr(), UsdGeom.Tokens.rightHanded)
+        orient = self.ctx.get(gprim.GetOrientationAttr(), UsdGeom.Tokens.rightHanded)
         if orient == UsdGeom.Tokens.leftHanded:
             corners = corners[:, [0, 2, 1]]
         tris = idx[corners]
@@ -106,15 +143,15 @@ class MeshReader:
                 return None
             tris, corners, face_of_tri = tris[keep], corners[keep], face_of_tri[keep]
         mat = self.bind_materials(prim, mesh, len(counts), face_of_tri)
-        uv, mat = self.texture_coords(prim, corners, face_of_tri, tris, mat)
-        ds = bool(self.ctx.get(mesh.GetDoubleSidedAttr(), False))  # UsdGeom's uniform doubleSided (the eye view's back-face culling)
+        uv, mat = self.texture_coords(prim, corners, face_of_tri, tris, mat, shape=mesh is None)
+        ds = bool(self.ctx.get(gprim.GetDoubleSidedAttr(), False))  # UsdGeom's uniform doubleSided (the eye view's back-face culling)
         stray = prim.GetAttribute("primvars:doubleSided")
         if stray and stray.HasAuthoredValue():
             self.ctx.warn(prim, "primvars:doubleSided is not a UsdGeom property; ignored (the mesh's doubleSided attribute "
                           f"is read: {str(ds).lower()})")
-        baked = self.read_primvar(prim, corners, face_of_tri, tris, "wsoft:bakedLight", 3)
+        baked = self.read_primvar(prim, corners, face_of_tri, tris, "wsoft:bakedLight", 3, shape=mesh is None)
         return MeshPart(points=pw, triangles=tris.astype(np.int32), material=mat, uv=uv, double_sided=ds, closed=closed_orientation(pw, tris),
-                        dynamic=self.ctx.is_dynamic(prim, mesh), baked=baked, faces=face_of_tri)
+                        dynamic=self.ctx.is_dynamic(prim, shaping), baked=baked, faces=face_of_tri)
 
     def triangulate(self, prim, mesh, p, counts, idx) -> Triangles:
         """The triangles of the faces that are not holes (``holeIndices``; out-of-range ones warned
@@ -138,19 +175,20 @@ class MeshReader:
             self.ctx.warn(prim, f"{tri.self_intersecting} faces cross themselves: triangulated as a fan from their first corner")
         return tri
 
-    def texture_coords(self, prim, corners, face_of_tri, tris, mat):
+    def texture_coords(self, prim, corners, face_of_tri, tris, mat, shape: bool = False):
         """Per triangle corner, the st its material's opacity texture is sampled at, [T, 3, 2]
         float32, and the triangles' materials. A triangle whose material reads a texture gets the
         primvar that material's network names (:class:`~wsoft.scene.types.StMap`: the
         ``UsdPrimvarReader_float2``'s ``varname``, its ``fallback`` where the mesh lacks it) mapped
         by its ``UsdTransform2d`` nodes, here on the host (exact: the map is affine); a triangle of
         a UDIM material gets the material of its tile, its st shifted into the tile
-        (:meth:`udim_tiles`). Other triangles keep the ``st`` primvar (0 without one)."""
+        (:meth:`udim_tiles`). Other triangles keep the ``st`` primvar (0 without one). A ``shape``
+        (one of UsdGeom's) reads constant primvars only (:meth:`read_primvar`)."""
         read: dict[str, np.ndarray | None] = {}
 
         def primvar(name: str):
             if name not in read:
-                read[name] = self.read_primvar(prim, corners, face_of_tri, tris, name, 2)
+                read[name] = self.read_primvar(prim, corners, face_of_tri, tris, name, 2, shape=shape)
             return read[name]
 
         st = primvar("st")
@@ -216,8 +254,10 @@ class MeshReader:
                                               tile=int(k)))
             mat[idx[tile == k]] = self.tile_index[key]
 
-    def read_primvar(self, prim, corners, face_of_tri, tris, name: str, width: int):
-        """A primvar's values at each triangle corner, shape [T, 3, width]; None when absent."""
+    def read_primvar(self, prim, corners, face_of_tri, tris, name: str, width: int, shape: bool = False):
+        """A primvar's values at each triangle corner, shape [T, 3, width]; None when absent. On a
+        ``shape`` (one of UsdGeom's, tessellated here) only a constant primvar has a meaning: any
+        other interpolation is warned about and ignored."""
         Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = pxr()
         pv = UsdGeom.PrimvarsAPI(prim).GetPrimvar(name)
         if not pv or not pv.HasValue():
@@ -232,6 +272,12 @@ class MeshReader:
             self.ctx.warn(prim, f"primvars:{name} is {pv.GetTypeName()}, not {width} numbers per element; ignored")
             return None
         interp = pv.GetInterpolation()
+        if shape and interp != UsdGeom.Tokens.constant:
+            line = (f"{self.ctx.file}: {prim.GetPath()}: primvars:{name} has {interp} interpolation, but a {prim.GetTypeName()} has "
+                    "no authored faces or points to vary over; ignored")
+            if line not in self.ctx.warnings:
+                self.ctx.warnings.append(line)
+            return None
         try:
             if interp == UsdGeom.Tokens.faceVarying:
                 out = v[corners]
@@ -246,9 +292,11 @@ class MeshReader:
         return out.astype(np.float32)
 
     def bind_materials(self, prim, mesh, nfaces: int, face_of_tri):
+        """Per triangle, the material bound to the gprim, or to the ``GeomSubset`` of its face (a
+        ``UsdGeom.Mesh`` ``mesh``; a shape, ``mesh`` None, has no faces a subset could name)."""
         Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = pxr()
         face_mat = np.full(nfaces, self.material_for(prim), np.int32)
-        subsets = UsdShade.MaterialBindingAPI(prim).GetMaterialBindSubsets()
+        subsets = UsdShade.MaterialBindingAPI(prim).GetMaterialBindSubsets() if mesh is not None else []
         for subset in subsets:
             ind = self.ctx.get(subset.GetIndicesAttr())
             if ind is None:
