@@ -4,6 +4,7 @@ creases and corners, primvars and GeomSubsets through refinement, and the errors
 
 from __future__ import annotations
 
+import json
 import time
 
 import numpy as np
@@ -475,6 +476,12 @@ def test_the_cli_flag_on_a_tiny_stage(tmp_path):
     rc, out, err = run_captured(["plan", path, "--subdiv-level", "9"])
     assert rc == 2 and err.strip().splitlines() == [f"wsoft: error: {path}: subdiv_level 9 is not an integer in 0..4 "
                                                     "(0: the control cage; each level has 4x the faces)"]
+    stats = tmp_path / "o.json"
+    rc, out, err = run_captured(["render", path, "-t", "hard", "--subdiv-level", "1", "--width", "16", "--height", "12", "--device", "cpu",
+                                 "--out", str(tmp_path / "o.exr"), "--stats", str(stats)])
+    assert rc == 0 and json.loads(stats.read_text())["scene"]["triangles"] == 48 + 2
+    assert [ln for ln in err.splitlines() if ln.startswith("note:")] == [
+        f"note: {path}: subdiv_level 1: 1 subdivision surface mesh (1 catmullClark) refined, 6 cage faces into 24"]
     rc, _, err = run_captured(["render", path, "-t", "hard", "--subdiv-level", "-1", "--out", str(tmp_path / "o.exr")])
     assert rc == 2 and "subdiv_level -1 is not an integer" in err and len(err.strip().splitlines()) == 1
     for cmd in ("render", "compare", "bake"):
