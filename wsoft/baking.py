@@ -118,6 +118,26 @@ def _triangle_of_faces(scene: Scene, j: int, nfaces: int, tri_of_prim: dict) -> 
     return out
 
 
+def _on_refined_surface(s: MeshSurface, scene: Scene, tris: np.ndarray, first: int, count: int) -> MeshSurface:
+    """``s`` (a cage's faces through its vertices' refined positions) with the normals of the refined
+    surface: per vertex the area-weighted normal of the scene's triangles ``tris`` of the refined
+    mesh (points ``first .. first + count``) around it, every corner smooth (``vertex`` values)."""
+    import dataclasses
+
+    p = scene.points[first:first + count].astype(np.float64)
+    t = scene.triangles[tris].astype(np.int64) - first
+    area = np.cross(p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]])
+    n = np.zeros_like(p)
+    for k in range(3):
+        np.add.at(n, t[:, k], area)
+    n = n[:len(s.points)]
+    ln = np.linalg.norm(n, axis=1)
+    n = np.where(ln[:, None] > 0, n / np.where(ln > 0, ln, 1.0)[:, None], 0.0)
+    corner = np.where(s.corner_valid[:, None], n[s.corner_vertex], 0.0)
+    return dataclasses.replace(s, vertex_normal=n, corner_normal=corner, corner_crease=np.zeros_like(s.corner_crease),
+                               interpolation="vertex", normals="refined surface")
+
+
 def _offsets(points: np.ndarray, eps: float) -> np.ndarray:
     """Per point: ``eps``, at least 2e-6 of its largest coordinate (as the reference's ray_offset)."""
     return np.maximum(eps, 2.0e-6 * np.abs(points).max(axis=1))
@@ -291,7 +311,7 @@ def _sanitise(path: str) -> str:
 
 def bake(scene, technique, *, light: str | None = None, frames=None, out: str | None = None, texture_size: int | None = None,
          texture_dir: str | None = None, device: str | None = None, crease_angle: float = CREASE_ANGLE, stats: dict | None = None,
-         progress=None, **params):
+         progress=None, subdiv_level: int | None = None, **params):
     """Bake ``technique``'s visibility of the stage ``scene`` into a new ``Sdf.Layer`` of ``over``\\ s
     (see the module's documentation) and return it.
 
@@ -307,14 +327,22 @@ def bake(scene, technique, *, light: str | None = None, frames=None, out: str | 
     ``st`` into ``texture_dir`` (default: the layer's folder; required without ``out``), named
     ``<mesh path>_<light>.exr`` (``..._<light>.<frame>.exr`` per frame). ``crease_angle``: degrees
     (:mod:`wsoft.scene.mesh_points`). ``stats``: a dict filled with what was done (per frame
-    wall and CPU times, points, meshes and their interpolation, skipped meshes, textures, warnings).
-    ``progress``: called as ``progress(done, total, time_code)`` after each frame."""
+    wall and CPU times, points, meshes and their interpolation, skipped meshes, textures, warnings,
+    the load's notes). ``progress``: called as ``progress(done, total, time_code)`` after each frame.
+
+    ``subdiv_level`` (None: a :class:`~wsoft.scene.types.Scene`'s own, else 0): subdivision
+    surfaces are refined that many times (:func:`~wsoft.scene.usd.load_scene`) and cast the
+    refined shadows; their primvars stay the cage's, one value per cage point (``vertex``), baked
+    at each cage vertex's refined position (a vertex of the refined surface) with the refined
+    surface's normal there (area-weighted over its refined triangles). A texture bake
+    (``texture_size``) needs the cage itself (its texels lie on the cage's faces): with
+    ``subdiv_level > 0`` it is an error."""
     from pxr import Sdf, Tf, Usd, UsdGeom, UsdUtils, Vt
 
     version = sys.modules["wsoft"].__version__  # the package (loaded before any of its modules), not an upward import
 
     report = stats if stats is not None else {}
-    report.update(frames=[], warnings=[], meshes={}, skipped_meshes={}, textures=[], lights={})
+    report.update(frames=[], warnings=[], notes=[], meshes={}, skipped_meshes={}, textures=[], lights={})
     warn_list: list[str] = report["warnings"]
     # the technique first: a refusal costs nothing
     (tech,) = as_techniques(technique, params)
@@ -325,6 +353,11 @@ def bake(scene, technique, *, light: str | None = None, frames=None, out: str | 
         raise ParameterError(f"crease angle {crease_angle:g} out of range [0, 180] degrees")
     if texture_size is not None and not 1 <= int(texture_size) <= MAX_TEXTURE_SIZE:
         raise ParameterError(f"texture size {texture_size} out of range [1, {MAX_TEXTURE_SIZE}]")
+    if subdiv_level is None:
+        subdiv_level = scene.subdiv_level if isinstance(scene, Scene) else 0
+    if texture_size is not None and subdiv_level:
+        raise ParameterError(f"a texture bake reads the control cage's faces: texture_size {texture_size} needs subdiv_level 0, "
+                             f"not {subdiv_level}")
     if out is not None:
         out = os.fspath(out)
         if not out.endswith((".usda", ".usdc", ".usd")):
@@ -382,9 +415,10 @@ def bake(scene, technique, *, light: str | None = None, frames=None, out: str | 
 
     for fi, t in enumerate(times_load):
         f0, c0 = time.perf_counter(), time.process_time()
-        sc = load_scene(stage, time=t)
+        sc = load_scene(stage, time=t, subdiv_level=subdiv_level)
         for w in sc.warnings:
             note(w)
+        report["notes"] += [n for n in sc.notes if n not in report["notes"]]
         tc = Usd.TimeCode.Default() if sc.time is None else Usd.TimeCode(sc.time)
         f1 = time.perf_counter()
         if not sc.lights:
@@ -426,10 +460,16 @@ def bake(scene, technique, *, light: str | None = None, frames=None, out: str | 
                      "(make it a mesh to bake it)")
                 continue
             off, cnt = sc.prim_points[j]
+            ncage = cnt
+            if sc.subdiv_level:  # a refined mesh's first points are its cage's vertices, refined
+                cage = UsdGeom.Mesh(prim).GetPointsAttr().Get(tc)
+                ncage = min(int(cnt), len(cage) if cage is not None else 0)
             M = np.array(xf.GetLocalToWorldTransform(prim), dtype=np.float64).T
-            s = read_mesh_surface(prim, tc, sc.points[off:off + cnt], M, crease_angle)
+            s = read_mesh_surface(prim, tc, sc.points[off:off + ncage], M, crease_angle)
             if s is None:
                 continue
+            if ncage < cnt:
+                s = _on_refined_surface(s, sc, tri_of_prim.get(j, np.zeros(0, np.int64)), off, cnt)
             for w in s.warnings:
                 note(w)
             surfaces.append((j, s))

@@ -147,7 +147,8 @@ def cmd_render(args) -> int:
         check_output(path, what)
     if args.frames is not None:
         return _render_frames(args)
-    scene = load_stage(scene_arg(args.scene), time=args.time, render_settings=args.render_settings, instancing=args.instancing)
+    scene = load_stage(scene_arg(args.scene), time=args.time, render_settings=args.render_settings, instancing=args.instancing,
+                       subdiv_level=args.subdiv_level)
     out = output_of(scene, args.out)
     params = _parse_sets(args.set)
     with PassProgress(args.technique) as progress:
@@ -157,6 +158,7 @@ def cmd_render(args) -> int:
         )
     for w in frame.stats["warnings"]:  # the stage's, then the passes'
         print(f"warning: {w}", file=sys.stderr)
+    print_notes(frame.stats["notes"])
     frame.write_exr(out)
     if args.png:
         frame.write_png(args.png)
@@ -209,12 +211,14 @@ def _render_frames(args) -> int:
     params = _parse_sets(args.set)
     seq = render_sequence(scene_arg(args.scene), args.technique, frames=args.frames, width=args.width, height=args.height,
                           camera=args.camera, light=args.light, device=args.device, pixel_samples=args.pixel_samples,
-                          render_settings=args.render_settings, instancing=args.instancing, progress=_FrameProgress(), **params)
+                          render_settings=args.render_settings, instancing=args.instancing, progress=_FrameProgress(),
+                          subdiv_level=args.subdiv_level, **params)
     first = seq.frames[0]
     rs = seq.render_settings
     out = output_of(types.SimpleNamespace(render_settings=rs, path=first.stats["scene"]["path"]), args.out)
     for w in seq.warnings + sorted({w for fr in seq.frames for w in fr.stats["warnings"]}):
         print(f"warning: {w}", file=sys.stderr)
+    print_notes(n for fr in seq.frames for n in fr.stats["notes"])
     for t, fr in zip(seq.times, seq.frames):
         fr.write_exr(frame_path(out, t))
         if args.png:
@@ -245,7 +249,8 @@ def cmd_plan(args) -> int:
     import wsoft
     from wsoft.pipeline import load_stage
 
-    scene = load_stage(scene_arg(args.scene), time=args.time, render_settings=args.render_settings, instancing=args.instancing)
+    scene = load_stage(scene_arg(args.scene), time=args.time, render_settings=args.render_settings, instancing=args.instancing,
+                       subdiv_level=args.subdiv_level)
     techs = args.technique or None
     p = wsoft.plan(scene, techs, light=args.light, camera=args.camera)
     if args.json:
@@ -299,6 +304,8 @@ def cmd_plan(args) -> int:
     print(f"triangles with baked light: {p['baked_light_triangles']}")
     for w in p["warnings"]:
         print(f"warning: {w}")
+    for n in p["notes"]:
+        print(f"note: {n}")
     for name, passes in p["techniques"].items():
         print(f"{name}: {' -> '.join(passes)}")
     for name, why in p["not_applicable"].items():
@@ -371,7 +378,8 @@ def cmd_compare(args) -> int:
     techs = _technique_sets(names, args.set)
     if args.frames is not None:
         return _compare_frames(args, techs)
-    scene = load_stage(scene_arg(args.scene), time=args.time, render_settings=args.render_settings, instancing=args.instancing)
+    scene = load_stage(scene_arg(args.scene), time=args.time, render_settings=args.render_settings, instancing=args.instancing,
+                       subdiv_level=args.subdiv_level)
     with PassProgress("compare") as progress:
         fs = wsoft.compare(scene, techs, samples=args.samples, width=args.width, height=args.height, camera=args.camera, light=args.light,
                            device=args.device, progress=progress)
@@ -435,6 +443,7 @@ def cmd_compare(args) -> int:
     print("\n".join(lines))
     for w in sorted({w for fr in fs.values() for w in fr.stats["warnings"]}):
         print(f"warning: {w}", file=sys.stderr)
+    print_notes(n for fr in fs.values() for n in fr.stats["notes"])
     print(f"\nwrote {', '.join(written)}, {grid}, {md}")
     return 0
 
@@ -451,7 +460,7 @@ def _compare_frames(args, techs) -> int:
     _frames_args(args)
     seq = compare_sequence(scene_arg(args.scene), techs, frames=args.frames, samples=args.samples, width=args.width, height=args.height,
                            camera=args.camera, light=args.light, device=args.device, render_settings=args.render_settings,
-                           instancing=args.instancing, progress=_FrameProgress())
+                           instancing=args.instancing, progress=_FrameProgress(), subdiv_level=args.subdiv_level)
     os.makedirs(args.out_dir, exist_ok=True)
     stem = os.path.splitext(os.path.basename(seq.frames[0].stats["scene"]["path"]))[0]
     labels = list(seq.frames[0])
@@ -505,6 +514,7 @@ def _compare_frames(args, techs) -> int:
     print("\n".join(lines))
     for w in seq.warnings + sorted({w for fs in seq.frames for fr in fs.values() for w in fr.stats["warnings"]}):
         print(f"warning: {w}", file=sys.stderr)
+    print_notes(n for fs in seq.frames for fr in fs.values() for n in fr.stats["notes"])
     print(f"\nwrote {len(seq.times)} frames of {', '.join(labels)} ({stem}-<technique>{frame_path('', seq.times[0])}.exr/.png/.json ...), "
           f"{grid}, {md}, {js}")
     return 0
@@ -542,10 +552,12 @@ def cmd_bake(args) -> int:
             print(f"frame {t:g} ({done}/{total}): {f['total_ms'] / 1e3:.2f} s", file=sys.stderr)
 
     wsoft.bake(scene_arg(args.scene), args.technique, light=args.light, frames=frames, out=args.out, texture_size=args.texture_size,
-               texture_dir=args.texture_dir, device=args.device, crease_angle=args.crease_angle, stats=stats, progress=progress, **params)
+               texture_dir=args.texture_dir, device=args.device, crease_angle=args.crease_angle, stats=stats, progress=progress,
+               subdiv_level=args.subdiv_level, **params)
     wall = time.perf_counter() - t0
     for w in stats["warnings"]:
         print(f"warning: {w}", file=sys.stderr)
+    print_notes(stats["notes"])
     fr = stats["frames"]
     per = sum(f["total_ms"] for f in fr) / len(fr) / 1e3
     comp = sum(f["compile_ms"] for f in fr)
@@ -570,6 +582,22 @@ _INST_HELP = ("PointInstancers and instanceable prims: keep them instanced (prot
               "(default: keep them when they place more than 4M triangles)")
 _RS_HELP = ("RenderSettings prim to use (default: the stage metadata renderSettingsPrimPath, else "
             "UsdRender.Settings.GetStageRenderSettings, else none); --width/--height/--camera override its values")
+
+
+_SUBDIV_HELP = ("refine subdivision surfaces (subdivisionScheme catmullClark, loop or bilinear; unauthored means catmullClark) "
+                "N times, 1 to 4, each level with 4x the faces (default: 0, their control cages)")
+
+
+def subdiv_option(parser) -> None:
+    """``--subdiv-level N``: how many times the stage's subdivision surfaces are refined
+    (:func:`wsoft.load_scene`'s ``subdiv_level``; render, compare, plan and bake)."""
+    parser.add_argument("--subdiv-level", type=int, default=0, metavar="N", help=_SUBDIV_HELP)
+
+
+def print_notes(notes) -> None:
+    """The load's notes (``Scene.notes``: no problem, worth knowing), once each, ``note: ...`` on stderr."""
+    for n in dict.fromkeys(notes):
+        print(f"note: {n}", file=sys.stderr)
 
 
 def _one_line_warnings() -> None:
@@ -621,6 +649,7 @@ def main(argv: list[str] | None = None) -> int:
                    "visibility RenderVar; required without one)")
     r.add_argument("--stats", help="stats JSON")
     r.add_argument("--png", help="shaded PNG")
+    subdiv_option(r)
     r.set_defaults(fn=cmd_render)
 
     c = sub.add_parser("compare", help="render techniques and the reference in one graph; EXR/PNG of each, a grid image, a time and error table",
@@ -645,6 +674,7 @@ def main(argv: list[str] | None = None) -> int:
                    "range; adds flicker against the reference and each frame's error (<stage>-compare.md, <stage>-sequence.json)")
     c.add_argument("--device")
     c.add_argument("--out-dir", default="out", help="where the images, stats and the compare table are written")
+    subdiv_option(c)
     c.set_defaults(fn=cmd_compare)
 
     p = sub.add_parser("plan", help="lights, cutouts and the passes each technique would run", formatter_class=fmt)
@@ -656,6 +686,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--instancing", choices=("auto", "keep", "flatten"), default="auto", help=_INST_HELP)
     p.add_argument("--time", type=float)
     p.add_argument("--json", action="store_true")
+    subdiv_option(p)
     p.set_defaults(fn=cmd_plan)
 
     t = sub.add_parser("techniques", help="techniques and their parameters", formatter_class=fmt)
@@ -681,6 +712,7 @@ def main(argv: list[str] | None = None) -> int:
     k.add_argument("--crease-angle", type=float, default=30.0, help="degrees: faces around a vertex closer than this share its "
                    "normal; farther ones make the mesh faceVarying")
     k.add_argument("--device", help="cpu or cuda:N (default: cuda:0 when available, else cpu)")
+    subdiv_option(k)
     k.set_defaults(fn=cmd_bake)
 
     b = sub.add_parser("bench", help="run a benchmark sweep; rows go to <out-dir>/<sweep>.jsonl", formatter_class=fmt)

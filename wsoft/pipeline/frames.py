@@ -137,6 +137,7 @@ def frames_of(built: Built, res: Resources, records: list[dict], total_ms: float
         "camera_model": camera_model(ctx),
         "framing": ctx.framing.describe() if ctx.framing is not None else None,
         "warnings": list(scene.warnings),
+        "notes": list(scene.notes),
     }
     out = scene.render_settings.output if scene.render_settings is not None else None
     exr_names = {"V": out.visibility_var, "V_stderr": f"{out.visibility_var}_stderr"} if out is not None else {}

@@ -62,8 +62,9 @@ def plan(scene: Scene, techniques: list[str] | None = None, *, width: int | None
     shadow-casting lights (where each emits, :func:`emission`, with their UsdLux shadow controls,
     :func:`shadow_controls`), skipped lights, cutout materials, the purposes loaded, the framing
     (``framing``: which render settings prim and camera, where each came from, the resolution,
-    conform policy and data window; see :meth:`Framing.describe`), and per technique the passes
-    (with their kinds) or why it is not applicable to a light."""
+    conform policy and data window; see :meth:`Framing.describe`), the load's warnings and notes
+    (``notes``: subdivision surfaces read as their cage, or refined; ``subdiv_level``), and per
+    technique the passes (with their kinds) or why it is not applicable to a light."""
     from wsoft.techniques import TECHNIQUES
 
     out = {
@@ -84,6 +85,8 @@ def plan(scene: Scene, techniques: list[str] | None = None, *, width: int | None
         "purposes": list(scene.purposes),
         "framing": frame_setup(scene, width, height, camera).describe(),
         "warnings": list(scene.warnings),
+        "notes": list(scene.notes),
+        "subdiv_level": scene.subdiv_level,
         "techniques": {},
         "not_applicable": {},
     }

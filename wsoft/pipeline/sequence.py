@@ -150,13 +150,14 @@ class _Loader:
     """Reads a stage at time codes: the stage opened once, each frame's scene loaded from it, its
     device copy carried over from the previous frame while the geometry's digest is the same."""
 
-    def __init__(self, scene, render_settings: str | None, instancing: str):
+    def __init__(self, scene, render_settings: str | None, instancing: str, subdiv_level: int | None = None):
         from wsoft.scene.usd import diagnostic_lines, open_stage, stage_file
         from wsoft.pipeline.loading import load_stage  # noqa: F401  (imported before frames are timed)
         from pxr import Usd, UsdUtils
 
         self.render_settings = render_settings
         self.instancing = instancing
+        self.subdiv_level = subdiv_level if subdiv_level is not None else scene.subdiv_level if isinstance(scene, Scene) else 0
         self.warnings: list[str] = []
         if isinstance(scene, Scene):
             source = scene.__dict__.get("_loaded_from", (scene.path, None))[0]
@@ -189,7 +190,7 @@ class _Loader:
             self._prev = scene
             return scene, {"time": t, "load_ms": round(1e3 * (t1 - t0), 3), "digest_ms": 0.0, "refit_ms": 0.0, "scene": "reused",
                            "geometry": "static: lights and cameras read again"}
-        scene = load_stage(self.stage, time=t, render_settings=self.render_settings, instancing=self.instancing)
+        scene = load_stage(self.stage, time=t, render_settings=self.render_settings, instancing=self.instancing, subdiv_level=self.subdiv_level)
         t1 = _time.perf_counter()
         digest, shape = geometry_digest(scene), geometry_digest(scene, points=False)
         t2 = _time.perf_counter()
@@ -217,19 +218,19 @@ def frame_costs(fr) -> dict:
     return {fr.stats["label"]: fr.stats["timings_ms"]["total"]}
 
 
-def _frames_and_loader(scene, frames, render_settings, instancing):
-    loader = _Loader(scene, render_settings, instancing)
+def _frames_and_loader(scene, frames, render_settings, instancing, subdiv_level=None):
+    loader = _Loader(scene, render_settings, instancing, subdiv_level)
     times = stage_time_codes(loader.stage, frames, loader.file)
     if len(times) > 1 and not stage_is_animated(loader.stage):
         loader.warnings.append(f"{loader.file}: the stage authors no time sample: its {len(times)} frames are the same stage")
     return loader, times
 
 
-def start_sequence(scene, frames, render_settings, instancing, techs: list, reseed: bool, **view):
+def start_sequence(scene, frames, render_settings, instancing, techs: list, reseed: bool, subdiv_level: int | None = None, **view):
     """A sequence's loader, its empty :class:`Sequence` and its :class:`History` (with the receivers
     of every frame when a technique asks for ``view=sequence``); ``view``: the render's size, camera,
-    light, device and pixel samples."""
-    loader, times = _frames_and_loader(scene, frames, render_settings, instancing)
+    light, device and pixel samples; ``subdiv_level``: None, a :class:`Scene`'s own (else 0)."""
+    loader, times = _frames_and_loader(scene, frames, render_settings, instancing, subdiv_level)
     seq = Sequence(times=times, frames=[], warnings=list(loader.warnings))
     history = History(reseed)
     if _wants_sequence_views(techs):
@@ -246,20 +247,21 @@ def note_upload(fr, info: dict) -> None:
 
 def render_sequence(scene, technique, *, frames, width: int | None = None, height: int | None = None, camera=None, light=None,
                     device: str | None = None, pixel_samples: int = 1, render_settings: str | None = None, instancing: str = "auto",
-                    reseed: bool = True, progress=None, **params) -> Sequence:
+                    reseed: bool = True, progress=None, subdiv_level: int | None = None, **params) -> Sequence:
     """Render ``technique`` (one, or a list as :func:`wsoft.render` takes it) on ``scene`` (a USD
     path, an open ``Usd.Stage`` or a :class:`Scene`, whose source is read again at each time code)
     at every time code of ``frames`` (see :func:`stage_time_codes`); a :class:`Sequence`.
 
     ``progress``: called as ``progress(done, total, time_code)`` after each frame. The other
-    arguments as :func:`wsoft.render` takes them. A stage without time samples renders the same
-    stage at every time code and says so in ``warnings``."""
+    arguments as :func:`wsoft.render` takes them; ``subdiv_level``: how many times subdivision
+    surfaces are refined (:func:`~wsoft.scene.usd.load_scene`; None: a :class:`Scene`'s own, else
+    0). A stage without time samples renders the same stage at every time code and says so in ``warnings``."""
     from wsoft.pipeline import as_techniques, is_several, render
 
     techs = as_techniques(technique, params)
     several = is_several(technique)
-    loader, seq, history = start_sequence(scene, frames, render_settings, instancing, techs, reseed, width=width, height=height, camera=camera,
-                                  light=light, device=device, pixel_samples=pixel_samples)
+    loader, seq, history = start_sequence(scene, frames, render_settings, instancing, techs, reseed, subdiv_level, width=width, height=height,
+                                          camera=camera, light=light, device=device, pixel_samples=pixel_samples)
     for i, t in enumerate(seq.times):
         sc, info = loader.load(t)
         if i == 0:

@@ -356,6 +356,8 @@ class Scene:
     render_settings_source: str = "none"  # how they were chosen: flag, metadata, GetStageRenderSettings or none
     purposes: tuple[str, ...] = ("default", "render")  # the UsdGeomImageable purposes that were loaded
     instances: Instances | None = None  # instanced geometry kept instanced (None: everything is in the soup)
+    notes: list[str] = field(default_factory=list)  # what the load did that is worth knowing but is no problem (subdivision surfaces read as their cage)
+    subdiv_level: int = 0  # how many times subdivision surfaces were refined (0: their control cages; wsoft.scene.subdiv)
 
     @property
     def triangle_count(self) -> int:

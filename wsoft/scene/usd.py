@@ -15,9 +15,10 @@ import os
 
 import numpy as np
 
-from wsoft.errors import SceneError
+from wsoft.errors import ParameterError, SceneError
 from wsoft.scene.shapes import not_drawn, shape_type
 from wsoft.scene.soup import Soup
+from wsoft.scene.subdiv import check_level
 from wsoft.scene.types import Scene, SkippedLight
 from wsoft.scene.usd_context import StageContext, pxr
 from wsoft.scene.usd_instancing import InstanceBuilder, InstanceReader, light_linking_instances
@@ -27,7 +28,8 @@ from wsoft.scene.usd_mesh import MeshReader
 __all__ = ["diagnostic_lines", "load_scene", "open_stage", "stage_file", "static_geometry", "with_views_at"]
 
 
-def load_scene(path_or_stage, time: float | None = None, render_settings: str | None = None, instancing: bool = False) -> Scene:
+def load_scene(path_or_stage, time: float | None = None, render_settings: str | None = None, instancing: bool = False,
+               subdiv_level: int = 0) -> Scene:
     """Load a USD stage (a file path or an open ``Usd.Stage``) at ``time``.
 
     ``time=None`` uses the stage's start time code when it has an authored time range, else the
@@ -69,6 +71,13 @@ def load_scene(path_or_stage, time: float | None = None, render_settings: str | 
     whose ``collection:shadowLink`` leaves out any caster of a stage with instances gives the flat
     load, with a warning (per-instance shadow linking is not kept instanced).
     :meth:`Scene.flattened <wsoft.scene.types.Scene.flattened>` loads the flat scene on demand.
+
+    ``subdiv_level``: 0 (the default) reads a subdivision surface (``subdivisionScheme``
+    catmullClark, loop or bilinear, and catmullClark when unauthored: USD's fallback) as its
+    control cage, with one line in ``Scene.notes`` per stage saying how many meshes that is;
+    1 to 4 refines them that many times (:mod:`wsoft.scene.subdiv`: creases, corners,
+    ``interpolateBoundary`` and holes honoured), each level with 4x the faces, and a note says how
+    many faces that made. ``Scene.subdiv_level`` keeps it for loads of the same stage again.
     """
     Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = pxr()
     from pxr import UsdUtils
@@ -78,13 +87,15 @@ def load_scene(path_or_stage, time: float | None = None, render_settings: str | 
         stage = path_or_stage
         file = stage_file(stage)
         _check_time(time, file)
+        subdiv_level = _check_subdiv_level(subdiv_level, file)
     else:
         file = os.fspath(path_or_stage)
         _check_time(time, file)  # before the stage is opened
+        subdiv_level = _check_subdiv_level(subdiv_level, file)
         stage = open_stage(file)
-    scene, linked_light = read_stage(stage, file, time, render_settings, instancing=instancing)
+    scene, linked_light = read_stage(stage, file, time, render_settings, instancing=instancing, subdiv_level=subdiv_level)
     if linked_light is not None:
-        scene, _ = read_stage(stage, file, time, render_settings)
+        scene, _ = read_stage(stage, file, time, render_settings, subdiv_level=subdiv_level)
         scene.warnings.append(f"{file}: {linked_light}: collection:shadowLink leaves out casters and the stage has "
                               "instances: loaded flat (instancing off; per-instance shadow linking is not kept instanced)")
     scene.warnings[:0] = diagnostic_lines(delegate.TakeUncoalescedDiagnostics(), file)
@@ -94,7 +105,8 @@ def load_scene(path_or_stage, time: float | None = None, render_settings: str | 
     source = stage if isinstance(path_or_stage, Usd.Stage) else file
     scene.__dict__["_loaded_from"] = (source, time)
     if instancing:  # how Scene.flattened loads the stage again, flat
-        scene.__dict__["_source"] = functools.partial(load_scene, source, time=time, render_settings=render_settings, instancing=False)
+        scene.__dict__["_source"] = functools.partial(load_scene, source, time=time, render_settings=render_settings, instancing=False,
+                                                      subdiv_level=subdiv_level)
     return scene
 
 
@@ -124,6 +136,13 @@ def stage_file(stage) -> str:
 def _check_time(time: float | None, file: str) -> None:
     if time is not None and not math.isfinite(float(time)):
         raise SceneError(f"time code {time} is not a finite number", file=file)
+
+
+def _check_subdiv_level(level, file: str) -> int:
+    try:
+        return check_level(level)
+    except ValueError as exc:
+        raise ParameterError(str(exc), file=file) from None
 
 
 def _usd_error_detail(text: str) -> str:
@@ -271,7 +290,7 @@ def with_views_at(scene: Scene, stage, time: float | None, render_settings: str 
     return out
 
 
-def read_stage(stage, file: str, time: float | None, render_settings: str | None = None, instancing: bool = False):
+def read_stage(stage, file: str, time: float | None, render_settings: str | None = None, instancing: bool = False, subdiv_level: int = 0):
     """The :class:`Scene` of ``stage`` (named ``file``) at ``time``, and with ``instancing`` the first
     shadow-casting light whose ``collection:shadowLink`` an instanced load cannot keep (None: none,
     or a flat load): one traversal with instance proxies, invisible prims and their subtrees
@@ -279,10 +298,12 @@ def read_stage(stage, file: str, time: float | None, render_settings: str | None
     visited). Meshes and UsdGeom's shapes (tessellated, :mod:`wsoft.scene.shapes`) go to the soup
     (:class:`~wsoft.scene.soup.Soup`) or, kept instanced, to the instances
     (:mod:`wsoft.scene.usd_instancing`); other gprims (curves, points, NURBS) are warned about and
-    cast nothing; lights and cameras go to their lists (:mod:`wsoft.scene.usd_lights`)."""
+    cast nothing; lights and cameras go to their lists (:mod:`wsoft.scene.usd_lights`); subdivision
+    surfaces are refined ``subdiv_level`` times (0: their cages), with a note
+    (:meth:`MeshReader.subdivision_note <wsoft.scene.usd_mesh.MeshReader.subdivision_note>`)."""
     Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = pxr()
     ctx = StageContext(stage, file, time, render_settings)
-    meshes = MeshReader(ctx)
+    meshes = MeshReader(ctx, subdiv_level)
     instancers = InstanceReader(ctx, meshes)
     soup = Soup()
     prims, prim_points = [], []  # every prim the scene names; its points in the soup ((0, 0): none there)
@@ -339,5 +360,7 @@ def read_stage(stage, file: str, time: float | None, render_settings: str | None
         render_settings_source=ctx.render_settings_source,
         purposes=tuple(ctx.purposes),
         instances=inst.instances() if inst is not None and inst.count else None,
+        notes=[n for n in [meshes.subdivision_note()] if n],
+        subdiv_level=subdiv_level,
     )
     return scene, linked_light

@@ -2,7 +2,8 @@
 
 :class:`MeshReader` reads a ``UsdGeom.Mesh``, or one of UsdGeom's shapes tessellated into one
 (:mod:`wsoft.scene.shapes`), at the context's time code (:mod:`wsoft.scene.usd_context`):
-its faces triangulated (:mod:`wsoft.scene.polygons`; the faces of ``holeIndices`` left out), its
+a subdivision surface as its control cage, or refined ``subdiv_level`` times
+(:mod:`wsoft.scene.subdiv`, :meth:`MeshReader.refinement`); its faces triangulated (:mod:`wsoft.scene.polygons`; the faces of ``holeIndices`` left out), its
 points placed in the world, per triangle the material bound to the mesh or its ``GeomSubset``
 faces, and per corner ``primvars:wsoft:bakedLight`` and the texture coordinates the triangle's
 material samples its opacity texture at (the primvar its network reads, through its
@@ -22,22 +23,29 @@ import numpy as np
 from wsoft.scene.polygons import Triangles, triangulate
 from wsoft.scene.shapes import ShapeMesh, tessellate
 from wsoft.scene.soup import MeshPart
+from wsoft.scene.subdiv import BOUNDARY_MODES, MAX_LEVEL, SCHEMES, Refinement, Tags, crease_edges, refine
 from wsoft.scene.types import Material, Texture
 from wsoft.scene.usd_context import StageContext, pxr
 from wsoft.scene.usd_texture import OpacityNetwork
 
 
 class MeshReader:
-    """Meshes of one stage, and the materials and textures they use (index 0: the default material)."""
+    """Meshes of one stage, and the materials and textures they use (index 0: the default material).
 
-    def __init__(self, ctx: StageContext):
+    ``subdiv_level``: how many times subdivision surfaces (``subdivisionScheme`` catmullClark, loop
+    or bilinear; USD's fallback, when unauthored, is catmullClark) are refined; 0 reads their
+    control cage. :meth:`subdivision_note` says which were read how."""
+
+    def __init__(self, ctx: StageContext, subdiv_level: int = 0):
         self.ctx = ctx
+        self.subdiv_level = subdiv_level
+        self.subdivision: dict[str, tuple[str, bool, int, int]] = {}  # mesh path -> (scheme, authored?, cage faces, refined faces)
         self.materials: list[Material] = [Material(path="(default)")]
         self.material_index: dict[str, int] = {"": 0}
         self.network = OpacityNetwork(ctx)
         self.textures: list[Texture] = self.network.textures
         self.tile_index: dict[tuple[int, int], int] = {}  # (UDIM material, tile) -> the tile's material
-        self.prototype_triangles: dict[str, Triangles] = {}  # a PointInstancer prototype's mesh path -> its triangles
+        self.prototype_triangles: dict[str, tuple[Refinement | None, Triangles]] = {}  # a PointInstancer prototype's mesh path -> (refinement, triangles)
         self.prototype_shapes: dict[str, ShapeMesh | None] = {}  # a PointInstancer prototype's shape path -> its tessellation
 
     def read(self, prim) -> MeshPart | None:
@@ -70,7 +78,10 @@ class MeshReader:
         ``orientation`` respected, the winding flipped under a mirroring transform) in the world (or
         the frame of the context's ``world_override``), zero-area triangles dropped; None (with a
         warning) when nothing is left. Faces that cross themselves, non-planar concave faces and
-        out-of-range hole indices are warned once per mesh."""
+        out-of-range hole indices are warned once per mesh. A subdivision surface with
+        ``subdiv_level > 0`` is refined first (:meth:`refinement`): its refined faces are
+        triangulated, each triangle keeps its cage face (``MeshPart.faces``: GeomSubset materials,
+        uniform primvars) and primvars are refined with it (:meth:`read_primvar`)."""
         Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = pxr()
         mesh = UsdGeom.Mesh(prim)
         points = self.ctx.get(mesh.GetPointsAttr())
@@ -106,14 +117,22 @@ class MeshReader:
         dynamic when one of the ``shaping`` attributes is time-sampled (or its transform is)."""
         Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = pxr()
         gprim = UsdGeom.Gprim(prim)
-        # a prototype a PointInstancer places many times is triangulated (and warned about) once
+        # a prototype a PointInstancer places many times is refined, triangulated (and warned about) once
         key = str(prim.GetPath()) if self.ctx.world_override is not None else None
-        tri = self.prototype_triangles.get(key) if key is not None else None
-        if tri is None:
-            tri = self.triangulate(prim, mesh, p, counts, idx) if mesh is not None else triangulate(p, counts, idx)
+        cached = self.prototype_triangles.get(key) if key is not None else None
+        if cached is None:
+            ref = self.refinement(prim, mesh, p, counts, idx) if mesh is not None else None
+            if ref is None:
+                tri = self.triangulate(prim, mesh, p, counts, idx) if mesh is not None else triangulate(p, counts, idx)
+            else:
+                tri = self.triangulate(prim, mesh, ref.points, ref.counts, ref.indices, ref)
+            cached = (ref, tri)
             if key is not None:
-                self.prototype_triangles[key] = tri
+                self.prototype_triangles[key] = cached
+        ref, tri = cached
         corners, face_of_tri = tri.corners, tri.faces
+        if ref is not None:  # the refined mesh's points and corners; faces stay the cage's
+            p, idx = ref.points, ref.indices
         orient = self.ctx.get(gprim.GetOrientationAttr(), UsdGeom.Tokens.rightHanded)
         if orient == UsdGeom.Tokens.leftHanded:
             corners = corners[:, [0, 2, 1]]
@@ -143,31 +162,44 @@ class MeshReader:
                 return None
             tris, corners, face_of_tri = tris[keep], corners[keep], face_of_tri[keep]
         mat = self.bind_materials(prim, mesh, len(counts), face_of_tri)
-        uv, mat = self.texture_coords(prim, corners, face_of_tri, tris, mat, shape=mesh is None)
+        uv, mat = self.texture_coords(prim, corners, face_of_tri, tris, mat, shape=mesh is None, ref=ref)
         ds = bool(self.ctx.get(gprim.GetDoubleSidedAttr(), False))  # UsdGeom's uniform doubleSided (the eye view's back-face culling)
         stray = prim.GetAttribute("primvars:doubleSided")
         if stray and stray.HasAuthoredValue():
             self.ctx.warn(prim, "primvars:doubleSided is not a UsdGeom property; ignored (the mesh's doubleSided attribute "
                           f"is read: {str(ds).lower()})")
-        baked = self.read_primvar(prim, corners, face_of_tri, tris, "wsoft:bakedLight", 3, shape=mesh is None)
+        baked = self.read_primvar(prim, corners, face_of_tri, tris, "wsoft:bakedLight", 3, shape=mesh is None, ref=ref)
         return MeshPart(points=pw, triangles=tris.astype(np.int32), material=mat, uv=uv, double_sided=ds, closed=closed_orientation(pw, tris),
                         dynamic=self.ctx.is_dynamic(prim, shaping), baked=baked, faces=face_of_tri)
 
-    def triangulate(self, prim, mesh, p, counts, idx) -> Triangles:
+    def triangulate(self, prim, mesh, p, counts, idx, ref: Refinement | None = None) -> Triangles:
         """The triangles of the faces that are not holes (``holeIndices``; out-of-range ones warned
         and ignored): a fan from each face's first corner where that is one, else ear clipping on
         the face's best-fit plane (:func:`~wsoft.scene.polygons.triangulate`); faces that cross
-        themselves and non-planar concave faces warned, one line each per mesh."""
-        drawn = counts >= 3
+        themselves and non-planar concave faces warned, one line each per mesh. With ``ref`` (a
+        refined mesh: ``p``, ``counts`` and ``idx`` are its own) the refined faces of hole faces
+        (and with ``interpolateBoundary = none``, of faces touching the boundary) are left out and
+        each triangle's face is its cage face."""
+        ncage = len(ref.boundary_faces) if ref is not None else len(counts)
+        drawn = np.ones(ncage, bool) if ref is not None else counts >= 3
         holes = self.ctx.get(mesh.GetHoleIndicesAttr())
         if holes is not None and len(holes):
             h = np.asarray(holes, dtype=np.int64)
-            out_of_range = (h < 0) | (h >= len(counts))
+            out_of_range = (h < 0) | (h >= ncage)
             if out_of_range.any():
-                self.ctx.warn(prim, f"holeIndices: {int(out_of_range.sum())} of {len(h)} indices out of range for {len(counts)} faces "
+                self.ctx.warn(prim, f"holeIndices: {int(out_of_range.sum())} of {len(h)} indices out of range for {ncage} faces "
                               f"(first: {int(h[out_of_range][0])}); ignored")
             drawn[h[~out_of_range]] = False
-        tri = triangulate(p, counts, idx, keep=drawn)
+        if ref is not None:
+            if self.ctx.get(mesh.GetInterpolateBoundaryAttr(), "edgeAndCorner") == "none":
+                drawn &= ~ref.boundary_faces
+                if not drawn.any() and ref.boundary_faces.any():
+                    self.ctx.warn(prim, "interpolateBoundary = none: every face touches the boundary, where the surface has no limit; "
+                                  "nothing drawn")
+            tri = triangulate(p, counts, idx, keep=drawn[ref.parent])
+            tri.faces = ref.parent[tri.faces]
+        else:
+            tri = triangulate(p, counts, idx, keep=drawn)
         if tri.non_planar:
             self.ctx.warn(prim, f"{tri.non_planar} concave faces are not planar (up to {tri.off_plane:.3g} off their best-fit plane): "
                           "triangulated on that plane")
@@ -175,7 +207,103 @@ class MeshReader:
             self.ctx.warn(prim, f"{tri.self_intersecting} faces cross themselves: triangulated as a fan from their first corner")
         return tri
 
-    def texture_coords(self, prim, corners, face_of_tri, tris, mat, shape: bool = False):
+    def refinement(self, prim, mesh, p, counts, idx) -> Refinement | None:
+        """The mesh refined ``subdiv_level`` times when it is a subdivision surface
+        (:func:`wsoft.scene.subdiv.refine`), else None (a polygon mesh, or level 0: its cage). Its
+        scheme is ``subdivisionScheme`` (unauthored: catmullClark, USD's fallback); its sharp
+        features are read by :meth:`subdivision_tags`. A loop mesh with a face that is not a
+        triangle, or one refined into more than :data:`~wsoft.scene.subdiv.MAX_FACES` faces, is an
+        error naming the prim."""
+        attr = mesh.GetSubdivisionSchemeAttr()
+        scheme = str(attr.Get(self.ctx.timecode) or "catmullClark")
+        if scheme == "none":
+            return None
+        path = str(prim.GetPath())
+        if scheme not in SCHEMES:
+            self.ctx.warn(prim, f"subdivisionScheme {scheme!r} is not one of none, {', '.join(SCHEMES)}; read as a polygon mesh")
+            return None
+        live = int(np.count_nonzero(counts >= 3))
+        if self.subdiv_level == 0:
+            self.subdivision[path] = (scheme, attr.HasAuthoredValue(), live, live)
+            return None
+        tags = self.subdivision_tags(prim, mesh, scheme, len(p))
+        try:
+            ref = refine(p, counts, idx, scheme, self.subdiv_level, tags)
+        except ValueError as exc:
+            raise self.ctx.err(prim, str(exc)) from None
+        if ref.unmatched_creases:
+            self.ctx.warn(prim, f"{ref.unmatched_creases} crease edges (creaseIndices) are not edges of the mesh; ignored")
+        self.subdivision[path] = (scheme, attr.HasAuthoredValue(), live, len(ref.counts))
+        return ref
+
+    def subdivision_tags(self, prim, mesh, scheme: str, npoints: int) -> Tags:
+        """The mesh's ``interpolateBoundary``, creases (``creaseIndices``, ``creaseLengths``,
+        ``creaseSharpnesses``) and corners (``cornerIndices``, ``cornerSharpnesses``) for
+        :func:`~wsoft.scene.subdiv.refine`. Inconsistent counts and out-of-range vertices are
+        warned and that part ignored; a NaN sharpness is an error. ``triangleSubdivisionRule =
+        smooth`` is warned (Catmull–Clark's own rule is used)."""
+        ctx = self.ctx
+        boundary = str(ctx.get(mesh.GetInterpolateBoundaryAttr(), "edgeAndCorner"))
+        if boundary not in BOUNDARY_MODES:
+            ctx.warn(prim, f"interpolateBoundary {boundary!r} is not one of {', '.join(BOUNDARY_MODES)}; edgeAndCorner used")
+            boundary = "edgeAndCorner"
+        if scheme == "catmullClark" and str(ctx.get(mesh.GetTriangleSubdivisionRuleAttr(), "catmullClark")) == "smooth":
+            ctx.warn(prim, "triangleSubdivisionRule = smooth is not applied; triangles follow the catmullClark rule")
+        tags = Tags(boundary=boundary)
+        ci = ctx.get(mesh.GetCreaseIndicesAttr())
+        if ci is not None and len(ci):
+            try:
+                edges, sharp = crease_edges(ci, ctx.get(mesh.GetCreaseLengthsAttr()), ctx.get(mesh.GetCreaseSharpnessesAttr()))
+            except ValueError as exc:
+                ctx.warn(prim, f"{exc}; creases ignored")
+            else:
+                self._check_sharpness(prim, "creaseSharpnesses", sharp)
+                ok = np.all((edges >= 0) & (edges < npoints), axis=1)
+                if not ok.all():
+                    ctx.warn(prim, f"creaseIndices: {int((~ok).sum())} crease edges name points out of range for {npoints} points; ignored")
+                tags.crease_edges, tags.crease_sharpness = edges[ok], sharp[ok]
+        vi = ctx.get(mesh.GetCornerIndicesAttr())
+        if vi is not None and len(vi):
+            vi = np.asarray(vi, np.int64)
+            vs = np.asarray(ctx.get(mesh.GetCornerSharpnessesAttr(), []), np.float64)
+            if len(vs) != len(vi):
+                ctx.warn(prim, f"cornerSharpnesses has {len(vs)} values for {len(vi)} cornerIndices; corners ignored")
+            else:
+                self._check_sharpness(prim, "cornerSharpnesses", vs)
+                ok = (vi >= 0) & (vi < npoints)
+                if not ok.all():
+                    ctx.warn(prim, f"cornerIndices: {int((~ok).sum())} of {len(vi)} out of range for {npoints} points; ignored")
+                tags.corners, tags.corner_sharpness = vi[ok], vs[ok]
+        return tags
+
+    def _check_sharpness(self, prim, name: str, values: np.ndarray) -> None:
+        if np.isnan(values).any():
+            raise self.ctx.err(prim, f"{name}[{int(np.argmax(np.isnan(values)))}] is NaN")
+
+    def subdivision_note(self) -> str | None:
+        """One line on the subdivision surfaces read (None: there were none): at level 0 how many
+        meshes were read as their control cage (and how to refine them), else how many were refined
+        and into how many faces."""
+        if not self.subdivision:
+            return None
+        schemes: dict[str, int] = {}
+        for scheme, _, _, _ in self.subdivision.values():
+            schemes[scheme] = schemes.get(scheme, 0) + 1
+        kinds = ", ".join(f"{n} {k}" for k, n in sorted(schemes.items()))
+        n = len(self.subdivision)
+        if self.subdiv_level == 0:
+            unauthored = sum(1 for _, authored, _, _ in self.subdivision.values() if not authored)
+            fallback = f"; {'all' if unauthored == n else unauthored} by USD's fallback, subdivisionScheme unauthored" if unauthored else ""
+            return (f"{self.ctx.file}: {n} mesh{'es are' if n > 1 else ' is a'} subdivision surface{'s' if n > 1 else ''} ({kinds}{fallback}; "
+                    f"{'e.g. ' if n > 1 else ''}{next(iter(self.subdivision))}), loaded as {'their control cages' if n > 1 else 'its control cage'}: "
+                    f"subdiv_level=N (--subdiv-level N, 1..{MAX_LEVEL}) refines {'them' if n > 1 else 'it'}; "
+                    "subdivisionScheme = \"none\" marks a polygon mesh")
+        cage = sum(c for _, _, c, _ in self.subdivision.values())
+        faces = sum(f for _, _, _, f in self.subdivision.values())
+        return (f"{self.ctx.file}: subdiv_level {self.subdiv_level}: {n} subdivision surface mesh{'es' if n > 1 else ''} ({kinds}) "
+                f"refined, {cage:,} cage faces into {faces:,}")
+
+    def texture_coords(self, prim, corners, face_of_tri, tris, mat, shape: bool = False, ref: Refinement | None = None):
         """Per triangle corner, the st its material's opacity texture is sampled at, [T, 3, 2]
         float32, and the triangles' materials. A triangle whose material reads a texture gets the
         primvar that material's network names (:class:`~wsoft.scene.types.StMap`: the
@@ -183,12 +311,13 @@ class MeshReader:
         by its ``UsdTransform2d`` nodes, here on the host (exact: the map is affine); a triangle of
         a UDIM material gets the material of its tile, its st shifted into the tile
         (:meth:`udim_tiles`). Other triangles keep the ``st`` primvar (0 without one). A ``shape``
-        (one of UsdGeom's) reads constant primvars only (:meth:`read_primvar`)."""
+        (one of UsdGeom's) reads constant primvars only (:meth:`read_primvar`). ``ref``: the
+        mesh's refinement (primvars refined with it)."""
         read: dict[str, np.ndarray | None] = {}
 
         def primvar(name: str):
             if name not in read:
-                read[name] = self.read_primvar(prim, corners, face_of_tri, tris, name, 2, shape=shape)
+                read[name] = self.read_primvar(prim, corners, face_of_tri, tris, name, 2, shape=shape, ref=ref)
             return read[name]
 
         st = primvar("st")
@@ -254,10 +383,14 @@ class MeshReader:
                                               tile=int(k)))
             mat[idx[tile == k]] = self.tile_index[key]
 
-    def read_primvar(self, prim, corners, face_of_tri, tris, name: str, width: int, shape: bool = False):
+    def read_primvar(self, prim, corners, face_of_tri, tris, name: str, width: int, shape: bool = False,
+                     ref: Refinement | None = None):
         """A primvar's values at each triangle corner, shape [T, 3, width]; None when absent. On a
         ``shape`` (one of UsdGeom's, tessellated here) only a constant primvar has a meaning: any
-        other interpolation is warned about and ignored."""
+        other interpolation is warned about and ignored. On a refined mesh (``ref``; ``corners`` and
+        ``tris`` are the refined mesh's, ``face_of_tri`` the cage's faces) ``vertex`` values are refined
+        by the scheme's rules, ``varying`` ones linearly and ``faceVarying`` ones bilinearly in each
+        face (:class:`~wsoft.scene.subdiv.Refinement`)."""
         Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = pxr()
         pv = UsdGeom.PrimvarsAPI(prim).GetPrimvar(name)
         if not pv or not pv.HasValue():
@@ -278,6 +411,13 @@ class MeshReader:
             if line not in self.ctx.warnings:
                 self.ctx.warnings.append(line)
             return None
+        if ref is not None and interp in (UsdGeom.Tokens.faceVarying, UsdGeom.Tokens.vertex, UsdGeom.Tokens.varying):
+            need = len(ref.cage_corners) if interp == UsdGeom.Tokens.faceVarying else ref.cage_points
+            if len(v) < need:
+                raise self.ctx.err(prim, f"primvars:{name} has {len(v)} values, too few for {interp} interpolation")
+            v = v[:need].astype(np.float64)
+            v = (ref.face_varying(v) if interp == UsdGeom.Tokens.faceVarying else ref.vertex(v) if interp == UsdGeom.Tokens.vertex
+                 else ref.varying(v)).astype(np.float32)
         try:
             if interp == UsdGeom.Tokens.faceVarying:
                 out = v[corners]
