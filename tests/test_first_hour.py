@@ -114,15 +114,17 @@ def test_scenes_lists_every_bundled_stage():
 
 
 def test_the_catalog_and_the_descriptions_match_the_stages():
-    """``catalog.json`` holds what the stages hold (run ``python -m wsoft.usd_scenes`` after
+    """``catalog.json`` holds what the stages hold (run ``python -m wsoft.scene.catalog`` after
     changing a stage); every stage has a one-line description and no description lacks its stage."""
+    from wsoft.scene.catalog import measure
+
     names = usd_scenes.names()
     cat = usd_scenes.catalog()
-    assert sorted(cat) == names, "catalog.json is not the bundled stages: run python -m wsoft.usd_scenes"
+    assert sorted(cat) == names, "catalog.json is not the bundled stages: run python -m wsoft.scene.catalog"
     assert sorted(usd_scenes.ABOUT) == names, "wsoft.usd_scenes.ABOUT needs one line per bundled stage"
     assert all(len(line) <= 100 and "\n" not in line for line in usd_scenes.ABOUT.values())
     for name in names:
-        assert usd_scenes.measure(name) == cat[name], f"{name}: catalog.json is stale: run python -m wsoft.usd_scenes"
+        assert measure(name) == cat[name], f"{name}: catalog.json is stale: run python -m wsoft.scene.catalog"
 
 
 def test_version_is_the_installed_packages():

@@ -4,9 +4,9 @@
 lights and frames (``wsoft scenes`` prints both).
 
 The stages are written by :mod:`wsoft.stages.bundled` (``python -m wsoft.stages.bundled``);
-``catalog.json`` by ``python -m wsoft.usd_scenes`` (loading every stage takes seconds; the catalog
-answers at once, and ``tests/test_first_hour.py`` checks it against the stages). This package
-imports neither USD nor Warp until :func:`measure` is called.
+``catalog.json`` by :mod:`wsoft.scene.catalog` (``python -m wsoft.scene.catalog``: loading every
+stage takes seconds, the catalog answers at once, and ``tests/test_first_hour.py`` checks it
+against the stages). This package imports neither USD nor Warp.
 """
 
 from __future__ import annotations
@@ -100,29 +100,8 @@ def resolve(scene) -> str:
 def catalog() -> dict[str, dict]:
     """Name -> ``triangles`` (every instance's included), ``lights`` ([name, kind] of each
     shadow-casting light) and ``frames`` ([start, end] time codes, or None), as
-    ``python -m wsoft.usd_scenes`` measured them (:func:`measure`); {} when the file is missing."""
+    :func:`wsoft.scene.catalog.measure` read them; {} when the file is missing."""
     try:
         return json.loads((folder() / CATALOG).read_text())
     except FileNotFoundError:
         return {}
-
-
-def measure(name: str) -> dict:
-    """The catalog entry of the bundled stage ``name``, read from the stage (loads it, instances kept)."""
-    from pxr import Usd
-
-    from wsoft.scene import load_scene
-
-    file = str(path(name))
-    scene = load_scene(file, instancing=True)
-    stage = Usd.Stage.Open(file)
-    frames = [stage.GetStartTimeCode(), stage.GetEndTimeCode()] if stage.HasAuthoredTimeCodeRange() else None
-    return {"triangles": int(scene.total_triangles), "lights": [[l.name, l.kind_name] for l in scene.lights], "frames": frames}
-
-
-def write_catalog() -> Path:
-    """Measure every bundled stage and write ``catalog.json`` beside them."""
-    out = folder() / CATALOG
-    entries = [f"  {json.dumps(n)}: {json.dumps(measure(n))}" for n in names()]  # one line a stage
-    out.write_text("{\n" + ",\n".join(entries) + "\n}\n")
-    return out

@@ -57,7 +57,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import warp as wp
 
-from wsoft import usd_scenes
+import wsoft.usd_scenes as usd_scenes
 from wsoft.errors import NonFiniteWarning, ParameterError, SceneError
 from wsoft.graph import Pass
 from wsoft.io import nonfinite_counts, write_exr

@@ -676,7 +676,12 @@ def cmd_scenes(args) -> int:
     from wsoft import usd_scenes
 
     cat = usd_scenes.catalog()
-    entries = {n: {**(cat.get(n) or usd_scenes.measure(n)), "about": usd_scenes.ABOUT.get(n, "")} for n in usd_scenes.names()}
+    missing = [n for n in usd_scenes.names() if n not in cat]
+    if missing:  # stages added since the catalog was written: read them
+        from wsoft.scene.catalog import measure
+
+        cat = {**cat, **{n: measure(n) for n in missing}}
+    entries = {n: {**cat[n], "about": usd_scenes.ABOUT.get(n, "")} for n in usd_scenes.names()}
     if args.json:
         print(json.dumps(entries, indent=2))
         return 0

@@ -15,7 +15,7 @@ import os
 
 import numpy as np
 
-from wsoft import usd_scenes
+import wsoft.usd_scenes as usd_scenes
 from wsoft.errors import SceneError
 from wsoft.scene.soup import Soup
 from wsoft.scene.types import Scene, SkippedLight
