@@ -605,7 +605,6 @@ def cmd_bake(args) -> int:
     from wsoft.errors import ParameterError
     from wsoft.params import parse_frames
 
-    scene_file = _check_args(args, [args.technique])
     check_output(args.out, "--out")
     if not args.out.endswith((".usda", ".usdc", ".usd")):
         raise ParameterError(f"--out {args.out}: the layer must be a .usda, .usdc or .usd file")
@@ -621,6 +620,7 @@ def cmd_bake(args) -> int:
         check_output(args.texture_dir, "--texture-dir", folder=True)
     if not 0.0 <= args.crease_angle <= 180.0:
         raise ParameterError(f"--crease-angle {args.crease_angle:g} out of range [0, 180]")
+    scene_file = _check_args(args, [args.technique])
     import wsoft
 
     params = _parse_sets(args.set)
