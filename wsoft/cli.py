@@ -798,7 +798,9 @@ def parser() -> argparse.ArgumentParser:
     techniques = sorted(NAMES)
     one_of = "one of: " + ", ".join(techniques)
     fmt = _Help
-    ap = argparse.ArgumentParser(prog="wsoft", description="Soft-shadow techniques in Warp on USD stages.")
+    ap = argparse.ArgumentParser(prog="wsoft", description="Soft-shadow techniques in Warp on USD stages.",
+                                 epilog="first steps: wsoft scenes; wsoft compare box_plane -t pcss -t hard (into out/); "
+                                 "wsoft warmup (compiles every kernel once)")
     ap.add_argument("--version", action="version", version=f"wsoft {_version()}")
     sub = ap.add_subparsers(dest="cmd", required=True)
 
