@@ -31,9 +31,10 @@ import numpy as np
 SWEEPS = {"foundation": "wsoft.bench.foundation", "filtered": "wsoft.bench.filtered", "essm": "wsoft.bench.essm",
           "essm-table1": "wsoft.bench.essm_table1", "essm-table2": "wsoft.bench.essm_table2", "ssm": "wsoft.bench.ssm", "izb": "wsoft.bench.izb",
           "ssm-table1": "wsoft.bench.ssm_table1", "ssm-table2": "wsoft.bench.ssm_table2", "pareto": "wsoft.bench.pareto",
-          "adversarial": "wsoft.bench.adversarial", "usd_pipeline": "wsoft.bench.usd_pipeline",
+          "adversarial": "wsoft.bench.adversarial", "usd-pipeline": "wsoft.bench.usd_pipeline",
           "instancing": "wsoft.bench.instancing", "stsv": "wsoft.bench.stsv", "modern": "wsoft.bench.modern",
           "temporal": "wsoft.bench.temporal"}
+SWEEP_ALIASES = {"usd_pipeline": "usd-pipeline"}  # other spellings `wsoft bench` accepts (words joined by "-" in SWEEPS)
 REFERENCE_VERSION = 4  # bump when the reference changes (2: rows render one named light; 3: the receiver's horizon, ray offsets from the frame's extent; 4: the shaded R, G, B for ꟻLIP)
 _SCENE_DIR: Path | None = None
 
@@ -228,6 +229,17 @@ def machine() -> dict:
     return {"python": platform.python_version(), "cpu": platform.processor() or platform.machine(), "threads": cpu_threads(), "cores": os.cpu_count()}
 
 
+def sweep_name(name: str) -> str:
+    """The sweep ``name`` stands for: a key of :data:`SWEEPS`, or one of :data:`SWEEP_ALIASES`;
+    anything else is a one-line error suggesting the closest names."""
+    from wsoft.errors import ParameterError, suggestion
+
+    name = SWEEP_ALIASES.get(name, name)
+    if name not in SWEEPS:
+        raise ParameterError(f"unknown sweep {name!r}{suggestion(name, SWEEPS)}; sweeps: {', '.join(sorted(SWEEPS))}")
+    return name
+
+
 def run_sweep(name: str, *, quick: bool = False, device: list[str] | None = None, out_dir: str = "reports", fresh: bool = False,
               scenes: str | None = None) -> int:
     from tqdm import tqdm
@@ -235,8 +247,7 @@ def run_sweep(name: str, *, quick: bool = False, device: list[str] | None = None
     from wsoft.errors import ParameterError, WsoftError
     from wsoft.parallel import resolve_device
 
-    if name not in SWEEPS:
-        raise ParameterError(f"unknown sweep {name!r}; sweeps: {', '.join(sorted(SWEEPS))}")
+    name = sweep_name(name)
     mod = importlib.import_module(SWEEPS[name])
     if scenes and not Path(scenes).is_dir():  # a bad --scenes is an error before anything runs (or is remembered)
         raise ParameterError(f"--scenes {scenes}: no such folder")
@@ -244,7 +255,8 @@ def run_sweep(name: str, *, quick: bool = False, device: list[str] | None = None
     devices = [resolve_device(d) for d in (device or [None])]
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    stem = f"{name}-quick" if quick else name
+    report = getattr(mod, "REPORT", name)  # a sweep module may name its report's files otherwise
+    stem = f"{report}-quick" if quick else report
     jsonl = out / f"{stem}.jsonl"
     if fresh and jsonl.exists():
         jsonl.unlink()

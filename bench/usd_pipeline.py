@@ -1,4 +1,4 @@
-"""Sweep ``usd_pipeline``: wsoft in a USD pipeline (render settings, shadowLink, bakes), every number made here.
+"""Sweep ``usd-pipeline``: wsoft in a USD pipeline (render settings, shadowLink, bakes), every number made here.
 
 1. **Render settings** (UsdRender): a stage (:func:`wsoft.stages.pipeline.render_settings_stage`) the
    sweep saves (``<out>/<stem>/render_settings.usda``) with two cameras and a ``RenderSettings`` prim, named by the stage metadata
@@ -49,6 +49,8 @@ from wsoft.stages.pipeline import (
 
 BRIDGE = "lightmapped_bridge"
 UMBRA_HALF = 0.2  # ground pixels within this of a blocker's umbra centre (the umbra's half side is 0.35)
+
+REPORT = "usd_pipeline"  # its files: reports/usd_pipeline.md and .jsonl, the images and stages in reports/usd_pipeline/
 
 
 def _quality(technique: str, quick: bool) -> dict:
@@ -576,7 +578,7 @@ def _section_time(rows: list[dict], machine: dict) -> list[str]:
 def report(rows: list[dict], md: Path, ctx: dict) -> None:
     from wsoft.bench.common import report_header
 
-    L = [line for line in report_header("usd_pipeline", rows, md, ctx)
+    L = [line for line in report_header("usd-pipeline", rows, md, ctx)
          if not line.startswith(("Error is against", "penumbra =", "Times:", "Rows:"))]
     L.append(f"Rows: {len(rows)}; every number below is read from them. Images, stages and the rows' files lie beside this report "
              f"(`{ctx['stem']}/`).")

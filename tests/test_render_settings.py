@@ -370,15 +370,15 @@ def _bad(case: str, tmp_path):
         return st, [], "/Render/Settings", "aspectRatioConformPolicy = 'stretch' is not one of"
     if case == "var_is_a_channel":
         return _product_stage(tmp_path, var_name="Z"), [], "/Render/Vars/Z", "RenderVar name 'Z' is already one of the frame's channels"
-    if case == "no_out":
-        _settings(st)
-        return st, ["--no-out"], None, "--out is required (render settings /Render/Settings have no product with a visibility RenderVar)"
+    if case == "product_format":
+        return (_product_stage(tmp_path, product_name=str(tmp_path / "product.tif")), ["--no-out"], "/Render/Product",
+                ".tif is not a format wsoft writes")
     raise AssertionError(case)
 
 
 BAD = ["not_settings", "missing_settings", "no_camera_target", "two_camera_targets", "camera_not_a_camera", "zero_resolution",
        "negative_resolution", "empty_window", "inverted_window", "window_without_pixels", "pixel_aspect_zero", "pixel_aspect_negative",
-       "pixel_aspect_nan", "pixel_aspect_inf", "policy", "var_is_a_channel", "no_out"]
+       "pixel_aspect_nan", "pixel_aspect_inf", "policy", "var_is_a_channel", "product_format"]
 
 
 @pytest.mark.parametrize("case", BAD)

@@ -1,4 +1,4 @@
-"""``wsoft bench usd_pipeline --quick`` (render settings, shadow linking and baking, end to end): its
+"""``wsoft bench usd-pipeline --quick`` (render settings, shadow linking and baking, end to end): its
 four sections, the images and stages it links, and that its rows say what the pipeline must do."""
 
 from __future__ import annotations
@@ -14,9 +14,9 @@ def test_quick_report_has_its_sections_images_and_numbers(tmp_path):
     from pxr import Usd
 
     out = tmp_path / "reports"
-    assert harness.run_sweep("usd_pipeline", quick=True, device=["cpu"], out_dir=str(out)) == 0
+    assert harness.run_sweep("usd-pipeline", quick=True, device=["cpu"], out_dir=str(out)) == 0
     md = (out / "usd_pipeline-quick.md").read_text()
-    assert "Produced by `wsoft bench usd_pipeline --quick" in md and "Machine:" in md
+    assert "Produced by `wsoft bench usd-pipeline --quick" in md and "Machine:" in md
     for head in ("## 1. Render settings", "## 2. `collection:shadowLink`", "## 3. Bake into USD", "## 4. Bake time per frame"):
         assert head in md, head
     images = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", md)

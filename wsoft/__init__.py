@@ -3,7 +3,7 @@
 Python API::
 
     import wsoft
-    scene = wsoft.load_scene("usd_scenes/box_plane.usda")
+    scene = wsoft.load_scene("box_plane")   # a bundled stage's name, or any USD file
     frame = wsoft.render(scene, "hard", width=640, height=480, shadow_map_size=2048)
     ref = wsoft.render(scene, "reference", width=640, height=480, samples=256)
     frame.write_exr("hard.exr"); print(frame.stats["timings_ms"])
@@ -18,11 +18,11 @@ Python API::
     wsoft.write_compare_grid("compare.png", result)   # shaded images and V - reference V, one grid
 
     # a sequence: the stage at each time code, flicker against the reference
-    seq = wsoft.compare_sequence("usd_scenes/ramp_slide.usda", ["pcss", "hard"], frames="1:24")
+    seq = wsoft.compare_sequence("ramp_slide", ["pcss", "hard"], frames="1:24")
     seq.summary["temporal"]["pcss"]["Light"]["flicker"], seq[3]["pcss"].V
 
     # visibility baked into USD: a layer of overs with primvars:wsoft:visibility:<light> per mesh
-    layer = wsoft.bake("usd_scenes/lightmapped_bridge.usda", "pcss", frames="1:48", out="vis.usda")
+    layer = wsoft.bake("lightmapped_bridge", "pcss", frames="1:48", out="vis.usda")
 
 The names below Warp or USD (everything but the exceptions) are imported at first use, so that
 ``import wsoft.cli`` and ``wsoft --help`` load neither. Every wsoft package that defines Warp code

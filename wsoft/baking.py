@@ -57,6 +57,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import warp as wp
 
+import wsoft.usd_scenes as usd_scenes
 from wsoft.errors import NonFiniteWarning, ParameterError, SceneError
 from wsoft.graph import Pass
 from wsoft.io import nonfinite_counts, write_exr
@@ -315,7 +316,7 @@ def bake(scene, technique, *, light: str | None = None, frames=None, out: str | 
     """Bake ``technique``'s visibility of the stage ``scene`` into a new ``Sdf.Layer`` of ``over``\\ s
     (see the module's documentation) and return it.
 
-    ``scene``: a USD file, an open ``Usd.Stage`` or a :class:`~wsoft.scene.types.Scene` (whose
+    ``scene``: a USD file (or a bundled stage's name), an open ``Usd.Stage`` or a :class:`~wsoft.scene.types.Scene` (whose
     stage is read again: the open stage it was loaded from, with its load rules and population
     mask, else its file). ``technique``: a name with its parameters as keywords (``samples=1024``), a
     ``(name, params)`` pair or a Technique. ``light``: one light's path or name (default: every
@@ -382,7 +383,7 @@ def bake(scene, technique, *, light: str | None = None, frames=None, out: str | 
             raise ParameterError("this Scene has no file to open again; pass its Usd.Stage", file=scene.path)
         stage, file = Usd.Stage.Open(found), scene.path
     else:
-        file = scene.path if isinstance(scene, Scene) else os.fspath(scene)
+        file = scene.path if isinstance(scene, Scene) else usd_scenes.resolve(scene)
         delegate = UsdUtils.CoalescingDiagnosticDelegate()
         stage = open_stage(file)
         warn_list += diagnostic_lines(delegate.TakeUncoalescedDiagnostics(), file)

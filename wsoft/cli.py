@@ -1,8 +1,10 @@
-"""``wsoft`` command line: render, compare, plan, techniques, bake, bench.
+"""``wsoft`` command line: render, compare, plan, techniques, scenes, bake, bench, warmup.
 
 Bad input prints one line naming the file and prim and exits with code 2. Warp and USD are
-imported by the commands that need them, never to parse the arguments (``wsoft --help`` and
-argument errors answer at once).
+imported by the commands that need them, never to parse or check the arguments (``wsoft --help``
+and argument errors answer at once: an unknown technique, scene, sweep or device, an output
+whose extension names no format wsoft writes). When Warp is about to compile kernels (a cold
+kernel cache), one line on stderr says so with a rough time (:class:`CompileNotice`).
 """
 
 from __future__ import annotations
@@ -10,9 +12,13 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import sys
 import threading
 import time
+
+OUTPUT_FORMATS = {".exr": "every channel, float32", ".png": "V as 16-bit linear grey"}
+"""What ``render --out`` (or a render product's ``productName``) writes, by extension."""
 
 
 def _parse_sets(items: list[str] | None) -> dict[str, str]:
@@ -75,6 +81,8 @@ class PassProgress:
         isatty = getattr(self.stream, "isatty", None)
         self.enabled = bool(isatty and isatty())
         self.bar = None
+        self._pass: str | None = None
+        self._compiling: str | None = None
         self._start = time.monotonic()
         self._stop = threading.Event()
         self._ticker: threading.Thread | None = None
@@ -90,8 +98,15 @@ class PassProgress:
                             bar_format="{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} passes [{elapsed}{postfix}]")  # no rate: passes differ
             self._ticker = threading.Thread(target=self._tick, name="wsoft-progress", daemon=True)
             self._ticker.start()
+        self._pass, self._compiling = name, None
         self.bar.set_postfix_str(name or "done", refresh=False)
         self.bar.update(done - self.bar.n)
+
+    def compiling(self, module: str) -> None:
+        """Show that Warp compiles ``module`` during the current pass."""
+        self._compiling = module
+        if self.bar is not None:
+            self.bar.set_postfix_str(f"{self._pass or ''} (compiling {module})", refresh=False)
 
     def _tick(self) -> None:
         while not self._stop.wait(0.5):
@@ -106,52 +121,150 @@ class PassProgress:
             self.bar.close()
 
     def __enter__(self) -> "PassProgress":
+        global _PROGRESS
+        _PROGRESS = self
         return self
 
     def __exit__(self, *exc) -> None:
+        global _PROGRESS
+        _PROGRESS = None
         self.close()
 
 
-def scene_arg(arg: str) -> str:
-    """A stage path, or the name of a bundled stage (``box_plane``) when no such file exists."""
-    if os.path.exists(arg):
-        return arg
-    from wsoft import usd_scenes
-
-    found = usd_scenes.path(arg)
-    return str(found) if found is not None else arg
+_PROGRESS: PassProgress | None = None  # the bar shown now, which CompileNotice tells what compiles
 
 
-def output_of(scene, out: str | None) -> str:
-    """The EXR to write: ``--out``, else the ``productName`` of the render settings' output product
-    (the one with a ``visibility`` RenderVar; a relative name is relative to the current folder)."""
+class CompileNotice:
+    """While it is entered, the first time Warp is about to compile a module (its binary is not in
+    the kernel cache) one line goes to stderr: ``compiling kernels for cpu (first run only, ~12 s)``,
+    the time a rough estimate from the modules not yet compiled for the device
+    (:func:`wsoft.parallel.uncached_seconds`; other techniques' own modules left out when
+    ``techniques`` names the ones that run). The progress bar, when shown, names each module that
+    compiles. A warm cache prints nothing."""
+
+    def __init__(self, device: str | None, techniques: list[str] | None = None, stream=None):
+        from wsoft.parallel import resolve_device, uncached_seconds
+        from wsoft.techniques import NAMES, TECHNIQUES
+
+        TECHNIQUES  # noqa: B018  (the technique modules define their kernels on import)
+        self.device = resolve_device(device)
+        skip = () if techniques is None else tuple(f"wsoft.techniques.{n}" for n in NAMES if n not in techniques)
+        self.seconds = uncached_seconds(self.device, skip)
+        self.stream = stream if stream is not None else sys.stderr
+        self.said = False
+        self._lock = threading.Lock()
+        self._remove = None
+
+    def __call__(self, module: str, device: str) -> None:
+        with self._lock:
+            if not self.said:
+                self.said = True
+                about = f", ~{max(1, round(self.seconds))} s" if self.seconds else ""
+                print(f"compiling kernels for {device} (first run only{about})", file=self.stream, flush=True)
+        if _PROGRESS is not None:
+            _PROGRESS.compiling(module)
+
+    def __enter__(self) -> "CompileNotice":
+        from wsoft.parallel import on_compile
+
+        self._remove = on_compile(self)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._remove()
+
+
+def check_device(name: str | None) -> None:
+    """A device name wsoft takes (``cpu``, ``cuda``, ``cuda:N``, ``auto``; None: the default),
+    checked without Warp; whether that CUDA device exists is known once Warp starts."""
     from wsoft.errors import ParameterError
 
+    if name is not None and name not in ("cpu", "cuda", "auto") and not re.fullmatch(r"cuda:\d+", name):
+        raise ParameterError(f"unknown device {name!r}; use cpu or cuda:N")
+
+
+def output_format(path: str, what: str, file: str | None = None, prim: str | None = None) -> str:
+    """The extension of ``path`` (``.exr`` or ``.png``, :data:`OUTPUT_FORMATS`); any other is an
+    error (naming ``file`` and ``prim`` when the name comes from a stage)."""
+    from wsoft.errors import ParameterError
+
+    ext = os.path.splitext(path)[1].lower()
+    if ext not in OUTPUT_FORMATS:
+        raise ParameterError(f"{what} {path}: {'no extension' if not ext else ext + ' is not a format wsoft writes'}; "
+                             + "; ".join(f"{e}: {w}" for e, w in OUTPUT_FORMATS.items()), file=file, prim=prim)
+    return ext
+
+
+def scene_arg(arg: str) -> str:
+    """A stage path, or the name of a bundled stage (``box_plane``) when no such file exists; an
+    unknown name is an error suggesting the closest (:func:`wsoft.usd_scenes.resolve`)."""
+    from wsoft import usd_scenes
+
+    return usd_scenes.resolve(arg)
+
+
+def output_of(scene, out: str | None, default: str) -> tuple[str, str]:
+    """The file to write and why that one: ``--out``, else the ``productName`` of the render
+    settings' output product (the one with a ``visibility`` RenderVar; a relative name is relative
+    to the current folder), else ``default`` (``<stage>-<technique>.exr`` in the current folder).
+    Its extension says the format (:func:`output_format`)."""
     if out:
-        return out
+        return out, ""
     rs = scene.render_settings
     product = rs.output if rs is not None else None
     if product is None or not product.product_name:
         why = ("no render settings" if rs is None else f"render settings {rs.path} have no product with a visibility RenderVar"
                if product is None else f"render product {product.path} has no productName")
-        raise ParameterError(f"--out is required ({why})", file=scene.path)
-    check_output(product.product_name, f"productName of {product.path}")
-    return product.product_name
+        check_output(default, "the default output")
+        return default, f" (no --out and {why}: named after the stage and technique)"
+    what = f"productName of {product.path}"
+    check_output(product.product_name, what)
+    output_format(product.product_name, "productName", file=scene.path, prim=product.path)
+    return product.product_name, f" (the {what})"
+
+
+def write_frame(frame, path: str) -> None:
+    """``frame`` to ``path`` in the format its extension names (:data:`OUTPUT_FORMATS`)."""
+    if path.lower().endswith(".png"):
+        frame.write_v_png(path)
+    else:
+        frame.write_exr(path)
+
+
+def _default_output(scene_file: str, technique: str) -> str:
+    return f"{os.path.splitext(os.path.basename(scene_file))[0]}-{technique}.exr"
+
+
+def _check_args(args, techniques: list[str]) -> str:
+    """What a command can check before Warp or USD starts (the technique names, the device, the
+    scene); the stage's file."""
+    from wsoft.techniques import check_names
+
+    check_names(techniques)
+    check_device(getattr(args, "device", None))
+    return scene_arg(args.scene)
 
 
 def cmd_render(args) -> int:
+    from wsoft.errors import ParameterError
+
+    scene_file = _check_args(args, [args.technique])
+    for path, what in ((args.out, "--out"), (args.stats, "--stats"), (args.png, "--png")):
+        check_output(path, what)
+    if args.out:
+        output_format(args.out, "--out")
+    if args.png and os.path.splitext(args.png)[1].lower() != ".png":
+        raise ParameterError(f"--png {args.png}: the shaded image is written as PNG; give a .png name")
+    params = _parse_sets(args.set)
+    if args.frames is not None:
+        return _render_frames(args, scene_file, params)
     import wsoft
     from wsoft.pipeline import load_stage
 
-    for path, what in ((args.out, "--out"), (args.stats, "--stats"), (args.png, "--png")):
-        check_output(path, what)
-    if args.frames is not None:
-        return _render_frames(args)
-    scene = load_stage(scene_arg(args.scene), time=args.time, render_settings=args.render_settings, instancing=args.instancing,
+    scene = load_stage(scene_file, time=args.time, render_settings=args.render_settings, instancing=args.instancing,
                        subdiv_level=args.subdiv_level)
-    out = output_of(scene, args.out)
-    params = _parse_sets(args.set)
-    with PassProgress(args.technique) as progress:
+    out, why = output_of(scene, args.out, _default_output(scene_file, args.technique))
+    with CompileNotice(args.device, [args.technique]), PassProgress(args.technique) as progress:
         frame = wsoft.render(
             scene, args.technique, width=args.width, height=args.height, camera=args.camera, light=args.light,
             device=args.device, pixel_samples=args.pixel_samples, progress=progress, **params,
@@ -159,7 +272,7 @@ def cmd_render(args) -> int:
     for w in frame.stats["warnings"]:  # the stage's, then the passes'
         print(f"warning: {w}", file=sys.stderr)
     print_notes(frame.stats["notes"])
-    frame.write_exr(out)
+    write_frame(frame, out)
     if args.png:
         frame.write_png(args.png)
     if args.stats:
@@ -169,7 +282,7 @@ def cmd_render(args) -> int:
     st = frame.stats
     print(f"{st['technique']} on {os.path.basename(scene.path)} ({st['width']}x{st['height']}, {st['device']}): "
           f"{st['timings_ms']['total']:.1f} ms{_compile_note(st['timings_ms']['compile'])}, passes: {', '.join(st['passes'])}")
-    print(f"wrote {out}" + (f", {args.png}" if args.png else "") + (f", {args.stats}" if args.stats else ""))
+    print(f"wrote {out}{why}" + (f", {args.png}" if args.png else "") + (f", {args.stats}" if args.stats else ""))
     return 0
 
 
@@ -200,27 +313,28 @@ def _sequence_line(seq) -> str:
             f"(load {s['load_ms'] / 1e3:.2f} s, upload {s['upload_ms']:.0f} ms, refit {s['refit_ms']:.0f} ms in all)")
 
 
-def _render_frames(args) -> int:
-    """``render --frames``: one EXR (PNG, stats) per time code, named as render delegates number
+def _render_frames(args, scene_file: str, params: dict) -> int:
+    """``render --frames``: one output (PNG, stats) per time code, named as render delegates number
     frames (``out.0012.exr``); ``--stats`` itself gets the sequence's summary and every frame's costs."""
     import types
 
     from wsoft.pipeline.sequence import frame_path, render_sequence
 
     _frames_args(args)
-    params = _parse_sets(args.set)
-    seq = render_sequence(scene_arg(args.scene), args.technique, frames=args.frames, width=args.width, height=args.height,
-                          camera=args.camera, light=args.light, device=args.device, pixel_samples=args.pixel_samples,
-                          render_settings=args.render_settings, instancing=args.instancing, progress=_FrameProgress(),
-                          subdiv_level=args.subdiv_level, **params)
+    with CompileNotice(args.device, [args.technique]):
+        seq = render_sequence(scene_file, args.technique, frames=args.frames, width=args.width, height=args.height,
+                              camera=args.camera, light=args.light, device=args.device, pixel_samples=args.pixel_samples,
+                              render_settings=args.render_settings, instancing=args.instancing, progress=_FrameProgress(),
+                              subdiv_level=args.subdiv_level, **params)
     first = seq.frames[0]
     rs = seq.render_settings
-    out = output_of(types.SimpleNamespace(render_settings=rs, path=first.stats["scene"]["path"]), args.out)
+    out, why = output_of(types.SimpleNamespace(render_settings=rs, path=first.stats["scene"]["path"]), args.out,
+                         _default_output(scene_file, args.technique))
     for w in seq.warnings + sorted({w for fr in seq.frames for w in fr.stats["warnings"]}):
         print(f"warning: {w}", file=sys.stderr)
     print_notes(n for fr in seq.frames for n in fr.stats["notes"])
     for t, fr in zip(seq.times, seq.frames):
-        fr.write_exr(frame_path(out, t))
+        write_frame(fr, frame_path(out, t))
         if args.png:
             fr.write_png(frame_path(args.png, t))
         if args.stats:
@@ -235,7 +349,7 @@ def _render_frames(args) -> int:
     print(f"{st['technique']} on {os.path.basename(st['scene']['path'])} ({st['width']}x{st['height']}, {st['device']}): "
           f"{sum(ms) / len(ms):.1f} ms a frame (min {min(ms):.1f}, max {max(ms):.1f}); {_sequence_line(seq)}")
     written = [frame_path(out, seq.times[0])] + ([frame_path(out, seq.times[-1])] if len(seq.times) > 1 else [])
-    print(f"wrote {' ... '.join(written)}" + (f", PNGs {frame_path(args.png, seq.times[0])} ..." if args.png else "")
+    print(f"wrote {' ... '.join(written)}{why}" + (f", PNGs {frame_path(args.png, seq.times[0])} ..." if args.png else "")
           + (f", {args.stats} and a JSON per frame" if args.stats else ""))
     return 0
 
@@ -246,12 +360,13 @@ def _compile_note(ms: float) -> str:
 
 
 def cmd_plan(args) -> int:
+    techs = args.technique or None
+    scene_file = _check_args(args, techs or [])
     import wsoft
     from wsoft.pipeline import load_stage
 
-    scene = load_stage(scene_arg(args.scene), time=args.time, render_settings=args.render_settings, instancing=args.instancing,
+    scene = load_stage(scene_file, time=args.time, render_settings=args.render_settings, instancing=args.instancing,
                        subdiv_level=args.subdiv_level)
-    techs = args.technique or None
     p = wsoft.plan(scene, techs, light=args.light, camera=args.camera)
     if args.json:
         print(json.dumps(p, indent=2))
@@ -367,20 +482,21 @@ def _short_table(frames, reference: str | None) -> list[str]:
 def cmd_compare(args) -> int:
     """Render techniques and the reference in one graph; write EXR/PNG of each, each technique's ꟻLIP
     map (magma), one grid image of them all beside the reference and a time / error table."""
+    check_output(args.out_dir, "--out-dir", folder=True)
+    names = list(dict.fromkeys(args.technique or ["hard"]))
+    scene_file = _check_args(args, names)
+    techs = _technique_sets(names, args.set)
+    if args.frames is not None:
+        return _compare_frames(args, techs, scene_file)
     import wsoft
     from wsoft.io import write_gray_png
     from wsoft.metrics.figures import write_compare_grid
     from wsoft.metrics.flip import write_flip_png
     from wsoft.pipeline import load_stage
 
-    check_output(args.out_dir, "--out-dir", folder=True)
-    names = list(dict.fromkeys(args.technique or ["hard"]))
-    techs = _technique_sets(names, args.set)
-    if args.frames is not None:
-        return _compare_frames(args, techs)
-    scene = load_stage(scene_arg(args.scene), time=args.time, render_settings=args.render_settings, instancing=args.instancing,
+    scene = load_stage(scene_file, time=args.time, render_settings=args.render_settings, instancing=args.instancing,
                        subdiv_level=args.subdiv_level)
-    with PassProgress("compare") as progress:
+    with CompileNotice(args.device, names + ["reference"]), PassProgress("compare") as progress:
         fs = wsoft.compare(scene, techs, samples=args.samples, width=args.width, height=args.height, camera=args.camera, light=args.light,
                            device=args.device, progress=progress)
     os.makedirs(args.out_dir, exist_ok=True)
@@ -448,7 +564,7 @@ def cmd_compare(args) -> int:
     return 0
 
 
-def _compare_frames(args, techs) -> int:
+def _compare_frames(args, techs, scene_file: str) -> int:
     """``compare --frames``: per time code each technique's EXR/PNG/JSON (``<stage>-<label>.0012.exr``),
     ``<stage>-compare.md`` / ``<stage>-sequence.json`` with the temporal measures (flicker against
     the reference, mean and worst error) and each frame's times and errors, and ``<stage>-compare.png``,
@@ -458,9 +574,10 @@ def _compare_frames(args, techs) -> int:
     from wsoft.pipeline.sequence import frame_path
 
     _frames_args(args)
-    seq = compare_sequence(scene_arg(args.scene), techs, frames=args.frames, samples=args.samples, width=args.width, height=args.height,
-                           camera=args.camera, light=args.light, device=args.device, render_settings=args.render_settings,
-                           instancing=args.instancing, progress=_FrameProgress(), subdiv_level=args.subdiv_level)
+    with CompileNotice(args.device, [n for n, _ in techs] + ["reference"]):
+        seq = compare_sequence(scene_file, techs, frames=args.frames, samples=args.samples, width=args.width, height=args.height,
+                               camera=args.camera, light=args.light, device=args.device, render_settings=args.render_settings,
+                               instancing=args.instancing, progress=_FrameProgress(), subdiv_level=args.subdiv_level)
     os.makedirs(args.out_dir, exist_ok=True)
     stem = os.path.splitext(os.path.basename(seq.frames[0].stats["scene"]["path"]))[0]
     labels = list(seq.frames[0])
@@ -540,6 +657,7 @@ def cmd_bake(args) -> int:
         check_output(args.texture_dir, "--texture-dir", folder=True)
     if not 0.0 <= args.crease_angle <= 180.0:
         raise ParameterError(f"--crease-angle {args.crease_angle:g} out of range [0, 180]")
+    scene_file = _check_args(args, [args.technique])
     import wsoft
 
     params = _parse_sets(args.set)
@@ -551,9 +669,10 @@ def cmd_bake(args) -> int:
             f = stats["frames"][-1]
             print(f"frame {t:g} ({done}/{total}): {f['total_ms'] / 1e3:.2f} s", file=sys.stderr)
 
-    wsoft.bake(scene_arg(args.scene), args.technique, light=args.light, frames=frames, out=args.out, texture_size=args.texture_size,
-               texture_dir=args.texture_dir, device=args.device, crease_angle=args.crease_angle, stats=stats, progress=progress,
-               subdiv_level=args.subdiv_level, **params)
+    with CompileNotice(args.device, [args.technique]):
+        wsoft.bake(scene_file, args.technique, light=args.light, frames=frames, out=args.out, texture_size=args.texture_size,
+                   texture_dir=args.texture_dir, device=args.device, crease_angle=args.crease_angle, stats=stats, progress=progress,
+                   subdiv_level=args.subdiv_level, **params)
     wall = time.perf_counter() - t0
     for w in stats["warnings"]:
         print(f"warning: {w}", file=sys.stderr)
@@ -564,7 +683,7 @@ def cmd_bake(args) -> int:
     kinds = {}
     for m in stats["meshes"].values():
         kinds[m["interpolation"]] = kinds.get(m["interpolation"], 0) + 1
-    print(f"{args.technique} on {os.path.basename(scene_arg(args.scene))}: {len(stats['meshes'])} meshes "
+    print(f"{args.technique} on {os.path.basename(scene_file)}: {len(stats['meshes'])} meshes "
           f"({', '.join(f'{n} {k}' for k, n in sorted(kinds.items()))}), {fr[0]['points']} points, lights "
           f"{', '.join(stats['lights'].values())}, {len(fr)} frame(s): {per:.2f} s per frame{_compile_note(comp)}; {wall:.1f} s in all")
     print(f"wrote {args.out}" + (f" and {len(stats['textures'])} texture(s)" if stats["textures"] else ""))
@@ -572,16 +691,123 @@ def cmd_bake(args) -> int:
 
 
 def cmd_bench(args) -> int:
-    from wsoft.bench.harness import run_sweep
+    from wsoft.bench.harness import run_sweep, sweep_name
 
+    name = sweep_name(args.sweep)
+    for d in args.device or []:
+        check_device(d)
     check_output(args.out_dir, "--out-dir", folder=True)
-    return run_sweep(args.sweep, quick=args.quick, device=args.device, out_dir=args.out_dir, fresh=args.fresh, scenes=args.scenes)
+    with CompileNotice((args.device or [None])[0]):
+        return run_sweep(name, quick=args.quick, device=args.device, out_dir=args.out_dir, fresh=args.fresh, scenes=args.scenes)
+
+
+def _light_kinds(lights: list) -> str:
+    """``[[name, kind], ...]`` as ``rect, 2 sphere``: each kind once, in order, with its count."""
+    counts: dict[str, int] = {}
+    for _, kind in lights:
+        counts[kind] = counts.get(kind, 0) + 1
+    return ", ".join(k if n == 1 else f"{n} {k}" for k, n in counts.items()) or "-"
+
+
+def cmd_scenes(args) -> int:
+    """The bundled stages: name, triangles, shadow-casting lights, frames and what each shows, from
+    ``wsoft.usd_scenes.ABOUT`` and its catalog (a stage missing from the catalog is read)."""
+    from wsoft import usd_scenes
+
+    cat = usd_scenes.catalog()
+    missing = [n for n in usd_scenes.names() if n not in cat]
+    if missing:  # stages added since the catalog was written: read them
+        from wsoft.scene.catalog import measure
+
+        cat = {**cat, **{n: measure(n) for n in missing}}
+    entries = {n: {**cat[n], "about": usd_scenes.ABOUT.get(n, "")} for n in usd_scenes.names()}
+    if args.json:
+        print(json.dumps(entries, indent=2))
+        return 0
+    lights = {n: _light_kinds(e["lights"]) for n, e in entries.items()}
+    w, lw = max(map(len, entries)), max(map(len, lights.values()))
+    print(f"{'name':<{w}}  {'triangles':>10}  {'lights':<{lw}}  {'frames':<6}  what it shows")
+    for n, e in entries.items():
+        frames = f"{e['frames'][0]:g}-{e['frames'][1]:g}" if e["frames"] else ""
+        print(f"{n:<{w}}  {e['triangles']:>10,}  {lights[n]:<{lw}}  {frames:<6}  {e['about']}")
+    print(f"\nA name works wherever a stage file does (wsoft render box_plane -t pcss); the files are in {usd_scenes.folder()}.")
+    return 0
+
+
+def _modules(n: int) -> str:
+    return f"{n} module{'' if n == 1 else 's'} compiled"
+
+
+def cmd_warmup(args) -> int:
+    """Compile into Warp's kernel cache, once per device, the kernels of every technique (a tiny
+    render of each on ``box_plane``, default parameters), of the metric passes (a comparison) and
+    every other kernel module wsoft defines; with ``--technique``, those techniques' only. Prints
+    each technique's time and the total."""
+    devices = args.device or ["cpu", None]
+    for d in devices:
+        check_device(d)
+    from wsoft.techniques import check_names
+
+    check_names(args.technique or [])
+    import warp as wp
+
+    import wsoft
+    from wsoft.errors import WsoftError
+    from wsoft.parallel import on_compile, resolve_device, uncached_modules
+    from wsoft.techniques import TECHNIQUES
+
+    scene = wsoft.load_scene("box_plane")
+    compiled: list[str] = []
+    remove = on_compile(lambda module, device: compiled.append(module))
+    try:
+        for dev in dict.fromkeys(resolve_device(d) for d in devices):
+            t0, n0 = time.perf_counter(), len(compiled)
+            print(f"{dev} (kernel cache {wp.config.kernel_cache_dir}):", flush=True)
+            for name in args.technique or TECHNIQUES:
+                t, n = time.perf_counter(), len(compiled)
+                try:
+                    wsoft.render(scene, name, width=16, height=12, device=dev)
+                except WsoftError as exc:
+                    print(f"  {name}: not compiled ({exc.line()})")
+                    continue
+                print(f"  {name}: {time.perf_counter() - t:.1f} s, {_modules(len(compiled) - n)}", flush=True)
+            if not args.technique:
+                t, n = time.perf_counter(), len(compiled)
+                wsoft.compare(scene, ["hard"], samples=4, width=16, height=12, device=dev)
+                for module in uncached_modules(dev):
+                    wp.load_module(module, device=dev)
+                print(f"  metric passes and the other modules: {time.perf_counter() - t:.1f} s, {_modules(len(compiled) - n)}")
+            print(f"{dev}: {_modules(len(compiled) - n0)} in {time.perf_counter() - t0:.1f} s")
+    finally:
+        remove()
+    return 0
+
+
+def _version() -> str:
+    """The installed package's version (``importlib.metadata``), else the source's ``wsoft.__version__``."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("wsoft")
+    except PackageNotFoundError:  # run from a source tree that is not installed
+        from wsoft import __version__
+
+        return __version__
 
 
 _INST_HELP = ("PointInstancers and instanceable prims: keep them instanced (prototypes once), flatten them, or auto "
               "(default: keep them when they place more than 4M triangles)")
-_RS_HELP = ("RenderSettings prim to use (default: the stage metadata renderSettingsPrimPath, else "
-            "UsdRender.Settings.GetStageRenderSettings, else none); --width/--height/--camera override its values")
+_SCENE_HELP = "a .usda/.usdc/.usdz file or a bundled stage's name (box_plane; `wsoft scenes` lists them)"
+
+
+def _rs_help(overrides: str) -> str:
+    return ("RenderSettings prim to use (default: the stage metadata renderSettingsPrimPath, else "
+            f"UsdRender.Settings.GetStageRenderSettings, else none); {overrides}")
+
+
+_RS_HELP = _rs_help("--width/--height/--camera override its values")
+_DEVICE_HELP = "cpu or cuda:N (default: cuda:0 when available, else cpu)"
+_TIME_HELP = "USD time code (default: the stage's start time code; without a time range, its earliest time sample)"
 
 
 _SUBDIV_HELP = ("refine subdivision surfaces (subdivisionScheme catmullClark, loop or bilinear; unauthored means catmullClark) "
@@ -619,18 +845,23 @@ def _one_line_warnings() -> None:
     warnings.showwarning = show
 
 
-def main(argv: list[str] | None = None) -> int:
+def parser() -> argparse.ArgumentParser:
+    """The command line's parser (every subcommand; Warp and USD not imported)."""
     from wsoft.bench.harness import SWEEPS
     from wsoft.techniques import NAMES  # the names only: the technique modules import Warp
 
     techniques = sorted(NAMES)
+    one_of = "one of: " + ", ".join(techniques)
     fmt = _Help
-    ap = argparse.ArgumentParser(prog="wsoft", description="Soft-shadow techniques in Warp on USD stages.")
+    ap = argparse.ArgumentParser(prog="wsoft", description="Soft-shadow techniques in Warp on USD stages.",
+                                 epilog="first steps: wsoft scenes; wsoft compare box_plane -t pcss -t hard (into out/); "
+                                 "wsoft warmup (compiles every kernel once)")
+    ap.add_argument("--version", action="version", version=f"wsoft {_version()}")
     sub = ap.add_subparsers(dest="cmd", required=True)
 
-    r = sub.add_parser("render", help="render a stage with a technique, write EXR (and PNG, stats)", formatter_class=fmt)
-    r.add_argument("scene", help="a .usda/.usdc/.usdz file or a bundled stage's name (box_plane)")
-    r.add_argument("--technique", "-t", required=True, metavar="TECHNIQUE", help="one of: " + ", ".join(techniques))
+    r = sub.add_parser("render", help="render a stage with a technique, write EXR or PNG (and a shaded PNG, stats)", formatter_class=fmt)
+    r.add_argument("scene", help=_SCENE_HELP)
+    r.add_argument("--technique", "-t", required=True, metavar="TECHNIQUE", help=one_of)
     r.add_argument("--set", action="append", metavar="KEY=VALUE", help="technique parameter (repeatable)")
     r.add_argument("--width", type=int, help="image width in pixels (default: 640, or the render settings' resolution; "
                    "--width alone keeps their aspect)")
@@ -639,16 +870,16 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--render-settings", metavar="PRIM", help=_RS_HELP)
     r.add_argument("--light", help="light path or name for V (default: every shadow-casting light; V = the first)")
     r.add_argument("--instancing", choices=("auto", "keep", "flatten"), default="auto", help=_INST_HELP)
-    r.add_argument("--time", type=float, help="USD time code (default: the stage's start time code; without a time range, "
-                   "its earliest time sample)")
+    r.add_argument("--time", type=float, help=_TIME_HELP)
     r.add_argument("--frames", metavar="A:B[:STEP]", help="a sequence: every time code from A to B (step 1, or STEP) within the stage's "
                    "range, one output per frame named out.0012.exr; --stats gets the sequence's summary")
-    r.add_argument("--device", help="cpu or cuda:N (default: cuda:0 when available, else cpu)")
+    r.add_argument("--device", help=_DEVICE_HELP)
     r.add_argument("--pixel-samples", type=int, default=1, help="G-buffer samples per pixel")
-    r.add_argument("--out", help="output EXR (default: the productName of the render settings' product with a "
-                   "visibility RenderVar; required without one)")
+    r.add_argument("--out", help="output file, by its extension: .exr (every channel, float32) or .png (V as 16-bit linear grey) "
+                   "(default: the productName of the render settings' product with a visibility RenderVar, else "
+                   "<stage>-<technique>.exr in the current folder)")
     r.add_argument("--stats", help="stats JSON")
-    r.add_argument("--png", help="shaded PNG")
+    r.add_argument("--png", help="shaded PNG (R G B, sRGB)")
     subdiv_option(r)
     r.set_defaults(fn=cmd_render)
 
@@ -658,41 +889,45 @@ def main(argv: list[str] | None = None) -> int:
                        "OUT_DIR/<stage>-compare.png (every technique's shaded image and its difference from the reference's V, "
                        "titled with its parameters, frame ms and penumbra MAE) "
                        "and OUT_DIR/<stage>-compare.md (times and errors against the reference: MAE of V, ꟻLIP of the shaded image).")
-    c.add_argument("scene", help="a .usda/.usdc/.usdz file or a bundled stage's name (box_plane)")
-    c.add_argument("--technique", "-t", action="append", metavar="TECHNIQUE",
-                   help="a technique (repeatable; default: hard); one of: " + ", ".join(techniques))
+    c.add_argument("scene", help=_SCENE_HELP)
+    c.add_argument("--technique", "-t", action="append", metavar="TECHNIQUE", help="a technique (repeatable; default: hard); " + one_of)
     c.add_argument("--set", action="append", metavar="[TECHNIQUE.]KEY=VALUE", help="a parameter (TECHNIQUE.KEY with several techniques)")
     c.add_argument("--samples", type=int, default=256, help="reference light samples per pixel")
     c.add_argument("--width", type=int, help="image width in pixels (default: 640, or the render settings' resolution)")
     c.add_argument("--height", type=int, help="image height in pixels (default: 480, or the render settings' resolution)")
-    c.add_argument("--camera")
+    c.add_argument("--camera", help="camera prim path (default: the render settings' camera, else the stage's first camera, else automatic)")
     c.add_argument("--render-settings", metavar="PRIM", help=_RS_HELP)
-    c.add_argument("--light")
+    c.add_argument("--light", help="light path or name whose V is compared (default: every shadow-casting light)")
     c.add_argument("--instancing", choices=("auto", "keep", "flatten"), default="auto", help=_INST_HELP)
-    c.add_argument("--time", type=float, help="USD time code (default: the stage's start time code)")
+    c.add_argument("--time", type=float, help=_TIME_HELP)
     c.add_argument("--frames", metavar="A:B[:STEP]", help="a sequence: every time code from A to B (step 1, or STEP) within the stage's "
                    "range; adds flicker against the reference and each frame's error (<stage>-compare.md, <stage>-sequence.json)")
-    c.add_argument("--device")
+    c.add_argument("--device", help=_DEVICE_HELP)
     c.add_argument("--out-dir", default="out", help="where the images, stats and the compare table are written")
     subdiv_option(c)
     c.set_defaults(fn=cmd_compare)
 
     p = sub.add_parser("plan", help="lights, cutouts and the passes each technique would run", formatter_class=fmt)
-    p.add_argument("scene", help="a .usda/.usdc/.usdz file or a bundled stage's name (box_plane)")
-    p.add_argument("--technique", "-t", action="append", metavar="TECHNIQUE", help="one of: " + ", ".join(techniques))
-    p.add_argument("--light")
-    p.add_argument("--camera")
-    p.add_argument("--render-settings", metavar="PRIM", help=_RS_HELP)
+    p.add_argument("scene", help=_SCENE_HELP)
+    p.add_argument("--technique", "-t", action="append", metavar="TECHNIQUE",
+                   help="a technique whose passes to list (repeatable; default: all); " + one_of)
+    p.add_argument("--light", help="light path or name (default: every shadow-casting light)")
+    p.add_argument("--camera", help="camera prim path (default: the render settings' camera, else the stage's first camera, else automatic)")
+    p.add_argument("--render-settings", metavar="PRIM", help=_rs_help("--camera overrides its camera"))
     p.add_argument("--instancing", choices=("auto", "keep", "flatten"), default="auto", help=_INST_HELP)
-    p.add_argument("--time", type=float)
-    p.add_argument("--json", action="store_true")
+    p.add_argument("--time", type=float, help=_TIME_HELP)
+    p.add_argument("--json", action="store_true", help="the plan as JSON")
     subdiv_option(p)
     p.set_defaults(fn=cmd_plan)
 
     t = sub.add_parser("techniques", help="techniques and their parameters", formatter_class=fmt)
-    t.add_argument("--json", action="store_true")
+    t.add_argument("--json", action="store_true", help="every technique's description as JSON")
     t.add_argument("--markdown", action="store_true", help="the README's technique table")
     t.set_defaults(fn=cmd_techniques)
+
+    s = sub.add_parser("scenes", help="the bundled stages: triangles, lights, frames and what each shows", formatter_class=fmt)
+    s.add_argument("--json", action="store_true", help="the list as JSON")
+    s.set_defaults(fn=cmd_scenes)
 
     k = sub.add_parser("bake", help="bake a technique's visibility into a USD layer of overs (primvars, optional textures)",
                        formatter_class=fmt, description="Writes OUT, a layer to add as a sublayer of the stage: on every mesh a float "
@@ -700,8 +935,7 @@ def main(argv: list[str] | None = None) -> int:
                        "--frames, computed at the vertices themselves (seen by a camera or not); with --texture-size, an EXR per mesh "
                        "and light over its st and a UsdUVTexture hookup under <mesh>/wsoftVisibility.")
     k.add_argument("scene", help="a .usda/.usdc/.usdz file or a bundled stage's name (lightmapped_bridge)")
-    k.add_argument("--technique", "-t", required=True, metavar="TECHNIQUE", help="one of: " + ", ".join(techniques)
-                   + " (izb with --set aa=none; ssm without a budget_map)")
+    k.add_argument("--technique", "-t", required=True, metavar="TECHNIQUE", help=one_of + " (izb with --set aa=none; ssm without a budget_map)")
     k.add_argument("--set", action="append", metavar="KEY=VALUE", help="technique parameter (repeatable)")
     k.add_argument("--light", help="light path or name (default: every shadow-casting light the technique supports)")
     k.add_argument("--frames", metavar="A:B[:STEP]", help="time codes A to B inclusive (step 1, or STEP), or one time code A, within the "
@@ -711,7 +945,7 @@ def main(argv: list[str] | None = None) -> int:
     k.add_argument("--texture-dir", help="where the textures go (default: the layer's folder)")
     k.add_argument("--crease-angle", type=float, default=30.0, help="degrees: faces around a vertex closer than this share its "
                    "normal; farther ones make the mesh faceVarying")
-    k.add_argument("--device", help="cpu or cuda:N (default: cuda:0 when available, else cpu)")
+    k.add_argument("--device", help=_DEVICE_HELP)
     subdiv_option(k)
     k.set_defaults(fn=cmd_bake)
 
@@ -724,7 +958,19 @@ def main(argv: list[str] | None = None) -> int:
     b.add_argument("--fresh", action="store_true", help="discard earlier rows instead of resuming")
     b.set_defaults(fn=cmd_bench)
 
-    args = ap.parse_args(argv)
+    w = sub.add_parser("warmup", help="compile every technique's kernels once (Warp's kernel cache), so later runs start at once",
+                       formatter_class=fmt)
+    w.add_argument("--device", action="append", help="a device to compile for (repeatable; default: cpu and the default device, "
+                   "cuda:0 when available)")
+    w.add_argument("--technique", "-t", action="append", metavar="TECHNIQUE",
+                   help="compile this technique's kernels only (repeatable; default: every technique, the metric passes and "
+                   "every other kernel module); " + one_of)
+    w.set_defaults(fn=cmd_warmup)
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parser().parse_args(argv)
     from wsoft.errors import WsoftError
 
     _one_line_warnings()

@@ -3,6 +3,14 @@
 from __future__ import annotations
 
 
+def suggestion(word: str, choices) -> str:
+    """`` (did you mean a, b?)`` naming the choices closest to ``word`` (difflib), or ``""``."""
+    import difflib
+
+    close = difflib.get_close_matches(word, list(choices), n=3, cutoff=0.6)
+    return f" (did you mean {', '.join(close)}?)" if close else ""
+
+
 class WsoftError(Exception):
     """A problem with the user's input, worded for the user.
 

@@ -68,9 +68,23 @@ def write_png(path: str, channels: dict[str, np.ndarray]) -> None:
         Image.fromarray(to_srgb8(channels["V"]), "L").save(path)
 
 
-def write_gray_png(path: str, v: np.ndarray) -> None:
-    """A single channel in [0, 1] as an 8-bit grey PNG (linear, no gamma)."""
+def write_gray_png(path: str, v: np.ndarray, bits: int = 8) -> dict[str, int]:
+    """A single channel in [0, 1] as an 8- or 16-bit grey PNG (linear, no gamma). NaN/inf values
+    are counted, reported with a :class:`~wsoft.errors.NonFiniteWarning` and written as 0; returns
+    the count ({"V": n} when there are any)."""
+    import warnings
+
     from PIL import Image
 
+    from wsoft.errors import NonFiniteWarning
+
+    bad = nonfinite_counts({"V": v})
+    if bad:
+        warnings.warn(f"{path}: non-finite values written as 0: V {bad['V']}", NonFiniteWarning, stacklevel=2)
+    x = np.clip(np.nan_to_num(np.asarray(v, np.float32), nan=0.0, posinf=0.0, neginf=0.0), 0, 1)
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
-    Image.fromarray((np.clip(np.nan_to_num(v), 0, 1) * 255 + 0.5).astype(np.uint8), "L").save(path)
+    if bits == 16:
+        Image.fromarray((x * 65535 + 0.5).astype(np.uint16)).save(path)
+    else:
+        Image.fromarray((x * 255 + 0.5).astype(np.uint8), "L").save(path)
+    return bad

@@ -45,7 +45,8 @@ def render(
     frame_history=None,
     **params,
 ) -> Frame | FrameSet:
-    """Render on ``scene`` (a :class:`Scene` or a USD path) and return a :class:`Frame`, or a
+    """Render on ``scene`` (a :class:`Scene`, a USD path or a bundled stage's name such as
+    ``"box_plane"``, :func:`wsoft.usd_scenes.resolve`) and return a :class:`Frame`, or a
     :class:`FrameSet` when ``technique`` is a list.
 
     ``technique``: a name with its parameters as keywords (``render(scene, "pcss",

@@ -55,9 +55,17 @@ class Frame:
         write_exr(path, {self.exr_names.get(k, k): v for k, v in self.channels.items()})
 
     def write_png(self, path: str) -> None:
+        """The shaded image (``R G B``, sRGB, 8 bits) as PNG; ``V`` when there is no colour."""
         from wsoft.io import write_png
 
         write_png(path, self.channels)
+
+    def write_v_png(self, path: str) -> None:
+        """``V`` as a 16-bit linear grey PNG (0 -> 0, 1 -> 65535), the visibility itself rather than
+        the shaded image (``wsoft render --out x.png``)."""
+        from wsoft.io import write_gray_png
+
+        write_gray_png(path, self.V, bits=16)
 
 
 class FrameSet(Mapping):

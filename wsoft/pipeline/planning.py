@@ -8,7 +8,7 @@ import numpy as np
 
 from wsoft.pipeline.build import build_graph
 from wsoft.pipeline.framing import frame_setup
-from wsoft.pipeline.loading import instancing_plan, too_big_to_flatten
+from wsoft.pipeline.loading import instancing_plan, load_stage, too_big_to_flatten
 from wsoft.scene.types import LIGHT_DISTANT, Light, Scene
 
 
@@ -56,9 +56,10 @@ def emission(scene: Scene, light: Light) -> dict:
     return {"side": "all around"}
 
 
-def plan(scene: Scene, techniques: list[str] | None = None, *, width: int | None = None, height: int | None = None, light=None,
+def plan(scene, techniques: list[str] | None = None, *, width: int | None = None, height: int | None = None, light=None,
          camera=None) -> dict:
-    """What would run: the time code the scene was loaded at (``time``; None: the default time),
+    """What would run on ``scene`` (a :class:`Scene`, or what :func:`wsoft.pipeline.load_stage` loads:
+    a USD path or a bundled stage's name): the time code the scene was loaded at (``time``; None: the default time),
     shadow-casting lights (where each emits, :func:`emission`, with their UsdLux shadow controls,
     :func:`shadow_controls`), skipped lights, cutout materials, the purposes loaded, the framing
     (``framing``: which render settings prim and camera, where each came from, the resolution,
@@ -67,6 +68,8 @@ def plan(scene: Scene, techniques: list[str] | None = None, *, width: int | None
     technique the passes (with their kinds) or why it is not applicable to a light."""
     from wsoft.techniques import TECHNIQUES
 
+    if not isinstance(scene, Scene):
+        scene = load_stage(scene)
     out = {
         "scene": scene.path,
         "triangles": scene.total_triangles,

@@ -249,7 +249,7 @@ def render_sequence(scene, technique, *, frames, width: int | None = None, heigh
                     device: str | None = None, pixel_samples: int = 1, render_settings: str | None = None, instancing: str = "auto",
                     reseed: bool = True, progress=None, subdiv_level: int | None = None, **params) -> Sequence:
     """Render ``technique`` (one, or a list as :func:`wsoft.render` takes it) on ``scene`` (a USD
-    path, an open ``Usd.Stage`` or a :class:`Scene`, whose source is read again at each time code)
+    path or a bundled stage's name, an open ``Usd.Stage`` or a :class:`Scene`, whose source is read again at each time code)
     at every time code of ``frames`` (see :func:`stage_time_codes`); a :class:`Sequence`.
 
     ``progress``: called as ``progress(done, total, time_code)`` after each frame. The other

@@ -15,6 +15,7 @@ import os
 
 import numpy as np
 
+import wsoft.usd_scenes as usd_scenes
 from wsoft.errors import ParameterError, SceneError
 from wsoft.scene.shapes import not_drawn, shape_type
 from wsoft.scene.soup import Soup
@@ -30,7 +31,10 @@ __all__ = ["diagnostic_lines", "load_scene", "open_stage", "stage_file", "static
 
 def load_scene(path_or_stage, time: float | None = None, render_settings: str | None = None, instancing: bool = False,
                subdiv_level: int = 0) -> Scene:
-    """Load a USD stage (a file path or an open ``Usd.Stage``) at ``time``.
+    """Load a USD stage (a file path, a bundled stage's name such as ``"multi_light"``, or an open
+    ``Usd.Stage``) at ``time``. A name without a folder that is not an existing file is the bundled
+    stage of that name (:func:`wsoft.usd_scenes.resolve`; an unknown one is an error suggesting the
+    closest names).
 
     ``time=None`` uses the stage's start time code when it has an authored time range, else the
     earliest time sample authored on the stage (a warning names it: a stage whose values are only
@@ -89,7 +93,7 @@ def load_scene(path_or_stage, time: float | None = None, render_settings: str | 
         _check_time(time, file)
         subdiv_level = _check_subdiv_level(subdiv_level, file)
     else:
-        file = os.fspath(path_or_stage)
+        file = usd_scenes.resolve(path_or_stage)
         _check_time(time, file)  # before the stage is opened
         subdiv_level = _check_subdiv_level(subdiv_level, file)
         stage = open_stage(file)
@@ -112,9 +116,10 @@ def load_scene(path_or_stage, time: float | None = None, render_settings: str | 
 
 def open_stage(file: str):
     """``Usd.Stage.Open(file)``, its problems as a :class:`SceneError` naming the file (not found, a
-    folder, the parser's own ``file:line:col`` message)."""
+    folder, the parser's own ``file:line:col`` message). ``file`` may name a bundled stage
+    (:func:`wsoft.usd_scenes.resolve`)."""
     Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = pxr()
-    file = os.fspath(file)
+    file = usd_scenes.resolve(file)
     if not os.path.exists(file):
         raise SceneError("file not found", file=file)
     if os.path.isdir(file):

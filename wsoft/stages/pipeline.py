@@ -1,4 +1,4 @@
-"""The USD pipeline stages of ``wsoft bench usd_pipeline``: UsdRender settings and a light's shadowLink.
+"""The USD pipeline stages of ``wsoft bench usd-pipeline``: UsdRender settings and a light's shadowLink.
 
 * :func:`render_settings_stage` — two cameras over a few blockers, and a ``RenderSettings`` prim,
   named by the stage metadata ``renderSettingsPrimPath``, that picks the *second* camera at a
@@ -49,7 +49,7 @@ def render_settings_stage(resolution):
     prod.CreateOrderedVarsRel().SetTargets([var.GetPath()])
     rs.CreateProductsRel().SetTargets([prod.GetPath()])
     st.SetMetadata("renderSettingsPrimPath", RS_PRIM)
-    st.GetRootLayer().documentation = ("Built by wsoft bench usd_pipeline: two cameras; the render settings (named by the stage "
+    st.GetRootLayer().documentation = ("Built by wsoft bench usd-pipeline: two cameras; the render settings (named by the stage "
                                        "metadata renderSettingsPrimPath) pick /World/Cam2 with wide pixels, cropAperture and a data window.")
     return st
 

@@ -19,7 +19,7 @@ import importlib
 import pkgutil
 import warnings
 
-from wsoft.errors import ParameterError
+from wsoft.errors import ParameterError, suggestion
 from wsoft.techniques.base import PassSpec, Quality, Technique, Tolerance
 
 ENTRY_POINT_GROUP = "wsoft.techniques"
@@ -133,12 +133,26 @@ def __getattr__(name: str):
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
+def unknown_technique(name: str, known) -> ParameterError:
+    """The one-line error for a technique name that is not one of ``known``: the closest names, then all."""
+    return ParameterError(f"unknown technique {name!r}{suggestion(name, known)}; techniques: {', '.join(sorted(known))}")
+
+
+def check_names(wanted) -> None:
+    """Raise :func:`unknown_technique` for the first name of ``wanted`` that no bundled technique or
+    installed plugin has, without importing any technique (so without Warp)."""
+    known = names()
+    for name in wanted:
+        if name not in known:
+            raise unknown_technique(name, known)
+
+
 def get_technique(name: str) -> type[Technique]:
     techniques = _techniques()
     try:
         return techniques[name]
     except KeyError:
-        raise ParameterError(f"unknown technique {name!r}; techniques: {', '.join(sorted(techniques))}") from None
+        raise unknown_technique(name, techniques) from None
 
 
 def create(name: str, params: dict | None = None) -> Technique:
@@ -171,4 +185,4 @@ def markdown_table(techniques: dict[str, type[Technique]] | None = None) -> str:
 
 
 __all__ = ["ENTRY_POINT_GROUP", "NAMES", "PassSpec", "PluginWarning", "TECHNIQUES", "Quality", "Technique", "Tolerance", "bundled_names",
-           "create", "get_technique", "markdown_table", "names", "parameter_table", "plugin_entry_points", "reload_plugins"]
+           "check_names", "create", "get_technique", "markdown_table", "names", "parameter_table", "plugin_entry_points", "reload_plugins"]
