@@ -194,7 +194,7 @@ def test_plan_and_techniques_show_it(tmp_path):
     st.Export(str(path))
     p = wsoft_cli("plan", str(path), "-t", "pcss", "-t", "pwedge")
     assert p.returncode == 0, p.stderr
-    assert "/World/Tube" in p.stdout and "cylinder" in p.stdout and "length 4, radius 0.3" in p.stdout
+    assert "/World/Tube" in p.stdout and "cylinder" in p.stdout and f"length 4, radius {RADIUS:g}" in p.stdout
     assert "emits: all around" in p.stdout
     assert "pcss: cylinder light /World/Tube: its bound seen along the light view's axis" in p.stdout
     assert "pwedge: cylinder light /World/Tube: its silhouette rectangle" in p.stdout
