@@ -426,6 +426,9 @@ def cmd_plan(args) -> int:
     for name, why in p["not_applicable"].items():
         for w in why:
             print(f"{name}: not applicable to {w['light']}: {w['reason']}")
+    for name, models in p.get("cylinder_lights", {}).items():
+        for m in models:
+            print(f"{name}: cylinder light {m['light']}: {m['model']}")
     return 0
 
 
@@ -449,6 +452,8 @@ def cmd_techniques(args) -> int:
             print(f"  {p['name']:<16} {p['type']:<6} default {p['default']!s:<8} {p['meaning']}{rng}")
         for q in d["quality"]:
             print(f"  quality: {q['param']} over {', '.join(map(str, q['values']))} ({q['note']})")
+        if d["cylinder_light"]:
+            print(f"  cylinder light: {d['cylinder_light']}")
     return 0
 
 

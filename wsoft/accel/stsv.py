@@ -60,7 +60,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from wsoft.lightspace.light import LightGPU, light_gpu
+from wsoft.lightspace.light import LightGPU, bound_radius, light_gpu
 from wsoft.scene.surfaces import Surfaces, sample_alpha
 
 planes_t = wp.types.matrix(shape=(5, 4), dtype=wp.float32)
@@ -158,11 +158,7 @@ def light_ball(L: LightGPU) -> wp.vec4:
     direction toward the light (xyz, unit) and the sine of its cone's half angle (w)."""
     if L.kind == 3:
         return wp.vec4(L.az[0], L.az[1], L.az[2], wp.sqrt(wp.max(1.0 - L.cos_max * L.cos_max, 0.0)))
-    r = L.radius
-    if L.kind == 0:
-        r = wp.length(L.half_size)
-    elif L.kind == 4:
-        r = 0.0
+    r = bound_radius(L)
     return wp.vec4(L.position[0], L.position[1], L.position[2], r)
 
 

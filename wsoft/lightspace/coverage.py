@@ -2,7 +2,9 @@
 wedge algorithm (Akenine-Möller and Assarsson 2002, Assarsson and Akenine-Möller 2003).
 
 Seen from a receiver ``o``, the occluders project onto the light's plane (a rect or disk light's
-own plane; a sphere light's silhouette disk facing ``o``; a distant light's cone as the disk it
+own plane; a sphere light's silhouette disk facing ``o``; a cylinder light's silhouette rectangle
+facing ``o``, :func:`~wsoft.lightspace.light.silhouette_rect`, a line light as a rectangle
+:data:`~wsoft.lightspace.light.LINE_WIDTH` of its length wide; a distant light's cone as the disk it
 cuts at unit distance along its direction, :func:`light_frame`). Take the light's centre
 ``c`` and any light point ``x``: the segment ``c x`` lies in the (convex) light, and the occluders'
 covering count at ``x`` differs from the one at ``c`` by the signed crossings of ``c x`` with the
@@ -39,7 +41,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from wsoft.lightspace.light import LightGPU, is_round, light_gpu, silhouette_disk, silhouette_ellipse
+from wsoft.lightspace.light import LINE_WIDTH, LightGPU, is_round, light_gpu, silhouette_disk, silhouette_ellipse, silhouette_rect
 
 poly_t = wp.types.matrix(shape=(8, 2), dtype=wp.float32)  # a convex polygon: a rectangle clipped by at most 3 lines
 INFINITE = wp.constant(1.0e30)
@@ -53,7 +55,7 @@ def cross2(a: wp.vec2, b: wp.vec2) -> float:
 @wp.func
 def light_frame(L: LightGPU, p: wp.vec3):
     """The light as seen from ``p``: (its centre, unit axes ``u``, ``v`` of its plane, half extents
-    (a rect's half width and height; a disk's two semi-axes, equal when round), 1 for a disk / 0 for a rect, and how
+    (a rect's half width and height, a cylinder's silhouette rectangle's; a disk's two semi-axes, equal when round), 1 for a disk / 0 for a rect, and how
     far past its plane (as a multiple of the way there) a caster can be: 1, or :data:`INFINITE`
     for a distant light, whose plane is put at unit distance from ``p``)."""
     if L.kind == 0:
@@ -63,6 +65,9 @@ def light_frame(L: LightGPU, p: wp.vec3):
     if L.kind == 3:
         t = wp.sqrt(wp.max(1.0 - L.cos_max * L.cos_max, 0.0)) / wp.max(L.cos_max, 1.0e-6)
         return p + L.az, L.ax, L.ay, wp.vec2(t, t), int(1), INFINITE
+    if L.kind == 5:  # cylinder: its silhouette rectangle seen from p (as light_point); a line light: LINE_WIDTH wide
+        ce, u, v, e = silhouette_rect(L, p)
+        return ce, u, v, wp.vec2(e[0], wp.max(e[1], LINE_WIDTH * e[0])), int(0), 1.0
     # sphere: its silhouette disk (an ellipsoid's ellipse) seen from p (as light_point); a point light: a disk of radius 0
     if L.kind == 2 and not is_round(L):
         ce, u, v, e = silhouette_ellipse(L, p)

@@ -11,7 +11,7 @@ import numpy as np
 import warp as wp
 
 from wsoft.lightspace.view import MAX_TAN, LightView, far_light, frame_extent_of_bounds, to_frame
-from wsoft.scene.types import LIGHT_DISTANT, LIGHT_POINT, LIGHT_SPHERE, Light
+from wsoft.scene.types import LIGHT_CYLINDER, LIGHT_DISTANT, LIGHT_POINT, LIGHT_SPHERE, Light
 
 
 def _basis_from_axis(z: np.ndarray) -> np.ndarray:
@@ -21,6 +21,22 @@ def _basis_from_axis(z: np.ndarray) -> np.ndarray:
     x /= np.linalg.norm(x)
     y = np.cross(z, x)
     return np.stack([x, y, z], axis=1)
+
+
+def omni_axes(light: Light, d: np.ndarray) -> np.ndarray:
+    """The view axes (columns x, y, view axis) of a light that emits all around (sphere, point,
+    cylinder) looking along ``d``: a cylinder light's x axis is its own axis projected onto the
+    view's plane (its bound is then a rectangle along the view's x and y,
+    :func:`~wsoft.lightspace.light.cylinder_half_extents`; seen end-on, any x)."""
+    if light.kind != LIGHT_CYLINDER:
+        return _basis_from_axis(d)
+    z = np.asarray(d, np.float64) / np.linalg.norm(d)
+    a = np.asarray(light.frame, np.float64)[:, 0]
+    x = a - np.dot(a, z) * z
+    if np.linalg.norm(x) < 1e-6:
+        return _basis_from_axis(z)
+    x /= np.linalg.norm(x)
+    return np.stack([x, np.cross(z, x), z], axis=1)
 
 
 def distant_axes(light: Light) -> np.ndarray:
@@ -275,7 +291,8 @@ def fit_light_view(
     *whole* light from a receiver is mapped (for a local light of half-extent w, a caster at
     depth z blocks within w (1/z - 1/z_r) of a receiver's tangent; for a distant light of cone
     half-angle a, within (z_r - z) tan a). Perspective windows are clamped to ±80° around the
-    view axis; receivers beyond are counted in ``receivers_outside``. A rect or disk light's view is
+    view axis; receivers beyond are counted in ``receivers_outside``. A sphere, point or cylinder
+    light's view looks at the receivers' mean (:func:`omni_axes`). A rect or disk light's view is
     fitted to the receivers in front of its emitting plane; those behind it (which get none of its
     light, :mod:`wsoft.raster.horizon`) are counted in ``receivers_behind``, never as outside.
     ``side_growth`` (a local light): per side of the window (l, r, b, t), how far casters beyond
@@ -336,15 +353,15 @@ def fit_light_view(
         persp, outside, behind = False, 0, 0
     else:
         origin = np.asarray(light.position, np.float64)
-        if light.kind in (LIGHT_SPHERE, LIGHT_POINT):
+        if light.kind in (LIGHT_SPHERE, LIGHT_POINT, LIGHT_CYLINDER):
             d = rmean - origin
-            axes = _basis_from_axis(d if np.linalg.norm(d) > 1e-9 * ext else -light.frame[:, 2])
+            axes = omni_axes(light, d if np.linalg.norm(d) > 1e-9 * ext else -light.frame[:, 2])
         else:
             axes = local_axes(light)
         zmin_ok = 1e-6 * ext
         # a rect or disk light emits forward only: receivers behind its plane see nothing of it
         # (the horizon rule darkens them), so they are neither fitted nor counted outside, only counted
-        one_sided = light.kind not in (LIGHT_SPHERE, LIGHT_POINT)
+        one_sided = light.one_sided
         st = _local_fit_stats(pts, origin, axes, np.asarray(light.frame, np.float64)[:, 2] if one_sided else None, zmin_ok, margin)
         s = st["front"] if one_sided and st["front"]["n"] else st["all"]
         if s["n"]:

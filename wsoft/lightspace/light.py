@@ -1,5 +1,14 @@
 """Lights on the device: how to sample a point (or direction) on them, the light as a filter kernel
-(its spread over a map from a blocker's depth), and the slope-scaled receiver bias."""
+(its spread over a map from a blocker's depth), and the slope-scaled receiver bias.
+
+A cylinder light is seen from a point ``p`` as its *silhouette rectangle* (:func:`silhouette_rect`),
+as a sphere light is seen as its silhouette disk: the flat rectangle, as long as the cylinder,
+between the two lines where the planes through ``p`` tangent to its side touch it. A light point
+drawn uniformly on it is uniform in the cylinder's projected area seen from ``p`` (as a rect
+light's, and a sphere's silhouette disk's, are), so ``V`` is the unoccluded fraction of the
+cylinder's visible side weighted as it is seen, not by its surface area (which would over-count
+the flanks seen edge-on). Exact but for the end caps' curved rims, which the rectangle cuts
+square (a difference of the order of ``radius / distance``)."""
 
 from __future__ import annotations
 
@@ -9,18 +18,23 @@ import numpy as np
 import warp as wp
 
 from wsoft.lightspace.view import ViewGPU
-from wsoft.scene.types import LIGHT_DISK, LIGHT_DISTANT, LIGHT_RECT, Light
+from wsoft.scene.types import LIGHT_CYLINDER, LIGHT_DISK, LIGHT_DISTANT, LIGHT_RECT, Light
+
+LINE_WIDTH = wp.constant(1.0e-3)
+"""The half width, as a fraction of its half length, that a line light (a cylinder light of radius
+0) takes where a technique measures the light by its area (``pwedge``'s coverage, the filter
+kernels of :func:`light_kernel`): a rectangle that thin covers a segment's fraction to ~1e-3."""
 
 
 @wp.struct
 class LightGPU:
-    kind: int  # LIGHT_RECT, LIGHT_DISK, LIGHT_SPHERE, LIGHT_DISTANT, LIGHT_POINT
+    kind: int  # LIGHT_RECT, LIGHT_DISK, LIGHT_SPHERE, LIGHT_DISTANT, LIGHT_POINT, LIGHT_CYLINDER
     position: wp.vec3
-    ax: wp.vec3  # unit X axis
+    ax: wp.vec3  # unit X axis (a cylinder's axis)
     ay: wp.vec3  # unit Y axis
     az: wp.vec3  # unit Z axis (rect/disk emit along -Z; distant light comes from +Z)
-    half_size: wp.vec2  # rect half width / height
-    radius: float  # disk / sphere radius
+    half_size: wp.vec2  # rect half width / height; cylinder half length / radius
+    radius: float  # disk / sphere / cylinder radius
     cos_max: float  # distant: cosine of the cone half angle
     far: float  # distant: length of shadow rays (4 scene diagonals, at most 1e30)
     aspect: wp.vec3  # disk / sphere: semi-axes along ax, ay, az over radius (the largest); (1, 1, 1) when round
@@ -106,13 +120,49 @@ def silhouette_ellipse(L: LightGPU, p: wp.vec3):
 
 
 @wp.func
+def silhouette_rect(L: LightGPU, p: wp.vec3):
+    """A cylinder light (half length ``L.half_size[0]`` along ``ax``, radius ``L.half_size[1]``)
+    seen from ``p``: its silhouette rectangle (module docstring), facing ``p`` (centre, unit axes
+    ``u`` along the cylinder's axis and ``v`` across it, half extents (half length, half width)).
+    In the cross-section through ``p``, at distance ``rho`` from the axis, the tangent points lie
+    ``radius^2 / rho`` toward ``p`` from the axis and ``radius sqrt(1 - radius^2 / rho^2)`` to
+    either side: the sphere's silhouette disk in two dimensions. From within ``radius`` of the
+    axis line (beyond an end, where its side shows only its inside), and for a line light, the
+    axis segment itself (half width 0)."""
+    q = p - L.position
+    qy = wp.dot(q, L.ay)
+    qz = wp.dot(q, L.az)
+    rho = wp.sqrt(qy * qy + qz * qz)
+    r = L.half_size[1]
+    if rho <= r * 1.0001 or rho <= 0.0:
+        return L.position, L.ax, L.ay, wp.vec2(L.half_size[0], 0.0)
+    n = (L.ay * qy + L.az * qz) / rho  # from the axis toward p, across it
+    v = L.az * (qy / rho) - L.ay * (qz / rho)
+    rr = r * r / rho
+    return L.position + n * rr, L.ax, v, wp.vec2(L.half_size[0], r * wp.sqrt(wp.max(1.0 - rr / rho, 0.0)))
+
+
+@wp.func
+def bound_radius(L: LightGPU) -> float:
+    """The radius of a local light's enclosing ball about ``L.position``: a rect's half diagonal, a
+    cylinder's (half length, radius) diagonal, a disk's or sphere's (largest) radius, 0 for a point."""
+    r = L.radius
+    if L.kind == 0 or L.kind == 5:
+        r = wp.length(L.half_size)
+    elif L.kind == 4:
+        r = 0.0
+    return r
+
+
+@wp.func
 def light_point(L: LightGPU, p: wp.vec3, c: wp.vec2) -> wp.vec4:
     """A shadow ray from ``p`` toward the point of light coordinates ``c`` (``[-1, 1]^2`` on a rect
-    light, the unit disk on the others, :mod:`wsoft.lightspace.samples`): unit direction (xyz)
+    or cylinder light, the unit disk on the others, :mod:`wsoft.lightspace.samples`): unit direction (xyz)
     and length (w). A disk light's coordinates are scaled by its two semi-axes (an ellipse); a
     sphere light is its silhouette disk seen from ``p`` (an ellipsoid's silhouette ellipse,
-    :func:`silhouette_ellipse`); a distant light's disk is its cone (uniform in solid angle); a
-    point light ignores ``c``."""
+    :func:`silhouette_ellipse`); a cylinder light its silhouette rectangle seen from ``p``
+    (:func:`silhouette_rect`; a line light its segment); a distant light's disk is its cone
+    (uniform in solid angle); a point light ignores ``c``."""
     target = L.position
     if L.kind == 0:  # rect
         target = L.position + L.ax * (c[0] * L.half_size[0]) + L.ay * (c[1] * L.half_size[1])
@@ -125,6 +175,9 @@ def light_point(L: LightGPU, p: wp.vec3, c: wp.vec2) -> wp.vec4:
         else:
             ce, u, v, e = silhouette_ellipse(L, p)
             target = ce + u * (c[0] * e[0]) + v * (c[1] * e[1])
+    elif L.kind == 5:  # cylinder: the silhouette rectangle seen from p
+        ce, u, v, e = silhouette_rect(L, p)
+        target = ce + u * (c[0] * e[0]) + v * (c[1] * e[1])
     elif L.kind == 3:  # distant: uniform in the cone's solid angle
         rho2 = c[0] * c[0] + c[1] * c[1]
         cos_t = 1.0 - rho2 * (1.0 - L.cos_max)
@@ -146,8 +199,9 @@ def light_point(L: LightGPU, p: wp.vec3, c: wp.vec2) -> wp.vec4:
 
 
 def disk_shaped(light: Light) -> bool:
-    """Are the light's samples mapped onto a disk (disk, sphere and distant lights) rather than a rectangle?"""
-    return light.kind != LIGHT_RECT
+    """Are the light's samples mapped onto a disk (disk, sphere and distant lights) rather than a
+    rectangle (rect lights, a cylinder light's silhouette rectangle)?"""
+    return light.kind not in (LIGHT_RECT, LIGHT_CYLINDER)
 
 
 def light_bound(light: Light) -> tuple[np.ndarray, float, bool]:
@@ -156,7 +210,7 @@ def light_bound(light: Light) -> tuple[np.ndarray, float, bool]:
     direction toward the light, the sine of its cone's half angle, True)."""
     if light.kind == LIGHT_DISTANT:
         return np.asarray(light.frame[:, 2], np.float64), math.sin(math.radians(0.5 * light.angle_deg)), True
-    r = float(np.hypot(*light.half_size)) if light.kind == LIGHT_RECT else float(light.radius)
+    r = float(np.hypot(*light.half_size)) if light.kind in (LIGHT_RECT, LIGHT_CYLINDER) else float(light.radius)
     return np.asarray(light.position, np.float64), r, False
 
 
@@ -180,7 +234,8 @@ def light_center_dir(L: LightGPU, p: wp.vec3) -> wp.vec4:
 class LightKernel:
     """The light as a filter sees it from the light view's centre.
 
-    ``disk``: 1 for a disk-shaped light (disk, sphere, distant), 0 for a rectangle.
+    ``disk``: 1 for a disk-shaped light (disk, sphere, distant), 0 for a rectangle (a rect light,
+    a cylinder light's bound).
     ``half``: local lights: half-extent in world units along the map's x and y;
     distant lights: tan of the cone's half angle (both components).
     """
@@ -189,14 +244,18 @@ class LightKernel:
     half: wp.vec2
 
 
-def light_kernel(light: Light) -> LightKernel:
+def light_kernel(light: Light, view=None) -> LightKernel:
     """The light's half extents along a light view's x and y (a rect or disk light's view is
     aligned with its X and Y: an elliptical disk's two semi-axes); a sphere light's radius, which
-    of an ellipsoid is its bounding sphere's (:attr:`~wsoft.techniques.Technique.ellipsoid_caveat`)."""
+    of an ellipsoid is its bounding sphere's (:attr:`~wsoft.techniques.Technique.ellipsoid_caveat`);
+    a cylinder light's bound seen along ``view``'s axis (:func:`cylinder_half_extents`), a rectangle."""
     k = LightKernel()
     if light.kind == LIGHT_RECT:
         k.disk = 0
         k.half = wp.vec2(*light.half_size)
+    elif light.kind == LIGHT_CYLINDER:
+        k.disk = 0
+        k.half = wp.vec2(*cylinder_half_extents(light, None if view is None else view.axes))
     elif light.kind == LIGHT_DISTANT:
         k.disk = 1
         t = math.tan(math.radians(0.5 * light.angle_deg))
@@ -208,6 +267,28 @@ def light_kernel(light: Light) -> LightKernel:
         k.disk = 1
         k.half = wp.vec2(light.radius, light.radius)
     return k
+
+
+def cylinder_half_extents(light: Light, axes: np.ndarray | None) -> tuple[float, float]:
+    """A cylinder light's half extents along a view's x and y (``axes``: 3 x 3, columns x, y and the
+    view axis): the extent of the cylinder along each, ``h |a . e| + r sqrt(1 - (a . e)^2)`` for
+    its axis ``a``, half length ``h`` and radius ``r`` (its support), which is the rectangle of
+    its outline projected onto the view's plane (``h`` and ``r`` when the view looks across its
+    axis with x along it, as :func:`~wsoft.lightspace.fit.omni_axes` makes it). Without ``axes``:
+    ``h`` and ``r``. Each at least :data:`LINE_WIDTH` of ``h`` and of the other (a line light's area,
+    seen across or end-on)."""
+    h, r = float(light.half_size[0]), float(light.half_size[1])
+    if axes is None:
+        hx, hy = h, r
+    else:
+        a = np.asarray(light.frame, np.float64)[:, 0]
+        ext = []
+        for e in (axes[:, 0], axes[:, 1]):
+            c = min(abs(float(np.dot(a, e)) / max(float(np.linalg.norm(e)), 1e-300)), 1.0)
+            ext.append(h * c + r * math.sqrt(1.0 - c * c))
+        hx, hy = ext
+    m = LINE_WIDTH * max(hx, hy, h)
+    return max(hx, m), max(hy, m)
 
 
 @wp.func
@@ -257,7 +338,7 @@ def emits_along(L: LightGPU, d: wp.vec3) -> bool:
     receiver to a point of the light (or to its centre)? A rect or disk light emits from its front
     only: the receiver must lie on the side its −Z axis points to, ``dot(p - q, -az) > 0`` for the
     light point ``q``, i.e. ``dot(d, az) > 0`` (the same for every point of its plane). Sphere,
-    point and distant lights emit all around."""
+    point, cylinder and distant lights emit all around."""
     if L.kind == 0 or L.kind == 1:
         return wp.dot(d, L.az) > 0.0
     return True
@@ -276,7 +357,7 @@ def lit_along(L: LightGPU, n: wp.vec3, d: wp.vec3) -> bool:
 def light_side(L: LightGPU, p: wp.vec3, n: wp.vec3) -> int:
     """Where the whole light lies against the tangent plane at ``p`` (normal ``n``): 1 wholly in
     front, -1 wholly behind (or on it), 0 across it. Bounds: a local light's enclosing sphere
-    (centre, half-diagonal or radius), a distant light's cone."""
+    (:func:`bound_radius`), a distant light's cone."""
     if L.kind == 3:
         s = wp.dot(n, L.az)
         sin_a = wp.sqrt(wp.max(1.0 - L.cos_max * L.cos_max, 0.0))
@@ -285,11 +366,7 @@ def light_side(L: LightGPU, p: wp.vec3, n: wp.vec3) -> int:
         if s <= -sin_a:
             return -1
         return 0
-    r = L.radius
-    if L.kind == 0:
-        r = wp.length(L.half_size)
-    elif L.kind == 4:
-        r = 0.0
+    r = bound_radius(L)
     s = wp.dot(n, L.position - p)
     if s > r:
         return 1

@@ -22,8 +22,8 @@ receivers:
   depth span rounded up on the ladder (a distant light's from the anchor), so a sliding depth range
   does not change the normalised depths and biases frame to frame.
 
-The axes are the light's alone: a distant light's and a rect or disk light's own frame; a sphere or
-point light looks at the mean of the receivers of a whole sequence when the renderer gives them
+The axes are the light's alone: a distant light's and a rect or disk light's own frame; a sphere,
+point or cylinder light looks at the mean of the receivers of a whole sequence when the renderer gives them
 (``region``, as a fitted view looks at the mean of the frame's), else straight down the stage's
 up axis (``down``): a lamp lights what lies below it, and a fixed downward axis is what a fitted
 view of a lamp over its floor approaches. The centre of the scene's bounds would be a poorer
@@ -42,11 +42,11 @@ import math
 import numpy as np
 
 from wsoft.lightspace.fit import (
-    _basis_from_axis, _caster_growth, _far_light_depths, _fit_points, _frame_bounds, _local_fit_stats, _prism_depth_min, distant_axes,
-    local_axes, receiver_bounds,
+    _caster_growth, _far_light_depths, _fit_points, _frame_bounds, _local_fit_stats, _prism_depth_min, distant_axes, local_axes,
+    omni_axes, receiver_bounds,
 )
 from wsoft.lightspace.view import MAX_TAN, LightView, far_light, frame_extent_of_bounds, to_frame
-from wsoft.scene.types import LIGHT_DISTANT, LIGHT_POINT, LIGHT_SPHERE, Light
+from wsoft.scene.types import LIGHT_CYLINDER, LIGHT_DISTANT, LIGHT_POINT, LIGHT_SPHERE, Light
 
 LADDER_STEPS = 4  # rungs of the size ladder per doubling
 DEPTH_STEPS = 8  # a depth range is snapped to multiples of its span (on the ladder) over this
@@ -110,8 +110,8 @@ def fit_stable_view(
     """A stable view of ``light`` (module docstring) holding ``receivers`` (world points [N, 3], the
     camera's visible surface) and ``region`` (more world points, e.g. a sequence's receivers; None:
     none). ``anchor``: the world origin in the frame's coordinates (None: the frame's origin), where
-    a distant light's texel grid is anchored; ``down``: the stage's downward direction, a sphere or
-    point light's axis without ``region`` (None: the light's −Z axis). The other arguments are
+    a distant light's texel grid is anchored; ``down``: the stage's downward direction, a sphere,
+    point or cylinder light's axis without ``region`` (None: the light's −Z axis). The other arguments are
     :func:`~wsoft.lightspace.fit.fit_light_view`'s, with the same meaning, and so are the counts:
     ``receivers_outside`` and ``receivers_behind`` count the frame's receivers alone. The view's
     ``snap`` holds what was quantised (``radius``, ``texel``, ``snap_offset``, ``depth_step``)."""
@@ -130,11 +130,11 @@ def fit_stable_view(
     if light.kind == LIGHT_DISTANT:
         return _stable_distant(light, both, rlo, rhi, scene_lo, scene_hi, size, margin, margin_texels, casters, anchor, ext)
     has_region = region is not None and len(region) > 0
-    if light.kind in (LIGHT_SPHERE, LIGHT_POINT):
+    if light.kind in (LIGHT_SPHERE, LIGHT_POINT, LIGHT_CYLINDER):
         d = np.asarray(region, np.float64).reshape(-1, 3).mean(axis=0) - light.position if has_region else down
         if d is None or not np.linalg.norm(d) > 1e-9 * ext:
             d = -light.frame[:, 2]
-        axes = _basis_from_axis(np.asarray(d, np.float64))
+        axes = omni_axes(light, np.asarray(d, np.float64))
     else:
         axes = local_axes(light)
     return _stable_local(light, axes, rec, pts, rlo, rhi, size, margin, margin_texels, casters, all_casters, side_growth, has_region, ext)
@@ -186,7 +186,7 @@ def _stable_local(light, axes, rec, pts, rlo, rhi, size, margin, margin_texels, 
     :func:`~wsoft.lightspace.fit.fit_light_view`'s; near and far snapped."""
     origin = np.asarray(light.position, np.float64)
     zmin_ok = 1e-6 * ext
-    one_sided = light.kind not in (LIGHT_SPHERE, LIGHT_POINT)
+    one_sided = light.one_sided
     facing = np.asarray(light.frame, np.float64)[:, 2] if one_sided else None
     st = _local_fit_stats(pts, origin, axes, facing, zmin_ok, margin)
     s = st["front"] if one_sided and st["front"]["n"] else st["all"]

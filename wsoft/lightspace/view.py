@@ -1,7 +1,7 @@
 """Views and texel maths: where a light (or a camera) looks, and how points map to its texels.
 
 A :class:`LightView` is a perspective frustum from a local light's centre (rect, disk, sphere,
-point) or an orthographic box along a distant light, fitted to the receivers the camera sees
+point, cylinder) or an orthographic box along a distant light, fitted to the receivers the camera sees
 (:func:`~wsoft.lightspace.fit.fit_light_view`). On the device a view is a :class:`ViewGPU`. Coordinates, from world to texel:
 
 * **view space** (:func:`view_of`): x, y along the view's axes, z the *linear* depth along its

@@ -9,7 +9,7 @@ import numpy as np
 from wsoft.pipeline.build import build_graph
 from wsoft.pipeline.framing import frame_setup
 from wsoft.pipeline.loading import instancing_plan, load_stage, too_big_to_flatten
-from wsoft.scene.types import LIGHT_DISTANT, Light, Scene
+from wsoft.scene.types import LIGHT_CYLINDER, LIGHT_DISTANT, Light, Scene
 
 
 COLOR_APPLIED = "applied to R G B, not to V"
@@ -65,7 +65,8 @@ def plan(scene, techniques: list[str] | None = None, *, width: int | None = None
     (``framing``: which render settings prim and camera, where each came from, the resolution,
     conform policy and data window; see :meth:`Framing.describe`), the load's warnings and notes
     (``notes``: subdivision surfaces read as their cage, or refined; ``subdiv_level``), and per
-    technique the passes (with their kinds) or why it is not applicable to a light."""
+    technique the passes (with their kinds) or why it is not applicable to a light, and what it
+    renders of each cylinder light (``cylinder_lights``: its :attr:`~wsoft.techniques.Technique.cylinder_model`)."""
     from wsoft.techniques import TECHNIQUES
 
     if not isinstance(scene, Scene):
@@ -109,5 +110,10 @@ def plan(scene, techniques: list[str] | None = None, *, width: int | None = None
             out["not_applicable"][name] = [{"light": l.path, "reason": why} for l, why in built.skipped[label]]
         if label in built.channels:
             out["techniques"][name] = [p.name for p in built.ctx.graph.schedule([built.channels[label]])]
+            skipped = {l.path for l, _ in built.skipped[label]}
+            cyl = [l.path for l in scene.lights if l.kind == LIGHT_CYLINDER and l.path not in skipped
+                   and (light is None or getattr(light, "path", light) in (l.path, l.name))]
+            if cyl and TECHNIQUES[name].cylinder_model:
+                out.setdefault("cylinder_lights", {})[name] = [{"light": c, "model": TECHNIQUES[name].cylinder_model} for c in cyl]
             out.setdefault("pass_kinds", {}).update({p.name: p.kind for p in built.ctx.graph.schedule([built.channels[label]])})
     return out

@@ -6,11 +6,13 @@ pixel: a jittered ``m x m`` grid for a perfect-square count, else a randomly shi
 (Fibonacci) lattice, both unbiased; ``regular`` puts samples at stratum centres, one sample =
 the light's centre). Rect lights take the points in the rectangle; disk and sphere lights
 through the concentric map onto the disk (an elliptical disk's scaled by its semi-axes; the
-sphere seen as its silhouette disk, an ellipsoid as its silhouette ellipse); distant lights
-uniformly in the sun's cone. A sample counts only where its ray leaves the receiver's visible
-side and the light emits back along it (a rect or disk light from its front only:
-:func:`~wsoft.lightspace.light.lit_along`). Rays are any-hit against the scene's BVH and alpha-tested
-through cutout triangles. Randomness is seeded by the pattern's seed and the sample index.
+sphere seen as its silhouette disk, an ellipsoid as its silhouette ellipse); cylinder lights in
+their silhouette rectangle seen from the point (a line light on its segment,
+:func:`~wsoft.lightspace.light.silhouette_rect`); distant lights uniformly in the sun's cone. A
+sample counts only where its ray leaves the receiver's visible side and the light emits back along
+it (a rect or disk light from its front only: :func:`~wsoft.lightspace.light.lit_along`). Rays are
+any-hit against the scene's BVH and alpha-tested through cutout triangles. Randomness is seeded by
+the pattern's seed and the sample index.
 
 Two traversals give the same answer bit for bit (``tests/test_packets.py``; three kinds of
 exception found, all at float precision on a shared edge or a cutout's hole, where the packet

@@ -20,7 +20,9 @@ LIGHT_DISK = 1
 LIGHT_SPHERE = 2
 LIGHT_DISTANT = 3
 LIGHT_POINT = 4  # SphereLight with treatAsPoint or radius 0
-LIGHT_KIND_NAMES = {LIGHT_RECT: "rect", LIGHT_DISK: "disk", LIGHT_SPHERE: "sphere", LIGHT_DISTANT: "distant", LIGHT_POINT: "point"}
+LIGHT_CYLINDER = 5  # CylinderLight: its side along the frame's X (a line light: radius 0)
+LIGHT_KIND_NAMES = {LIGHT_RECT: "rect", LIGHT_DISK: "disk", LIGHT_SPHERE: "sphere", LIGHT_DISTANT: "distant", LIGHT_POINT: "point",
+                    LIGHT_CYLINDER: "cylinder"}
 
 EXACT_CASTER_POINTS = 4_000_000  # instanced vertices up to which Scene.caster_points holds them all (else instance box corners)
 
@@ -93,15 +95,17 @@ class Light:
     (:attr:`direction`): nothing behind their plane receives their light. Sphere lights are an
     ellipsoid of semi-axes :attr:`semi_axes` along the frame's axes about ``position`` (a ball of
     ``radius`` when round) and emit all around; distant lights shine along −Z with a cone of full
-    angle ``angle_deg``.
+    angle ``angle_deg``. Cylinder lights are the side of a cylinder of length ``2 half_size[0]``
+    along X and radius ``half_size[1]`` (= ``radius``) about ``position``, emitting all around from
+    its side (not its end caps); of radius 0 a line light (:attr:`is_line`).
     """
 
     path: str
     kind: int
     position: np.ndarray  # world position (unused for distant)
     frame: np.ndarray  # 3x3, columns = X, Y, Z axes (unit)
-    half_size: tuple[float, float] = (0.0, 0.0)  # rect half width / half height (world units)
-    radius: float = 0.0  # disk / sphere radius (world units); of an ellipse or ellipsoid its largest semi-axis
+    half_size: tuple[float, float] = (0.0, 0.0)  # rect half width / half height; cylinder half length / radius (world units)
+    radius: float = 0.0  # disk / sphere / cylinder radius (world units); of an ellipse or ellipsoid its largest semi-axis
     angle_deg: float = 0.0  # distant light full cone angle
     intensity: float = 1.0
     color: tuple[float, float, float] = (1.0, 1.0, 1.0)
@@ -158,6 +162,11 @@ class Light:
         n = 2 if self.kind == LIGHT_DISK else 3
         return tuple(self.radius * a for a in self.aspect[:n])
 
+    @property
+    def is_line(self) -> bool:
+        """Is the light a line light (a cylinder light of radius 0, or one with ``treatAsLine``)?"""
+        return self.kind == LIGHT_CYLINDER and self.radius == 0.0
+
     def points_behind(self, points: np.ndarray) -> int:
         """How many of ``points`` ([N, 3]) lie on or behind a one-sided light's plane (0 for the others)."""
         if not self.one_sided or len(points) == 0:
@@ -168,6 +177,8 @@ class Light:
     def size_description(self) -> str:
         if self.kind == LIGHT_RECT:
             return f"{2 * self.half_size[0]:g} x {2 * self.half_size[1]:g}"
+        if self.kind == LIGHT_CYLINDER:
+            return f"line, length {2 * self.half_size[0]:g}" if self.is_line else f"length {2 * self.half_size[0]:g}, radius {self.radius:g}"
         if self.elliptical:
             return f"{'ellipse' if self.kind == LIGHT_DISK else 'ellipsoid'}, semi-axes {' x '.join(f'{a:g}' for a in self.semi_axes)}"
         if self.kind in (LIGHT_DISK, LIGHT_SPHERE):
@@ -178,7 +189,7 @@ class Light:
 
     def extent(self) -> float:
         """Radius of the light's emitting region's bounding ball (world units; radians for distant)."""
-        if self.kind == LIGHT_RECT:
+        if self.kind in (LIGHT_RECT, LIGHT_CYLINDER):
             return math.hypot(*self.half_size)
         if self.kind in (LIGHT_DISK, LIGHT_SPHERE):
             return self.radius

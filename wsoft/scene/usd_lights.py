@@ -1,7 +1,7 @@
 """USD lights with their shadow controls, and cameras -> :class:`~wsoft.scene.types.Light`, :class:`~wsoft.scene.types.Camera`.
 
-:func:`read_light` reads the lights wsoft shadows (:data:`HANDLED_LIGHTS`: rect, disk, sphere and
-distant; the others are skipped with :data:`UNHANDLED_REASONS`) from their ``inputs:`` at the
+:func:`read_light` reads the lights wsoft shadows (:data:`HANDLED_LIGHTS`: rect, disk, sphere,
+cylinder and distant; the others are skipped with :data:`UNHANDLED_REASONS`) from their ``inputs:`` at the
 context's time code, their frame re-orthonormalised and their sizes scaled by the transform;
 :func:`read_shadow_controls` adds the ``UsdLux.ShadowAPI`` controls (shadow linking, distance,
 colour, falloff). :func:`read_camera` reads a ``UsdGeom.Camera``; :func:`auto_camera` frames a scene
@@ -14,13 +14,12 @@ import math
 
 import numpy as np
 
-from wsoft.scene.types import LIGHT_DISK, LIGHT_DISTANT, LIGHT_POINT, LIGHT_RECT, LIGHT_SPHERE, Camera, Light, Scene
+from wsoft.scene.types import LIGHT_CYLINDER, LIGHT_DISK, LIGHT_DISTANT, LIGHT_POINT, LIGHT_RECT, LIGHT_SPHERE, Camera, Light, Scene
 from wsoft.scene.usd_context import StageContext, pxr
 
-HANDLED_LIGHTS = ("RectLight", "DiskLight", "SphereLight", "DistantLight")
+HANDLED_LIGHTS = ("RectLight", "DiskLight", "SphereLight", "CylinderLight", "DistantLight")
 UNHANDLED_REASONS = {
     "DomeLight": "environment (dome) lighting has no finite emitter to shadow-map; not handled",
-    "CylinderLight": "cylinder lights are not handled by any technique",
     "GeometryLight": "mesh (geometry) lights are not handled by any technique",
     "PortalLight": "portal lights only shape a DomeLight; not handled",
     "PluginLight": "plugin lights have no known shape; not handled",
@@ -34,8 +33,17 @@ def read_light(ctx: StageContext, prim, type_name: str) -> Light | None:
     """The light ``prim`` (``type_name`` one of :data:`HANDLED_LIGHTS`) in the world: a rect light
     spans +-width/2, +-height/2 in its local XY plane, a disk light its radius there, a sphere light
     its radius about its origin (a sphere treated as a point, or of radius 0, is a point light), a
-    distant light its full ``angle`` in degrees; sizes scaled by the transform, intensity by
-    ``2^exposure``.
+    cylinder light the side of a cylinder of ``length`` along its local X and ``radius`` about its
+    origin (end caps do not emit), a distant light its full ``angle`` in degrees; sizes scaled by
+    the transform, intensity by ``2^exposure``.
+
+    A cylinder's length is scaled by the transform's X scale and its radius by the mean of its Y
+    and Z scales (unequal ones, an elliptical cross-section, are rendered round, with a warning).
+    ``treatAsLine`` (UsdLux: "effectively, a zero-radius cylinder") or radius 0 makes it a line
+    light of that length (:attr:`~wsoft.scene.types.Light.is_line`); length 0 leaves a side of no
+    area, rendered as a point light at its origin with a warning. ``inputs:intensity`` and
+    ``inputs:normalize`` scale how much light it emits, not which part of it a point sees: ``V``
+    does not depend on them.
 
     The frame's columns are the transformed local axes, normalised (and re-orthonormalised under
     shear). A mirroring transform (a negative determinant) keeps its reflection: the light's Z axis
@@ -96,6 +104,21 @@ def read_light(ctx: StageContext, prim, type_name: str) -> Light | None:
             sv_u[:, 2] = -sv_u[:, 2]  # a ball has no handedness: its frame a rotation
         common["frame"] = sv_u
         return Light(kind=LIGHT_SPHERE, radius=float(r0 * sv[0]), aspect=tuple(float(a) for a in sv / sv[0]), **common)
+    if type_name == "CylinderLight":
+        lt = UsdLux.CylinderLight(prim)
+        length = ctx.size(prim, "inputs:length", ctx.get(lt.GetLengthAttr(), 1.0)) * float(scale[0])
+        r0 = ctx.size(prim, "inputs:radius", ctx.get(lt.GetRadiusAttr(), 0.5))
+        line = bool(ctx.get(lt.GetTreatAsLineAttr(), False))
+        r = 0.0 if line else r0 * 0.5 * float(scale[1] + scale[2])
+        if length == 0:
+            ctx.warn(prim, "CylinderLight has length 0: its side has no area; rendered as a point light (hard shadows)")
+            return Light(kind=LIGHT_POINT, **common)
+        if r0 == 0 and not line:
+            ctx.warn(prim, "CylinderLight has radius 0: rendered as a line light")
+        if r > 0 and not _round(scale[1:]):
+            ctx.warn(prim, f"CylinderLight scaled unequally across its axis (Y {scale[1]:g}, Z {scale[2]:g}): its elliptical "
+                     f"cross-section is rendered round, of the mean radius {r:g}")
+        return Light(kind=LIGHT_CYLINDER, half_size=(0.5 * length, r), radius=r, **common)
     angle = ctx.finite(prim, "inputs:angle", ctx.get(UsdLux.DistantLight(prim).GetAngleAttr(), 0.53))
     if not (0.0 <= angle < 180.0):
         raise ctx.err(prim, f"DistantLight angle {angle} must be in [0, 180) degrees")

@@ -31,6 +31,7 @@ from wsoft.stages.builders import (
     add_box,
     add_camera,
     add_class_root,
+    add_cylinder_light,
     add_cutout_material,
     add_instance,
     add_material,
@@ -52,7 +53,7 @@ from wsoft.stages.builders import (
     world_dir,
 )
 
-__all__ = ["add_box", "add_camera", "add_class_root", "add_cutout_material", "add_instance", "add_material", "add_mesh",
-           "add_point_light", "add_quad", "add_rect_light", "add_sphere_light", "add_sun", "bind", "check_points_down",
+__all__ = ["add_box", "add_camera", "add_class_root", "add_cutout_material", "add_cylinder_light", "add_instance", "add_material",
+           "add_mesh", "add_point_light", "add_quad", "add_rect_light", "add_sphere_light", "add_sun", "bind", "check_points_down",
            "look_at_xform", "make_stage", "mark_casters", "set_custom_bool", "set_display_color", "set_doc_attr",
            "set_doc_string", "world_dir"]

@@ -190,6 +190,21 @@ def add_sphere_light(stage: Usd.Stage, path: str, pos, radius: float, intensity:
     return light
 
 
+def add_cylinder_light(stage: Usd.Stage, path: str, pos, length: float, radius: float, *, treat_as_line: bool | None = None,
+                       intensity: float | None = None) -> UsdLux.CylinderLight:
+    """A CylinderLight of ``length`` along its local X and ``radius`` at ``pos`` (a point, or a
+    Gf.Matrix4d); ``treat_as_line``: author ``treatAsLine``."""
+    light = UsdLux.CylinderLight.Define(stage, path)
+    light.CreateLengthAttr(float(length))
+    light.CreateRadiusAttr(float(radius))
+    if treat_as_line is not None:
+        light.CreateTreatAsLineAttr(bool(treat_as_line))
+    if intensity is not None:
+        light.CreateIntensityAttr(float(intensity))
+    _place(light, pos)
+    return light
+
+
 def add_point_light(stage: Usd.Stage, path: str, pos, *, intensity: float | None = None,
                     radius: float | None = None) -> UsdLux.SphereLight:
     """A SphereLight treated as a point (``treatAsPoint``) at ``pos``; ``radius``: authored when given."""

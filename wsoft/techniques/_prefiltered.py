@@ -35,6 +35,8 @@ class Prefiltered(Technique):
     map_params: ClassVar[tuple[str, ...]]
     size_param = "shadow_map_size"
     instancing_refusal = ""  # its maps draw instances (wsoft.raster.depth_map.instance_runs)
+    cylinder_model = ("the shadow of its centre through a prefiltered map (its size plays no part), in a light view that looks at the "
+                      "receivers as a sphere light's does")
 
     def prefilter(self, dm, device: str):  # pragma: no cover - interface
         """The prefiltered map ``[H, W]`` of the depth map ``dm``."""

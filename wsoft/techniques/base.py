@@ -155,6 +155,9 @@ class Technique:
     # point lights: "" when the technique renders them, else why it cannot (one line, naming what
     # to use instead); supports() then refuses them with it
     point_refusal: ClassVar[str] = ""
+    # cylinder lights (UsdLux CylinderLight, a line light at radius 0): what the technique renders of
+    # one, in a line (`wsoft techniques` and `wsoft plan` show it); "" where it does not say
+    cylinder_model: ClassVar[str] = ""
 
     def __init__(self, params):
         self.params = params
@@ -296,6 +299,7 @@ class Technique:
             ],
             "quality": [{"param": q.param, "values": list(q.values), "note": q.note} for q in cls.quality],
             "tolerance": dataclasses.asdict(cls.tolerance) if cls.tolerance else None,
+            "cylinder_light": cls.cylinder_model,
         }
 
     def add_passes(self, ctx, light):  # pragma: no cover - interface

@@ -77,7 +77,8 @@ inconsistent winding all follow one rule), and ``V`` only asks whether the count
    light at height 1 half hidden: 0.17 on average, ``tests/test_dcs.py``); the reference's V is
    the unweighted fraction.
 
-Lights: rect, disk, sphere and distant. A point light has no area: every sample is its centre and
+Lights: rect, disk, sphere, cylinder (its silhouette rectangle, sampled as the reference samples it;
+a line light its segment) and distant. A point light has no area: every sample is its centre and
 depth complexity sampling degenerates to a hard shadow (``hard`` or ``izb``). UsdLux's
 ``collection:shadowLink`` is honoured (the excluded prims are neither edges, BVH nor volumes);
 ``inputs:shadow:distance`` is refused (the counts run to the light). Instanced stages are
@@ -104,7 +105,7 @@ import warp as wp
 
 from wsoft.accel.dcs_bins import BinsGPU, receiver_items
 from wsoft.accel.occluders import count_crossings, in_wedge, side
-from wsoft.lightspace.light import LightGPU, is_round, light_bound, light_point, lit_along, silhouette_ellipse
+from wsoft.lightspace.light import LightGPU, disk_shaped, is_round, light_bound, light_point, lit_along, silhouette_ellipse, silhouette_rect
 from wsoft.lightspace.samples import LightSamples, sample_coords
 from wsoft.accel.stsv import in_volume, light_ball, planes_t, receiver_matrix, s_triangle, sample_blocked
 from wsoft.parallel import launch_chunked
@@ -112,7 +113,6 @@ from wsoft.raster.gbuffer import GBufferGPU, gb_covered
 from wsoft.raster.shadow_rays import ray_epsilon, receiver_begin
 from wsoft.scene.adjacency import silhouette_candidates
 from wsoft.scene.surfaces import Surfaces
-from wsoft.scene.types import LIGHT_RECT
 from wsoft.techniques._object_based import ObjectBased, ObjectBasedParams, object_based_passes
 from wsoft.techniques.base import Quality, Tolerance, check, param
 
@@ -289,6 +289,11 @@ def dcs_visibility(
                 axis = wp.normalize(wp.cross(eu, ev))
                 if wp.dot(axis, ce - p) < 0.0:
                     axis = -axis
+        elif light.kind == 5:  # a cylinder: the normal of its silhouette rectangle's plane, away from p
+            ce, eu, ev, ext = silhouette_rect(light, p)
+            axis = wp.normalize(wp.cross(eu, ev))
+            if wp.dot(axis, ce - p) < 0.0:
+                axis = -axis
         for s in range(S):
             dv = xs[s] - o
             dist = wp.length(dv)
@@ -325,6 +330,7 @@ class DCS(ObjectBased):
     distance_refusal = "the depth complexity counts every occluder between the receiver and the light"
     instancing_refusal = "its edges come from the flattened soup's adjacency and its reference rays walk the soup's BVH"
     point_refusal = "a point light has no area: depth complexity sampling needs light samples spread over it (use hard or izb)"
+    cylinder_model = "its silhouette rectangle seen from each receiver, sampled as the reference samples it (a line light: its segment)"
 
     def edges(self, scene, opaque, light, device):
         """The potential silhouette edges of the light's bound, with both faces' far corners."""
@@ -350,7 +356,7 @@ class DCS(ObjectBased):
         bvh_id = a["bvh"].id if a["bvh"] is not None else wp.uint64(0)
         launch_chunked(
             dcs_visibility, n,
-            inputs=[gb.gpu(), p.sample_pattern().on(dev, light.kind != LIGHT_RECT), ctx.light_gpu(light), ray_epsilon(gb, light),
+            inputs=[gb.gpu(), p.sample_pattern().on(dev, disk_shaped(light)), ctx.light_gpu(light), ray_epsilon(gb, light),
                     a["has_opaque"], bvh_id, a["tri_pts"], a["ebins"].gpu, a["edge_pts"], a["edge_faces"], int(st is not None), tb, stri,
                     planes, ds.cutouts, cut_pts, int(p.estimator == "direct")],
             outputs=[vis, wt, wh, vt], device=dev, min_chunk=256, per_thread=32)

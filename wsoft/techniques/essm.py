@@ -551,6 +551,8 @@ class ESSM(Technique):
     tolerance = Tolerance(mae=0.001, mae_penumbra=0.025)
     distance_refusal = "its summed-area tables of exp(-c z) sum every caster of a kernel together, so they cannot tell which lie within the distance"
     ellipsoid_caveat = "its bounding sphere (search and penumbra kernels sized by its largest semi-axis)"
+    cylinder_model = ("its bound seen along the light view's axis (toward the receivers' mean, its x along the cylinder): a rectangle "
+                      "of its projected length by its diameter, as a rect light's kernel (a line light: 1e-3 of its length wide)")
 
     def add_passes(self, ctx, light):
         p = self.params
@@ -561,7 +563,6 @@ class ESSM(Technique):
         # that differ only in H, level, subdivision, epsilon or bias share them
         bkey = ctx.shared_key("essm_basis", light, p.shadow_map_size, "sat", "mu", "c", "depth_range", "tile")
         skey = ctx.shared_key("essm_sat", light, p.shadow_map_size, "sat", "mu", "c", "depth_range", "tile", "build", "reads")
-        k = light_kernel(light)
 
         def run_basis(res):
             b = make_basis(res[depth], storage=p.sat, mu=p.mu, c=p.c, mode=p.depth_range, scene=ctx.scene, device=ctx.device,
@@ -580,7 +581,7 @@ class ESSM(Technique):
             vis = wp.empty(n, dtype=float, device=ctx.device)
             looks = wp.empty(n, dtype=wp.int32, device=ctx.device)
             fb = wp.empty(n, dtype=wp.int32, device=ctx.device)
-            launch_chunked(essm_shade, n, inputs=[dm.view.gpu(), k, consts_for(b, sat, p), sat.data, dm.depth, gb.gpu()],
+            launch_chunked(essm_shade, n, inputs=[dm.view.gpu(), light_kernel(light, dm.view), consts_for(b, sat, p), sat.data, dm.depth, gb.gpu()],
                            outputs=[vis, looks, fb], device=ctx.device, min_chunk=64)
             lk = looks.numpy()
             hit = gb.prim.numpy() >= 0

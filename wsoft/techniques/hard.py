@@ -86,6 +86,7 @@ class Hard(Technique):
     # up to 1 in the penumbra (about half of it on box_plane)
     tolerance = Tolerance(mae=0.009, mae_penumbra=0.36)
     horizon = "centre"  # binary: dark where the light's centre is behind the receiver's plane
+    cylinder_model = "the shadow of its centre (its size plays no part), in a light view that looks at the receivers as a sphere light's does"
 
     def add_passes(self, ctx, light):
         p = self.params

@@ -226,6 +226,8 @@ class MSMSoft(Technique):
     size_param = "shadow_map_size"
     tolerance = Tolerance(mae=0.0003, mae_penumbra=0.01)  # measured 0.00013, 0.0054
     distance_refusal = "its summed-area tables of depth moments sum every caster of a kernel together, so they cannot tell which lie within the distance"
+    cylinder_model = ("its bound seen along the light view's axis (toward the receivers' mean, its x along the cylinder): a rectangle "
+                      "of its projected length by its diameter, as a rect light's kernel (a line light: 1e-3 of its length wide)")
 
     def add_passes(self, ctx, light):
         p = self.params
@@ -234,7 +236,6 @@ class MSMSoft(Technique):
         out = ctx.visibility_key(light)
         mkey = ctx.shared_key("msm_soft_moments", light, p.shadow_map_size, "sat")
         skey = ctx.shared_key("msm_soft_sat", light, p.shadow_map_size, "sat", "mu", "max_radius", "build")
-        k = light_kernel(light)
 
         def run_moments(res):
             dm = res[depth]
@@ -261,7 +262,7 @@ class MSMSoft(Technique):
             q.min_r, q.max_r = p.min_radius, p.max_radius
             vis = wp.empty(gb.count, dtype=float, device=ctx.device)
             blk = wp.empty(gb.count, dtype=float, device=ctx.device)
-            launch_chunked(msm_soft_shade, gb.count, inputs=[dm.view.gpu(), k, q, sat.data, gb.gpu()], outputs=[vis, blk],
+            launch_chunked(msm_soft_shade, gb.count, inputs=[dm.view.gpu(), light_kernel(light, dm.view), q, sat.data, gb.gpu()], outputs=[vis, blk],
                            device=ctx.device, min_chunk=64)
             c = ctx.counters(light)
             c["z_range"] = [m.zmin, m.zmax]

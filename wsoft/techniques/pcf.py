@@ -93,6 +93,8 @@ class PCF(Technique):
     quality = (Quality("taps", (4, 16, 64), "more taps: a smoother filter, linearly more time"),)
     # a fixed 2-texel kernel: nearly as hard as `hard`
     tolerance = Tolerance(mae=0.0075, mae_penumbra=0.3)
+    cylinder_model = ("the shadow of its centre filtered over a fixed kernel (its size plays no part), in a light view that looks at the "
+                      "receivers as a sphere light's does")
 
     def add_passes(self, ctx, light):
         p = self.params

@@ -146,13 +146,14 @@ class PCSS(Technique):
 
     quality = (Quality("filter_samples", (16, 36, 100), "more filter taps: smoother penumbrae, linearly more time"),)
     tolerance = Tolerance(mae=0.0025, mae_penumbra=0.06)
+    cylinder_model = ("its bound seen along the light view's axis (toward the receivers' mean, its x along the cylinder): a rectangle "
+                      "of its projected length by its diameter, as a rect light's kernel (a line light: 1e-3 of its length wide)")
 
     def add_passes(self, ctx, light):
         p = self.params
         gbuf = ctx.gbuffer()
         depth = ctx.light_depth(light, size=p.shadow_map_size, soft=True, view=p.view)
         out = ctx.visibility_key(light)
-        k = light_kernel(light)
 
         def run(res):
             gb, dm = res[gbuf], res[depth]
@@ -167,7 +168,7 @@ class PCSS(Technique):
             blk = wp.empty(gb.count, dtype=float, device=ctx.device)
             launch_chunked(
                 shade_pcss, gb.count,
-                inputs=[dm.view.gpu(), k, dm.depth, gb.gpu(), bt.array, bt.count, ft.array, ft.count,
+                inputs=[dm.view.gpu(), light_kernel(light, dm.view), dm.depth, gb.gpu(), bt.array, bt.count, ft.array, ft.count,
                         z_min, bias, p.min_radius, p.max_radius, light.shadow_distance],
                 outputs=[vis, blk], device=ctx.device, min_chunk=256,
             )

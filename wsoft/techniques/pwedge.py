@@ -44,7 +44,8 @@ would do the same tests on more pixels: a wedge's screen footprint bounds its re
 where the wedge grazes a surface.
 
 Lights: rect, disk (an elliptical one too), sphere (its silhouette disk; an ellipsoid's silhouette
-ellipse) and distant (its cone as the disk it cuts at unit distance). A point light has no penumbra
+ellipse), cylinder (its silhouette rectangle seen from the receiver, the reference's; a line light as
+a rectangle :data:`~wsoft.lightspace.light.LINE_WIDTH` of its length wide) and distant (its cone as the disk it cuts at unit distance). A point light has no penumbra
 (use ``hard`` or ``izb``). The receiver's own horizon caps ``V`` by the part of the light in front
 of its tangent plane that emits toward it (``horizon = "fraction"``).
 ``collection:shadowLink`` is honoured; ``inputs:shadow:distance`` is refused. Instanced stages are
@@ -73,7 +74,7 @@ from wsoft.accel.dcs_bins import BinsGPU, receiver_items
 from wsoft.accel.occluders import count_crossings, in_wedge
 from wsoft.lightspace.bitmask import popcount
 from wsoft.lightspace.coverage import edge_coverage, light_frame
-from wsoft.lightspace.light import LightGPU, light_bound, light_point
+from wsoft.lightspace.light import LightGPU, disk_shaped, light_bound, light_point
 from wsoft.lightspace.samples import LightSamples, sample_coords
 from wsoft.accel.stsv import in_volume, light_ball, planes_t, receiver_matrix, s_triangle, sample_blocked
 from wsoft.parallel import launch_chunked
@@ -81,7 +82,6 @@ from wsoft.raster.gbuffer import GBufferGPU, gb_covered
 from wsoft.raster.shadow_rays import ray_epsilon, ray_offset, ray_origin, receiver_begin
 from wsoft.scene.adjacency import silhouette_candidates
 from wsoft.scene.surfaces import Surfaces
-from wsoft.scene.types import LIGHT_RECT
 from wsoft.techniques._object_based import ObjectBased, ObjectBasedParams, object_based_passes
 from wsoft.techniques.base import Quality, Tolerance, check, param
 
@@ -275,6 +275,8 @@ class PWedge(ObjectBased):
     distance_refusal = "its hard shadow and wedges run from the receiver to the light"
     instancing_refusal = "its edges come from the flattened soup's adjacency and its centre rays walk the soup's BVH"
     point_refusal = "a point light has no penumbra: penumbra wedges need an area (use hard or izb)"
+    cylinder_model = ("its silhouette rectangle seen from each receiver, its covered area exact as a rect light's (a line light: a rectangle "
+                      "1e-3 of its length wide)")
 
     def edges(self, scene, opaque, light, device):
         """The silhouette edges seen from the light's centre, with their hard shadow quads' planes."""
@@ -293,7 +295,7 @@ class PWedge(ObjectBased):
         vt = wp.empty(n, dtype=wp.int32, device=dev)
         launch_chunked(
             ls_buffer_pass, n,
-            inputs=[gb.gpu(), p.sample_pattern().on(dev, light.kind != LIGHT_RECT), ctx.light_gpu(light), ray_epsilon(gb, light),
+            inputs=[gb.gpu(), p.sample_pattern().on(dev, disk_shaped(light)), ctx.light_gpu(light), ray_epsilon(gb, light),
                     data["tbins"].gpu, data["stri"], data["planes"], ds.cutouts, data["cut_pts"], nbytes],
             outputs=[buf, vt], device=dev, min_chunk=256, per_thread=32)
         counters["stsv_tests"] = int(vt.numpy().astype(np.int64).sum())

@@ -52,6 +52,7 @@ class Reference(Technique):
     quality = (Quality("samples", (1, 4, 16, 64, 256), "more light samples: error down as 1/sqrt(samples), time up linearly"),)
     tolerance = Tolerance(mae=0.0003, mae_penumbra=0.01)
     horizon = "exact"  # per light sample, in the tracing kernel
+    cylinder_model = "its silhouette rectangle seen from each point, sampled (a line light: its segment)"
 
     def supports(self, scene, light) -> str | None:
         why = super().supports(scene, light)

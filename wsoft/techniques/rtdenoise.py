@@ -18,9 +18,10 @@ any-hit test does not give it.
 
 **Penumbra radius** (what NRD SIGMA's front end packs per pixel, ``SIGMA_FrontEnd_PackPenumbra``):
 per blocked ray ``d tan(a) / 2``, ``d`` the blocker's distance and ``a`` the light's angular radius
-seen from the blocker (``tan a = r / (D - d)``: ``r`` half a rect light's mean side, a disk's or
-sphere's radius, 0 for a point light, whose shadows are not blurred; ``D`` the light point's
-distance; a distant light: the tangent of its half angle), a quarter of the penumbra's geometric
+seen from the blocker (``tan a = r / (D - d)``: ``r`` half a rect light's mean side (a cylinder
+light's: of length by diameter), a disk's or sphere's radius, 0 for a point light, whose shadows
+are not blurred; ``D`` the light point's distance; a distant light: the tangent of its half
+angle), a quarter of the penumbra's geometric
 width ``2 r d / (D - d)``. This is NRD's directional front end (``d`` times the tangent of the
 angular radius, halved) for every light; NRD's local-light front end halves the full width instead,
 a radius twice as large (``radius_scale = 2``). Penumbra MAE against 256 reference samples with 2
@@ -111,7 +112,7 @@ from wsoft.raster.gbuffer import GBufferGPU, gb_covered
 from wsoft.raster.shadow_rays import ray_epsilon, receiver_begin, shadow_ray_length
 from wsoft.reference import reference_pattern
 from wsoft.scene.rays import Occluders, blocker_distance, occluders
-from wsoft.scene.types import LIGHT_DISK, LIGHT_DISTANT, LIGHT_RECT, LIGHT_SPHERE
+from wsoft.scene.types import LIGHT_CYLINDER, LIGHT_DISK, LIGHT_DISTANT, LIGHT_RECT, LIGHT_SPHERE
 from wsoft.techniques.base import PassSpec, Quality, Technique, Tolerance, check, param
 
 DENOISERS = ("penumbra", "atrous", "none")
@@ -242,13 +243,14 @@ def times_front(
 
 
 def light_radius(light) -> tuple[float, bool]:
-    """(the light's radius in ``tan a = r / (D - d)``: half a rect light's mean side, a disk's or
+    """(the light's radius in ``tan a = r / (D - d)``: half a rect light's mean side (a cylinder
+    light's, the rectangle of its length by its diameter), a disk's or
     sphere's radius (an ellipse's or ellipsoid's smallest semi-axis: the filter is round, and a
     radius from a longer axis blurs across the short one), 0 for a point light; for a distant light
     the tangent of its half angle, True)."""
     if light.kind == LIGHT_DISTANT:
         return math.tan(math.radians(0.5 * light.angle_deg)), True
-    if light.kind == LIGHT_RECT:
+    if light.kind in (LIGHT_RECT, LIGHT_CYLINDER):
         return 0.5 * float(light.half_size[0] + light.half_size[1]), False
     if light.kind in (LIGHT_DISK, LIGHT_SPHERE):
         return float(min(light.semi_axes)) if light.elliptical else float(light.radius), False
@@ -308,6 +310,8 @@ class RTDenoise(Technique):
     tolerance = Tolerance(mae=0.003, mae_penumbra=0.075)
     instancing_refusal = ""  # closest-hit rays go through the instances' top-level BVH (wsoft.scene.rays.blocker_distance)
     horizon = "exact"  # per ray, and the denoised part in front times the exact front fraction
+    cylinder_model = ("the reference's rays to its silhouette rectangle; the denoiser's penumbra radius from half its mean side, "
+                      "(length / 2 + radius) / 2, as a rect light's")
 
     def bake_support(self) -> str | None:
         if self.params.denoiser != "none":

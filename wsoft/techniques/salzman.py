@@ -166,6 +166,8 @@ class Salzman(Technique):
     # one blur width for every penumbra: the parallel-rectangle penumbra is matched only roughly
     tolerance = Tolerance(mae=0.007, mae_penumbra=0.28)
     distance_refusal = "its blurred depth and mask reconstruct one averaged caster depth per texel, not each caster's distance"
+    cylinder_model = ("the shadow of its centre through a filtered map (its size plays no part), in a light view that looks at the "
+                      "receivers as a sphere light's does")
 
     def supports(self, scene, light) -> str | None:
         why = super().supports(scene, light)

@@ -187,6 +187,8 @@ class VSSM(Technique):
     tolerance = Tolerance(mae=0.0003, mae_penumbra=0.01)
     distance_refusal = "its summed-area tables of depth moments sum every caster of a kernel together, so they cannot tell which lie within the distance"
     ellipsoid_caveat = "its bounding sphere (search and penumbra kernels sized by its largest semi-axis)"
+    cylinder_model = ("its bound seen along the light view's axis (toward the receivers' mean, its x along the cylinder): a rectangle "
+                      "of its projected length by its diameter, as a rect light's kernel (a line light: 1e-3 of its length wide)")
 
     def add_passes(self, ctx, light):
         p = self.params
@@ -195,7 +197,6 @@ class VSSM(Technique):
         out = ctx.visibility_key(light)
         mkey = ctx.shared_key("vssm_moments", light, p.shadow_map_size, "sat")
         skey = ctx.shared_key("vssm_sat", light, p.shadow_map_size, "sat", "mu", "build")
-        k = light_kernel(light)
 
         def run_moments(res):
             dm = res[depth]
@@ -220,7 +221,7 @@ class VSSM(Technique):
             q.min_r, q.max_r = p.min_radius, p.max_radius
             vis = wp.empty(gb.count, dtype=float, device=ctx.device)
             looks = wp.empty(gb.count, dtype=wp.int32, device=ctx.device)
-            launch_chunked(vssm_shade, gb.count, inputs=[dm.view.gpu(), k, q, sat.data, gb.gpu()], outputs=[vis, looks],
+            launch_chunked(vssm_shade, gb.count, inputs=[dm.view.gpu(), light_kernel(light, dm.view), q, sat.data, gb.gpu()], outputs=[vis, looks],
                            device=ctx.device, min_chunk=64)
             hit = gb.prim.numpy() >= 0
             c = ctx.counters(light)

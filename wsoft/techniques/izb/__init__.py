@@ -183,6 +183,7 @@ class IZB(Technique):
     # a binary shadow of the light's centre (as hard): exact where the light is a point
     tolerance = Tolerance(mae=0.009, mae_penumbra=0.36)
     horizon = "exact"  # per sample: the light's centre behind the tangent plane is shadowed
+    cylinder_model = "the exact hard shadow of its centre (its size plays no part)"
 
     @staticmethod
     def treatment(light) -> str:

@@ -69,10 +69,10 @@ from wsoft.accel.ssm_structures import (
 )
 from wsoft.errors import ParameterError
 from wsoft.lightspace.bitmask import PATTERN_ANY, PATTERN_JITTERED, PATTERN_REGULAR
-from wsoft.lightspace.light import light_kernel
+from wsoft.lightspace.light import disk_shaped, light_kernel
 from wsoft.lightspace.samples import SamplePattern
 from wsoft.parallel import launch_chunked
-from wsoft.scene.types import LIGHT_DISTANT, LIGHT_POINT, LIGHT_RECT
+from wsoft.scene.types import LIGHT_DISTANT, LIGHT_POINT
 from wsoft.params import LightViewParams, check_ranges
 from wsoft.techniques.base import PassSpec, Quality, Technique, Tolerance, check, param
 from wsoft.techniques.ssm.kernels import (
@@ -343,6 +343,8 @@ class SSM(Technique):
     tolerance = Tolerance(mae=0.0005, mae_penumbra=0.012)
     distance_refusal = "its pruning pyramids and merged micro-occluders classify receivers by depth ranges of all casters, not by each caster's distance"
     ellipsoid_caveat = "its bounding sphere (back-projection onto a disk of its largest semi-axis)"
+    cylinder_model = ("backprojection onto its bound seen along the light view's axis (toward the receivers' mean, its x along the "
+                      "cylinder): a rectangle of its projected length by its diameter, as a rect light (a line light: 1e-3 of its length wide)")
 
     def supports(self, scene, light) -> str | None:
         why = super().supports(scene, light)
@@ -362,14 +364,13 @@ class SSM(Technique):
         p = self.params
         gbuf = ctx.gbuffer()
         depth = ctx.light_depth(light, size=p.shadow_map_size, soft=True, view=p.view)
-        k = light_kernel(light)
         # the pruning structure and microrects depend on the map only: shared by every budget
         maps_key = ctx.shared_key("ssm_maps", light, p.shadow_map_size, "structure", "ysm_size", "occluder", "microrect_diagonal")
         search_key = ctx.key("ssm_search", light)
         loq_key = ctx.key("ssm_loq", light)
         out = ctx.visibility_key(light)
         dev = ctx.device
-        disk = light.kind != LIGHT_RECT
+        disk = disk_shaped(light)
         budget = budget_image(p, ctx.width, ctx.height)
         pts, code = light_samples(p.pattern, p.bitmask_size, disk, p.seed, dev)
         counters = ctx.counters(light)
@@ -377,7 +378,7 @@ class SSM(Technique):
         def setup_of(dm) -> SSMSetup:
             st = SSMSetup()
             st.lv = dm.view.gpu()
-            st.k = k
+            st.k = light_kernel(light, dm.view)
             st.occluder = OCCLUDERS[p.occluder]
             st.bitmask = int(p.visibility == "bitmask")
             st.n = p.bitmask_size
