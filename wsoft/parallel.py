@@ -150,8 +150,13 @@ def uncached_modules(device: str, skip: tuple[str, ...] = ()) -> list:
 
 
 def uncached_seconds(device: str, skip: tuple[str, ...] = ()) -> float:
-    """A rough estimate of the seconds :func:`uncached_modules` take to compile."""
-    return len(uncached_modules(device, skip)) * SECONDS_PER_MODULE["cpu" if device.startswith("cpu") else "cuda"]
+    """A rough estimate of the seconds :func:`uncached_modules` take to compile; 0 (no estimate)
+    where this Warp's cache layout is not the one :func:`uncached_modules` reads."""
+    try:
+        n = len(uncached_modules(device, skip))
+    except (ImportError, AttributeError, TypeError, KeyError):
+        return 0.0
+    return n * SECONDS_PER_MODULE["cpu" if device.startswith("cpu") else "cuda"]
 
 
 def compile_time(t0: float, t1: float) -> tuple[float, float]:
