@@ -104,7 +104,9 @@ def _time_module_loads() -> None:
     timed_load.__doc__ = load.__doc__
     Module.load = timed_load
 
-    compile_ = Module._compile  # the step of Module.load that builds the binary unless the cache holds it
+    compile_ = getattr(Module, "_compile", None)  # the step of Module.load that builds the binary unless the cache holds it
+    if compile_ is None:  # another Warp: no compile notices, timings as above
+        return
 
     def noted_compile(self, device=None, output_dir=None, output_name=None, *args, **kwargs):
         if _COMPILE_LISTENERS and output_dir is not None and output_name is not None and (
