@@ -276,6 +276,35 @@ def _light_cell(row: dict) -> str:
     return name if row_metric(row) == "mae_penumbra" else f"{name} (all pixels)"
 
 
+def choice_section(rows: list[dict]) -> list[str]:
+    """Which technique to use: per scene and light, the fastest setting of any technique (the
+    reference included) that reaches each target, and the fastest that is not the reference; then
+    how often each technique is that fastest one."""
+    L = ["## Which technique to use", "",
+         "Per scene and light, the fastest setting of all (the reference at its sample counts included) whose error is at most "
+         "each target, and the fastest real-time technique (not the reference) reaching 0.05 (`-`: none does). "
+         "Error: penumbra MAE, or all pixels' MAE for a point light.", "",
+         "| scene | light | fastest to " + " | fastest to ".join(f"≤ {t}" for t in TARGETS) + f" | fastest but the reference to ≤ {TARGETS[0]} |",
+         "|---|---|" + "---|" * (len(TARGETS) + 1)]
+    wins: dict[float, dict[str, int]] = {t: {} for t in TARGETS}
+    for r in sorted(rows, key=lambda r: (r["scene"], r["light"])):
+        metric = row_metric(r)
+        cells = []
+        for t in TARGETS:
+            e = time_to_reach(r["entries"], t, metric)
+            if e is not None:
+                wins[t][e["technique"]] = wins[t].get(e["technique"], 0) + 1
+            cells.append("-" if e is None else f"{setting_text(e)}, {e['frame_ms']:.0f} ms")
+        e = time_to_reach([x for x in r["entries"] if x["technique"] != "reference"], TARGETS[0], metric)
+        cells.append("-" if e is None else f"{setting_text(e)}, {e['frame_ms']:.0f} ms")
+        L.append(f"| {r['scene']} | {_light_cell(r)} | " + " | ".join(cells) + " |")
+    L.append("")
+    for t in TARGETS:
+        tally = ", ".join(f"`{k}` {n}" for k, n in sorted(wins[t].items(), key=lambda kv: (-kv[1], kv[0])))
+        L.append(f"* Fastest to ≤ {t} on {sum(wins[t].values())} of {len(rows)} frames: {tally or 'none'}.")
+    return L + [""]
+
+
 def report(rows: list[dict], md: Path, ctx: dict) -> None:
     from wsoft.bench.common import report_header
 
@@ -306,6 +335,7 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
             L.append("equals a brute force over every triangle on its own rays")
             L.append("(`tests/test_izb.py::test_none_differs_from_the_reference_only_where_their_ray_conventions_do`).")
     L.append("")
+    L += choice_section(rows)
     L.append("## Time to reach penumbra MAE 0.05 and 0.02")
     L.append("")
     L.append("The fastest setting of each technique that reaches the target, per scene and light (`-`: not reached by any of its settings).")
