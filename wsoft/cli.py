@@ -106,7 +106,8 @@ class PassProgress:
         """Show that Warp compiles ``module`` during the current pass."""
         self._compiling = module
         if self.bar is not None:
-            self.bar.set_postfix_str(f"{self._pass or ''} (compiling {module})", refresh=False)
+            shown = time.monotonic() - self._start >= self.delay_s  # the bar is on the screen: say it at once
+            self.bar.set_postfix_str(f"{self._pass or ''} (compiling {module})", refresh=shown)
 
     def _tick(self) -> None:
         while not self._stop.wait(0.5):
