@@ -244,6 +244,11 @@ class LightKernel:
     half: wp.vec2
 
 
+CYLINDER_KERNEL = ("its bound seen along the light view's axis (toward the receivers' mean, its x along the cylinder): a rectangle "
+                   "of its projected length by its diameter, as a rect light's kernel (a line light: 1e-3 of its length wide)")
+"""What a technique whose kernel is :func:`light_kernel` renders of a cylinder light (its ``cylinder_model``)."""
+
+
 def light_kernel(light: Light, view=None) -> LightKernel:
     """The light's half extents along a light view's x and y (a rect or disk light's view is
     aligned with its X and Y: an elliptical disk's two semi-axes); a sphere light's radius, which

@@ -55,7 +55,7 @@ import warp as wp
 
 from wsoft.accel.pyramid import effective_depth_range
 from wsoft.accel.sat import Moments, box_area, build_sat, check_sat_params, mean_pyramid, sat_box
-from wsoft.lightspace.light import LightKernel, light_kernel, spread_texels
+from wsoft.lightspace.light import CYLINDER_KERNEL, LightKernel, light_kernel, spread_texels
 from wsoft.lightspace.moments import (
     QUANTISATION,
     QUANTISATION_OFFSET,
@@ -226,8 +226,7 @@ class MSMSoft(Technique):
     size_param = "shadow_map_size"
     tolerance = Tolerance(mae=0.0003, mae_penumbra=0.01)  # measured 0.00013, 0.0054
     distance_refusal = "its summed-area tables of depth moments sum every caster of a kernel together, so they cannot tell which lie within the distance"
-    cylinder_model = ("its bound seen along the light view's axis (toward the receivers' mean, its x along the cylinder): a rectangle "
-                      "of its projected length by its diameter, as a rect light's kernel (a line light: 1e-3 of its length wide)")
+    cylinder_model = CYLINDER_KERNEL
 
     def add_passes(self, ctx, light):
         p = self.params

@@ -31,7 +31,7 @@ import numpy as np
 import warp as wp
 
 from wsoft.accel.filters import pcf_visibility, taps_on
-from wsoft.lightspace.light import LightKernel, light_kernel, spread
+from wsoft.lightspace.light import CYLINDER_KERNEL, LightKernel, light_kernel, spread
 from wsoft.lightspace.samples import to_light_coords
 from wsoft.lightspace.view import (
     DEPTH_CLEAR,
@@ -146,8 +146,7 @@ class PCSS(Technique):
 
     quality = (Quality("filter_samples", (16, 36, 100), "more filter taps: smoother penumbrae, linearly more time"),)
     tolerance = Tolerance(mae=0.0025, mae_penumbra=0.06)
-    cylinder_model = ("its bound seen along the light view's axis (toward the receivers' mean, its x along the cylinder): a rectangle "
-                      "of its projected length by its diameter, as a rect light's kernel (a line light: 1e-3 of its length wide)")
+    cylinder_model = CYLINDER_KERNEL
 
     def add_passes(self, ctx, light):
         p = self.params
