@@ -58,17 +58,20 @@ def run_cli(stage: str, technique: str, out_dir: str, name: str, map_size: int =
 
 
 def supports(stage: str, technique: str) -> bool:
-    """Does ``technique`` support the stage's light (``ssm`` has no point lights)? Unloadable stages: yes."""
+    """Does ``technique`` support the stage's light (``ssm`` has no point lights; ``izb`` no light whose
+    receivers need a cube map), as the frame graph decides it? Unloadable stages: yes."""
     import wsoft
     from wsoft.errors import WsoftError
-    from wsoft.techniques import create
+    from wsoft.pipeline.build import build_graph
 
     try:
         scene = wsoft.load_scene(stage)
+        if not scene.lights:
+            return True
+        built = build_graph(scene, technique, strict=False)
     except WsoftError:
         return True
-    t = create(technique, {})
-    return any(t.supports(scene, l) is None for l in scene.lights) or not scene.lights
+    return bool(built.lights[built.labels[0]])
 
 
 class Corpus:

@@ -90,6 +90,14 @@ class BakeContext(RenderContext):
         super().__init__(scene, None, gbuffer.width, gbuffer.height, device)
         self.bake_points = gbuffer
 
+    def probe_receivers(self) -> tuple[np.ndarray, str]:
+        """Every bake point decides which lights get a cube map (there is no camera to probe with)."""
+        if self._probe is None:
+            gb = self.bake_points
+            prim = gb.prim.numpy()
+            self._probe = (gb.pos.numpy()[prim >= 0].astype(np.float64), f"{int(np.count_nonzero(prim >= 0))} bake points")
+        return self._probe
+
     def gbuffer(self):
         gb = self.bake_points
         return self.add(Pass("bake_points", (), (GBUFFER,), lambda res: {GBUFFER: gb}, kind="gbuffer"))

@@ -410,6 +410,8 @@ def cmd_plan(args) -> int:
         print(f"      shadow:distance: {dist}")
         print(f"      shadow:color: ({', '.join(f'{c:g}' for c in sh['color'])}): {sh['color_applied']}")
         print(f"      shadow:falloff: {sh['falloff']:g}, falloffGamma {sh['falloff_gamma']:g}: {sh['falloff_applied']}")
+        if l["path"] in p.get("light_views", {}):
+            print(f"      light views (shadow-map techniques, cube=auto): {p['light_views'][l['path']]}")
     print("lights skipped:" + ("" if p["skipped_lights"] else " (none)"))
     for l in p["skipped_lights"]:
         print(f"  {l['path']:<32} {l['kind']:<12} {l['reason']}")

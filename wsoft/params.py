@@ -64,6 +64,7 @@ def range_text(f) -> str:
 
 
 VIEWS = ("fitted", "stable", "sequence")
+CUBE_MODES = ("auto", "always", "never")  # wsoft.lightspace.cube: when a light's views form a cube map
 """How a shadow-map technique's light view is fitted (:class:`LightViewParams`)."""
 
 
@@ -81,6 +82,9 @@ class LightViewParams:
                                 "window on whole texels of a fixed grid, depth range snapped: edges that do not shimmer in motion, "
                                 "texels up to 19 % coarser) or sequence (the stable view fitted once to the receivers of every frame "
                                 "of a sequence)", choices=VIEWS)
+    cube: str = param("auto", "cube map of a sphere, point or cylinder light (wsoft.lightspace.cube): auto (where its receivers lie more "
+                              "than 60 degrees off one axis), always, or never (one frustum; receivers beyond it left lit, with a warning)",
+                      choices=CUBE_MODES)
 
 
 def parse_frames(text: str) -> list[float]:

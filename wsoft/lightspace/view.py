@@ -140,6 +140,7 @@ class LightView:
     # a stable view's quantities (wsoft.lightspace.stable): ladder radius, texel size (window units),
     # window centre in whole texels from its anchor (snap_offset), depth step; None: a fitted view
     snap: dict | None = None
+    face: int = -1  # a cube map's face (wsoft.lightspace.cube.FACE_NAMES); -1: a single view
 
     def gpu(self) -> ViewGPU:
         g = ViewGPU()

@@ -15,6 +15,7 @@ import warp as wp
 
 from wsoft.errors import ParameterError, SceneError
 from wsoft.graph import Key, Pass, Resources
+from wsoft.lightspace.view import MAX_HALF_ANGLE
 from wsoft.pipeline.context import RenderContext, TechniqueContext
 from wsoft.pipeline.framing import frame_setup, local_origin
 from wsoft.pipeline.loading import flatten_for, instancing_plan
@@ -125,7 +126,7 @@ def build_graph(scene: Scene, technique, *, width: int | None = None, height: in
     built.instancing = instancing
     for tech, label in zip(techs, labels):
         tctx = ctx.technique(tech, label)
-        mine, skipped = supported_lights(tech, scene, lights)
+        mine, skipped = supported_lights(tech, scene, lights, ctx)
         built.skipped[label] = skipped
         if not mine:
             if strict:
@@ -138,11 +139,17 @@ def build_graph(scene: Scene, technique, *, width: int | None = None, height: in
     return built
 
 
-def supported_lights(tech, scene: Scene, lights: list[Light]) -> tuple[list[Light], list[tuple[Light, str]]]:
-    """``lights`` split into those ``tech`` supports and (light, reason) for the others."""
+def supported_lights(tech, scene: Scene, lights: list[Light], ctx: RenderContext | None = None) -> tuple[list[Light], list[tuple[Light, str]]]:
+    """``lights`` split into those ``tech`` supports and (light, reason) for the others; with ``ctx``,
+    a technique with a :attr:`~wsoft.techniques.Technique.cube_refusal` also refuses a light whose
+    receivers no single frustum of at most ±80° holds (:meth:`~wsoft.pipeline.context.RenderContext.cube_decision`)."""
     mine, skipped = [], []
     for l in lights:
         why = tech.supports(scene, l)
+        if why is None and ctx is not None and tech.cube_refusal:
+            d = ctx.cube_decision(l)
+            if d.cube("auto") and d.half_angle > MAX_HALF_ANGLE:  # beyond the widest single frustum
+                why = f"it needs a cube map ({d.why('auto')}), which {tech.name} cannot use: {tech.cube_refusal}"
         if why is None:
             mine.append(l)
         else:
@@ -157,7 +164,11 @@ def visibility_of(ctx: RenderContext, tctx: TechniqueContext, light: Light) -> K
     every other technique is capped by its front fraction; receivers behind a one-sided light are
     counted and warned about (:meth:`~wsoft.pipeline.context.RenderContext.light_behind`)."""
     tech = tctx.tech
-    vk = tech.add_passes(tctx, light)
+    faces = ctx.cube_faces(light, getattr(tech.params, "cube", None))
+    if faces:  # a cube map: the technique's passes on each face, each receiver's visibility from its own face
+        vk = ctx.select_cube_faces(tctx, light, faces, [tech.add_passes(tctx, f) for f in faces])
+    else:
+        vk = tech.add_passes(tctx, light)
     if tech.distance_caveat and light.distance_limited:
         ctx.warn(ctx.graph.producers[vk], distance_caveat_warning(tech, light))
     if tech.ellipsoid_caveat and light.kind == LIGHT_SPHERE and light.elliptical:

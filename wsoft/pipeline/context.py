@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+import time
 from dataclasses import dataclass
 from typing import Any
 
@@ -19,6 +20,7 @@ import warp as wp
 
 from wsoft.errors import DeclarationError
 from wsoft.graph import FrameGraph, Key, Pass
+from wsoft.lightspace.cube import CUBE_KINDS, FACE_NAMES, CubeDecision, CubeFace, cube_decision, cube_frame, fit_cube_views, select_cube_face, vec6i
 from wsoft.lightspace.light import disk_shaped, light_gpu
 from wsoft.lightspace.fit import fit_light_view
 from wsoft.lightspace.stable import fit_stable_view
@@ -83,6 +85,8 @@ class RenderContext:
         self.graph = FrameGraph()
         self.counters: dict[str, Any] = {"frame": {}, "passes": {}, "techniques": {}}
         self._labels = {l.path: scene.light_label(l) for l in scene.lights}
+        self._cube: dict[str, CubeDecision] = {}  # light path -> whether its views form a cube map (cube_decision)
+        self._probe: tuple[np.ndarray, str] | None = None
         self.warnings: dict[str, list[str]] = {}  # pass name -> warnings it raised (a frame lists those of its passes)
         self.fit_receivers: dict[str, np.ndarray] | None = history.fit_receivers if history is not None else None
         """Light path -> world points [N, 3] that a ``view=sequence`` light view
@@ -98,7 +102,76 @@ class RenderContext:
 
     # -- naming ------------------------------------------------------------------------------------
     def label(self, light: Light) -> str:
-        return self._labels.get(light.path, light.name)
+        """The light's label in keys, pass names and channels; a cube map's face adds its name (``Lamp/+x``)."""
+        base = self._labels.get(light.path, light.name)
+        return f"{base}/{light.face_name}" if isinstance(light, CubeFace) else base
+
+    # -- cube maps -----------------------------------------------------------------------------------
+    PROBE_WIDTH = 128  # pixels across the low-resolution G-buffer that decides which lights get a cube map
+
+    def probe_receivers(self) -> tuple[np.ndarray, str]:
+        """The receivers of a low-resolution G-buffer (:data:`PROBE_WIDTH` pixels across, the frame's
+        camera, one sample per pixel) as world points [N, 3], and its size (``"128x96"``): what
+        decides, while the graph is built, which lights get a cube map and which faces it draws.
+        Timed in the frame's counters (``cube_probe_ms``)."""
+        if self._probe is None:
+            t0 = time.perf_counter()
+            ds, _ = self.scene.device_copy(self.device, upload_scene)
+            pw = min(self.width, self.PROBE_WIDTH)
+            ph = max(1, round(self.height * pw / max(self.width, 1)))
+            gb = render_gbuffer(ds, camera_gpu(self.camera), pw, ph, 1, self.scene.has_cutouts)
+            prim = gb.prim.numpy()
+            self._probe = (gb.pos.numpy()[prim >= 0].astype(np.float64), f"{pw}x{ph}")
+            self.counters["frame"]["cube_probe_ms"] = 1e3 * (time.perf_counter() - t0)
+        return self._probe
+
+    def cube_decision(self, light: Light) -> CubeDecision:
+        """Whether ``light``'s views form a cube map and which faces hold receivers
+        (:func:`~wsoft.lightspace.cube.cube_decision`, from :meth:`probe_receivers`), decided once per frame."""
+        d = self._cube.get(light.path)
+        if d is None:
+            if light.kind in CUBE_KINDS:
+                rec, probe = self.probe_receivers()
+                d = cube_decision(light, rec, probe)
+            else:
+                d = CubeDecision(light.path, False, 0.0, (), "")
+            self._cube[light.path] = d
+        return d
+
+    def cube_faces(self, light: Light, mode: str | None) -> list[CubeFace] | None:
+        """The faces a technique with ``cube=mode`` (None: a technique without light views) draws of
+        ``light``, or None: one view."""
+        if mode is None or light.kind not in CUBE_KINDS or isinstance(light, CubeFace):
+            return None
+        d = self.cube_decision(light)
+        if not d.cube(mode):
+            return None
+        return [CubeFace.of(light, k) for k in d.faces]
+
+    def _cube_view(self, face: CubeFace, size: int, soft: bool, guard: float) -> Key:
+        """Resource: the view of one face of ``face``'s light's cube map; one pass fits the views of
+        every face it draws (:func:`~wsoft.lightspace.cube.fit_cube_views`), the same window for all."""
+        gk = self.gbuffer()
+        faces = self.cube_decision(face).faces
+        base = self._labels.get(face.path, face.name)
+        variant = f"@{size}" + ("+soft" if soft else "") + f"+guard{guard:g}"
+        keys = {k: Key("light_view", f"{base}/{FACE_NAMES[k]}", variant=variant) for k in faces}
+        name = f"fit_cube[{base}]{variant}"
+
+        def run(res):
+            gb: GBuffer = res[gk]
+            prim = gb.prim.numpy()
+            rec = gb.pos.numpy()[prim >= 0]
+            views, facts = fit_cube_views(face, rec, faces, size, guard, casters=self.scene.caster_points if soft else None)
+            c = self.pass_counters(name)
+            c.update(cube_faces=[FACE_NAMES[k] for k in faces], receivers_per_face=facts["receivers"], guard=facts["guard"],
+                     texels=len(faces) * size * size)
+            if facts["guard_capped"]:
+                c["guard_capped"] = True
+            return {keys[k]: views[k] for k in faces}
+
+        self.add(Pass(name, (gk,), tuple(keys.values()), run, kind="light_map", light=base))
+        return keys[face.face]
 
     def light_gpu(self, light: Light):
         return light_gpu(light, self.scene.diagonal)
@@ -168,8 +241,12 @@ class RenderContext:
 
         return self.add(Pass("gbuffer_channels", (gk,), (GBUFFER_CHANNELS,), run, kind="resolve"))
 
-    def light_view(self, light: Light, size: int, soft: bool = False, view: str = "fitted") -> Key:
+    def light_view(self, light: Light, size: int, soft: bool = False, view: str = "fitted", guard: float = 2.0) -> Key:
         """Resource: a :class:`LightView` of ``light`` fitted to the receivers in view.
+
+        A :class:`~wsoft.lightspace.cube.CubeFace` gets its face of the light's cube map, with a guard
+        band of at least ``guard`` texels (:meth:`_cube_view`; its window is fixed by the light's frame,
+        so ``stable`` and ``sequence`` give the same view).
 
         ``soft``: widened so that casters blocking any part of the whole light are mapped.
         ``view``: ``fitted`` (:func:`fit_light_view`), ``stable`` (:func:`fit_stable_view`: its
@@ -177,6 +254,9 @@ class RenderContext:
         ``texel``, ``snap_offset``) or ``sequence`` (the stable view fitted also to
         :attr:`fit_receivers`, the receivers of every frame of the sequence: one view for all its
         frames); each is its own resource, shared by the techniques that ask for the same."""
+        if isinstance(light, CubeFace):
+            _stable(view)
+            return self._cube_view(light, size, soft, guard)
         gk = self.gbuffer()
         stable = _stable(view)
         whole_sequence = view == "sequence"
@@ -284,7 +364,7 @@ class RenderContext:
         return view
 
     def light_depth(self, light: Light, size: int, conservative: bool = False, soft: bool = False, inner: bool = False,
-                    opaque: bool = False, faces: str = "all", view: str = "fitted") -> Key:
+                    opaque: bool = False, faces: str = "all", view: str = "fitted", guard: float = 2.0) -> Key:
         """Resource: a :class:`~wsoft.raster.depth_map.DepthMap` of the :meth:`light_view` ``view``
         (``fitted`` or ``stable``) of ``light`` (alpha-tested only if the scene has
         cutouts); ``inner``: the map of depths that certainly block a whole texel (inner coverage);
@@ -296,11 +376,12 @@ class RenderContext:
         never share a map."""
         sk = self.scene_arrays()
         casting = self.scene.casting_triangles(light)  # None: every triangle (no list, no extra work)
-        vk = self.light_view(light, size, soft, view)
+        vk = self.light_view(light, size, soft, view, guard)
         alpha = self.scene.has_cutouts and not opaque
         flavour = (("_alpha" if alpha else "") + ("_inner" if inner else "_conservative" if conservative else "")
                    + ("" if faces == "all" else f"_{faces}"))
-        key = Key("light_depth", self.label(light), variant=_view_variant(size, soft, view), flavour=flavour)
+        variant = vk.variant if isinstance(light, CubeFace) else _view_variant(size, soft, view)
+        key = Key("light_depth", self.label(light), variant=variant, flavour=flavour)
         name = str(key)
 
         def run(res):
@@ -381,6 +462,53 @@ class RenderContext:
         return self.add(Pass(tctx.pass_name(f"horizon_{tctx.tech.name}", light), inputs, (key,), run, kind="shade", stage="horizon",
                              technique=tctx.label_, light=self.label(light)))
 
+    def select_cube_faces(self, tctx: "TechniqueContext", light: Light, faces: list[CubeFace], vis_keys: list[Key]) -> Key:
+        """Resource: a technique's visibility of ``light`` from its cube map: each G-buffer sample's
+        from the face its direction from the light's centre belongs to (:func:`select_cube_face`).
+        The technique's counters for the light: ``cube_faces`` (the faces drawn), ``cube_texels``
+        (texels of the face views its passes read). A sample at the light's centre (no direction)
+        gets V = 1 and a warning; so does one whose face the probe found empty."""
+        gk = self.gbuffer()
+        out = tctx.visibility_key(light)
+        name = tctx.pass_name("cube_select", light)
+        views = list(dict.fromkeys(tctx.face_views.get(light.path, [])))
+        frame = cube_frame(light)
+        slots = [-1] * 6
+        for s, f in enumerate(faces):
+            slots[f.face] = s
+
+        def run(res):
+            gb: GBuffer = res[gk]
+            dev = self.device
+            vis = wp.empty(gb.count, dtype=float, device=dev)
+            face_of = wp.empty(gb.count, dtype=wp.int32, device=dev)
+            dummy = wp.ones(1, dtype=float, device=dev)
+            arrays = [res[vis_keys[slots[k]]].vis if slots[k] >= 0 else dummy for k in range(6)]
+            ext = self.scene.diagonal
+            from wsoft.parallel import launch_chunked
+
+            launch_chunked(select_cube_face, gb.count,
+                           inputs=[gb.pos, gb.prim, wp.vec3(*np.asarray(light.position, np.float64)), wp.mat33(*frame.T.ravel()),
+                                   vec6i(*slots), *arrays, float(1e-7 * ext)],
+                           outputs=[vis, face_of], device=dev)
+            fo = face_of.numpy()
+            total = int(np.count_nonzero(fo != 6))
+            c = tctx.counters(light)
+            c["cube_faces"] = [f.face_name for f in faces]
+            c["cube_texels"] = int(sum(res[k].width * res[k].height for k in views))
+            at_light, undrawn = int(np.count_nonzero(fo == -1)), int(np.count_nonzero(fo == -2))
+            if at_light:
+                self.warn(name, f"light {light.path}: {at_light} of {total} visible samples lie at its centre (no direction to it): "
+                                "V = 1 there")
+            if undrawn:
+                self.warn(name, f"light {light.path}: {undrawn} of {total} visible samples lie in cube-map faces the "
+                                f"{self.cube_decision(light).probe} probe found no receiver in, which were not drawn: they are "
+                                "left unshadowed")
+            return {out: tctx.visibility(vis)}
+
+        return tctx.ctx.add(Pass(name, (gk, *vis_keys, *views), (out,), run, kind="technique", stage="cube_select",
+                                 technique=tctx.label_, light=self.label(light)))
+
     def provide(self, key: Key, value: Any, *, name: str | None = None, kind: str = "reference") -> Key:
         """A resource computed outside the graph (a cached reference image): a pass that hands it over."""
         return self.add(Pass(name or str(key), (), (key,), lambda res: {key: value}, kind=kind))
@@ -417,6 +545,7 @@ class TechniqueContext:
         self.ctx = ctx
         self.tech = tech
         self.label_ = label
+        self.face_views: dict[str, list[Key]] = {}  # light path -> the cube-map face views its passes read
 
     # the render context's state and providers
     scene = property(lambda self: self.ctx.scene)
@@ -433,11 +562,20 @@ class TechniqueContext:
         return self.ctx.gbuffer()
 
     def light_view(self, light: Light, size: int, soft: bool = False, view: str = "fitted") -> Key:
-        return self.ctx.light_view(light, size, soft, view)
+        key = self.ctx.light_view(light, size, soft, view, self.tech.cube_guard_texels())
+        self._note_face_view(light, key)
+        return key
 
     def light_depth(self, light: Light, size: int, conservative: bool = False, soft: bool = False, inner: bool = False,
                     opaque: bool = False, faces: str = "all", view: str = "fitted") -> Key:
-        return self.ctx.light_depth(light, size, conservative, soft, inner, opaque, faces, view)
+        guard = self.tech.cube_guard_texels()
+        self._note_face_view(light, self.ctx.light_view(light, size, soft, view, guard))
+        return self.ctx.light_depth(light, size, conservative, soft, inner, opaque, faces, view, guard)
+
+    def _note_face_view(self, light: Light, key: Key) -> None:
+        """Remember the views of a cube map's faces this technique reads (its counters count their texels)."""
+        if isinstance(light, CubeFace):
+            self.face_views.setdefault(light.path, []).append(key)
 
     def front_fraction(self, light: Light, centre: bool = False) -> Key:
         return self.ctx.front_fraction(light, centre)

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from wsoft.lightspace.cube import CUBE_KINDS
 from wsoft.pipeline.build import build_graph
 from wsoft.pipeline.framing import frame_setup
 from wsoft.pipeline.loading import instancing_plan, load_stage, too_big_to_flatten
@@ -66,7 +67,9 @@ def plan(scene, techniques: list[str] | None = None, *, width: int | None = None
     conform policy and data window; see :meth:`Framing.describe`), the load's warnings and notes
     (``notes``: subdivision surfaces read as their cage, or refined; ``subdiv_level``), and per
     technique the passes (with their kinds) or why it is not applicable to a light, and what it
-    renders of each cylinder light (``cylinder_lights``: its :attr:`~wsoft.techniques.Technique.cylinder_model`)."""
+    renders of each cylinder light (``cylinder_lights``: its :attr:`~wsoft.techniques.Technique.cylinder_model`), and
+    for each sphere, point or cylinder light whether the shadow-map techniques draw it as one frustum or
+    a cube map, and why (``light_views``, :class:`~wsoft.lightspace.cube.CubeDecision`)."""
     from wsoft.techniques import TECHNIQUES
 
     if not isinstance(scene, Scene):
@@ -98,6 +101,9 @@ def plan(scene, techniques: list[str] | None = None, *, width: int | None = None
         return out
     for name in techniques or sorted(TECHNIQUES):
         built = build_graph(scene, name, width=width, height=height, camera=camera, light=light, device="cpu", strict=False)
+        if "light_views" not in out:  # which lights get a cube map, and why (the same for every technique with cube=auto)
+            out["light_views"] = {l.path: built.ctx.cube_decision(l).why("auto") for l in scene.lights
+                                  if l.kind in CUBE_KINDS and (light is None or getattr(light, "path", light) in (l.path, l.name))}
         label = built.labels[0]
         if built.instancing["mode"] == "flattened":
             why = built.instancing["needs"][0][1]

@@ -46,6 +46,10 @@ class Prefiltered(Technique):
         """Per G-buffer sample visibility (a flat float32 array) from the prefiltered map ``fmap``."""
         raise NotImplementedError
 
+    def cube_guard_texels(self) -> float:
+        """Its prefilter's radius and the bilinear read's texel."""
+        return float(self.params.radius) + 2.0
+
     def add_passes(self, ctx, light):
         p = self.params
         gbuf = ctx.gbuffer()

@@ -158,6 +158,10 @@ class Technique:
     # cylinder lights (UsdLux CylinderLight, a line light at radius 0): what the technique renders of
     # one, in a line (`wsoft techniques` and `wsoft plan` show it); "" where it does not say
     cylinder_model: ClassVar[str] = ""
+    # cube maps (wsoft.lightspace.cube): a technique with light views (its Params has ``cube``) runs its
+    # passes on each face of a light that surrounds its receivers; one that cannot says why here, and
+    # such a light is refused (wsoft plan lists it) instead of left lit beyond one frustum
+    cube_refusal: ClassVar[str] = ""
 
     def __init__(self, params):
         self.params = params
@@ -212,6 +216,12 @@ class Technique:
         """"" when this instance (its parameters) keeps a stage's instances, else why it needs the
         triangle soup (:attr:`instancing_refusal` unless a parameter changes it)."""
         return self.instancing_refusal
+
+    def cube_guard_texels(self) -> float:
+        """Texels past a cube map's face edge that this instance's kernels read (its widest filter,
+        blur or search radius in texels): each face is drawn with a guard band at least that wide,
+        so a kernel crossing an edge reads the neighbouring directions from the face's own map."""
+        return 2.0
 
     def bake_support(self) -> str | None:
         """``None`` when the technique answers for any points given their positions and normals,

@@ -96,6 +96,10 @@ class PCF(Technique):
     cylinder_model = ("the shadow of its centre filtered over a fixed kernel (its size plays no part), in a light view that looks at the "
                       "receivers as a sphere light's does")
 
+    def cube_guard_texels(self) -> float:
+        """Its kernel's half-width and the bilinear tap's texel."""
+        return float(self.params.radius) + 2.0
+
     def add_passes(self, ctx, light):
         p = self.params
         gbuf = ctx.gbuffer()

@@ -190,6 +190,10 @@ class Salzman(Technique):
             sel = sel & link
         return np.flatnonzero(sel).astype(np.int32), mode
 
+    def cube_guard_texels(self) -> float:
+        """Its blur's radius and the bilinear tap's texel."""
+        return float(self.params.radius) + 2.0
+
     def add_passes(self, ctx, light):
         p = self.params
         scene = ctx.scene

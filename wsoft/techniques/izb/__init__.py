@@ -196,6 +196,10 @@ class IZB(Technique):
                     f"stencil) and a bake has no camera; bake with aa=none (the exact hard shadow of the light's centre at each point)")
         return None
 
+    # its light pass tests each inserted sample against the triangles over one grid in one light
+    # frustum (the paper's); six grids, one per face, are not built
+    cube_refusal = "its irregular z-buffer is one grid in one light frustum (no cube map of grids is built)"
+
     def add_passes(self, ctx, light):
         p = self.params
         if p.aa != "none" and ctx.pixel_samples != 1:
