@@ -33,7 +33,7 @@ SWEEPS = {"foundation": "wsoft.bench.foundation", "filtered": "wsoft.bench.filte
           "ssm-table1": "wsoft.bench.ssm_table1", "ssm-table2": "wsoft.bench.ssm_table2", "pareto": "wsoft.bench.pareto",
           "adversarial": "wsoft.bench.adversarial", "usd-pipeline": "wsoft.bench.usd_pipeline",
           "instancing": "wsoft.bench.instancing", "stsv": "wsoft.bench.stsv", "modern": "wsoft.bench.modern",
-          "temporal": "wsoft.bench.temporal"}
+          "temporal": "wsoft.bench.temporal", "cube": "wsoft.bench.cube"}
 SWEEP_ALIASES = {"usd_pipeline": "usd-pipeline"}  # other spellings `wsoft bench` accepts (words joined by "-" in SWEEPS)
 REFERENCE_VERSION = 4  # bump when the reference changes (2: rows render one named light; 3: the receiver's horizon, ray offsets from the frame's extent; 4: the shaded R, G, B for ꟻLIP)
 _SCENE_DIR: Path | None = None

@@ -49,6 +49,9 @@ CUBE_KINDS = (LIGHT_SPHERE, LIGHT_POINT, LIGHT_CYLINDER)
 through the hemisphere in front of them, which one frustum of at most ±80° holds but for its
 grazing rim."""
 FACE_NAMES = ("+x", "-x", "+y", "-y", "+z", "-z")
+GUARD_OVERRIDE: float | None = None
+"""The guard band forced to this many tangents for every cube map (None: each technique's, as
+:func:`fit_cube_views` sizes it): how ``wsoft bench cube`` measures the seams without one."""
 GUARD_MAX = 0.5
 """The widest guard band, in tangents past a face's edge (a face then spans ±56.3°): a wider one
 would spread a face's texels over directions its neighbours already hold."""
@@ -248,6 +251,8 @@ def fit_cube_views(light: Light, receivers: np.ndarray, faces: tuple[int, ...], 
                 if 1.0 + g > 1.0 + GUARD_MAX:
                     capped = True
                 T = max(T, min(1.0 + g, 1.0 + GUARD_MAX))
+    if GUARD_OVERRIDE is not None:
+        T = 1.0 + float(GUARD_OVERRIDE)
     views = {}
     for k in faces:
         axes, v, own = per_face[k]

@@ -470,7 +470,7 @@ class RenderContext:
         gets V = 1 and a warning; so does one whose face the probe found empty."""
         gk = self.gbuffer()
         out = tctx.visibility_key(light)
-        name = tctx.pass_name("cube_select", light)
+        name = tctx.pass_name(f"{tctx.tech.name}_cube_select", light)
         views = list(dict.fromkeys(tctx.face_views.get(light.path, [])))
         frame = cube_frame(light)
         slots = [-1] * 6
