@@ -79,7 +79,7 @@ def footprint_turn(lamp) -> list:
 def turning_frames(scene, light: str, device: str, turn=TURN):
     """``hard`` with a stable view under each camera of ``turn``."""
     return [wsoft.render(scene, "hard", width=W, height=H, device=device, camera=Camera(f"/c{i}", look_at(e, t)), light=light,
-                         view="stable", shadow_map_size=SIZE) for i, (e, t) in enumerate(turn)]
+                         view="stable", cube="never", shadow_map_size=SIZE) for i, (e, t) in enumerate(turn)]
 
 
 def test_ladder_and_depth_snapping():
@@ -161,7 +161,7 @@ def test_local_stable_view_keeps_its_texel_grid_under_a_turning_camera(device, f
 @pytest.mark.parametrize("file,light", [("box_plane.usda", "Light"), ("city.usdc", "Sun"), ("city.usdc", "Rect")])
 def test_stable_views_hold_every_receiver(device, file, light):
     scene = wsoft.load_scene(scene_path(file))
-    f = wsoft.render(scene, "pcss", width=W, height=H, device=device, light=light, view="stable", shadow_map_size=SIZE)
+    f = wsoft.render(scene, "pcss", width=W, height=H, device=device, light=light, view="stable", cube="never", shadow_map_size=SIZE)
     c = fit_pass(f)
     assert c["receivers_outside"] == 0
     lamp = next(l for l in scene.lights if l.name == light)
@@ -199,7 +199,7 @@ def test_sequence_receivers_fit_one_view_for_every_frame(device, light):
     foot = np.array([lamp.position[0], lamp.position[1], 0.0]) if lamp.kind_name != "distant" else np.zeros(3)
     ring = foot + [[10.0 * math.cos(a), 10.0 * math.sin(a), 0.0] for a in np.linspace(0.0, 2.0 * math.pi, 24, endpoint=False)]
     built = build_graph(scene, "hard", width=W, height=H, device=device, light=light, camera=Camera("/c1", look_at(*turn[1])),
-                        params={"view": "sequence", "shadow_map_size": SIZE})
+                        params={"view": "sequence", "cube": "never", "shadow_map_size": SIZE})
     built.ctx.fit_receivers = {lamp.path: ring}
     execute(built, device)
     c = built.ctx.counters["passes"][f"fit_light_view[{light}]@{SIZE}+sequence"]
