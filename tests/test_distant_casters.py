@@ -37,11 +37,16 @@ def _wall(half_width: float, x: float = -100.0, height: float = 160.0) -> np.nda
     return np.array([[a, b, c], [a, c, d]], np.float64)
 
 
+def _mesh(tris: np.ndarray):
+    """World triangles ``[T, 3, 3]`` as (points, triangles into them), as Scene.caster_mesh gives them."""
+    return tris.reshape(-1, 3), np.arange(3 * len(tris)).reshape(-1, 3)
+
+
 def _fit(light, casters_tris, stable=False, with_triangles=True, size=256):
     rec = _ground()
     pts = np.concatenate([rec, casters_tris.reshape(-1, 3)]) if len(casters_tris) else rec
     lo, hi = pts.min(axis=0), pts.max(axis=0)
-    kw = dict(casters=pts, caster_triangles=(lambda: casters_tris) if with_triangles else None)
+    kw = dict(casters=pts, caster_triangles=(lambda: _mesh(casters_tris)) if with_triangles else None)
     if stable:
         return fit_stable_view(light, rec, lo, hi, size, **kw)
     return fit_light_view(light, rec, lo, hi, size, **kw)
@@ -77,11 +82,12 @@ def test_a_huge_triangle_crossing_the_region_counts_through_its_interior():
     window = (-5.0, 5.0, -5.0, 5.0)
     tri = np.array([[[-1e4, -1e4, -50.0], [1e4, -1e4, -50.0], [0.0, 1e4, -50.0]]])  # corners far outside, at depth -50
     pts = tri.reshape(-1, 3)
+    view = (np.zeros(3), np.eye(3))  # world space is the view's
     assert distant_caster_depth(pts, window, 0.0, 1.0, 0.05) == 0.0  # its corners alone: not in the region
-    assert distant_caster_depth(pts, window, 0.0, 1.0, 0.05, tri) == pytest.approx(-50.0)
+    assert distant_caster_depth(pts, window, 0.0, 1.0, 0.05, _mesh(tri), *view) == pytest.approx(-50.0)
     # beside the region: a caster 60 units off the window at depth -50 blocks only within 0.05 * 51
     off = tri + np.array([0.0, 1e4 + 65.0, 0.0])
-    assert distant_caster_depth(off.reshape(-1, 3), window, 0.0, 1.0, 0.05, off) == 0.0
+    assert distant_caster_depth(off.reshape(-1, 3), window, 0.0, 1.0, 0.05, _mesh(off), *view) == 0.0
 
 
 @pytest.mark.parametrize("stable", [False, True], ids=["fitted", "stable"])
@@ -121,10 +127,17 @@ def test_a_hard_sun_needs_no_growth_and_keeps_its_window():
     assert v.window == bare.window and v.far == bare.far
 
 
-def test_scene_caster_triangles_are_the_soups_corners():
+def test_scene_caster_mesh_is_the_soup_and_each_instance_box():
     from wsoft.pipeline import load_stage
 
     scene = load_stage("box_plane")
-    tris = scene.caster_triangles()
-    assert tris.shape == (scene.triangle_count, 3, 3) and tris.dtype == np.float32
-    assert np.array_equal(tris, scene.points[scene.triangles])
+    pts, tris = scene.caster_mesh()
+    assert np.array_equal(pts[tris], scene.points[scene.triangles])
+    inst = load_stage("plants", instancing="keep")
+    assert inst.instanced
+    pts, tris = inst.caster_mesh()
+    n = inst.instances.count
+    assert len(tris) == inst.triangle_count + 12 * n and len(pts) == len(inst.points) + 8 * n
+    lo, hi = inst.instances.world_bounds
+    boxes = pts[tris[inst.triangle_count:]].reshape(n, 36, 3)
+    assert np.allclose(boxes.min(axis=1), lo, atol=1e-4) and np.allclose(boxes.max(axis=1), hi, atol=1e-4)

@@ -132,7 +132,8 @@ def _plane_values(p: np.ndarray, planes: np.ndarray) -> np.ndarray:
 
 def _cone_depth_min(v: np.ndarray | None, planes: np.ndarray, default: float) -> float:
     """Smallest view depth of the view-space points ``v`` inside the region of :func:`cone_planes`
-    (``default`` if none); row blocks over the thread pool, as :func:`to_frame`."""
+    (``default`` if none: only the points nearer are tested); row blocks over the thread pool, as
+    :func:`to_frame`."""
     if v is None or len(v) == 0:
         return default
     from wsoft.parallel import run_row_blocks
@@ -141,6 +142,7 @@ def _cone_depth_min(v: np.ndarray | None, planes: np.ndarray, default: float) ->
 
     def block(a: int, e: int) -> None:
         w = v[a:e]
+        w = w[w[:, 2] < default]  # a point no nearer than ``default`` cannot lower it
         inside = np.all(_plane_values(w, planes) >= 0.0, axis=-1)
         if inside.any():
             found.append(float(w[inside, 2].min()))
@@ -184,20 +186,36 @@ def clipped_depth_min(tris: np.ndarray, planes: np.ndarray) -> np.ndarray:
     return z.min(axis=1)
 
 
-def _triangle_depth_min(tris: np.ndarray, planes: np.ndarray, default: float) -> float:
-    """Smallest view depth of the parts of the view-space triangles ``tris`` (``[T, 3, 3]``) inside
-    the region ``planes`` (:func:`cone_planes`), their interiors included: a triangle whose corners
-    all lie outside may cross it (a huge wall far off). Triangles wholly inside give their corners'
-    depth, those outside one plane are skipped, the rest are clipped (:func:`clipped_depth_min`);
+def _triangle_depth_min(mesh, origin: np.ndarray, axes: np.ndarray, planes: np.ndarray, default: float) -> float:
+    """Smallest view depth of the parts of the triangles ``mesh`` (world points ``[V, 3]``, triangles
+    ``[T, 3]`` into them) inside the region ``planes`` of the view at ``origin`` along ``axes``
+    (:func:`cone_planes`), their interiors included: a triangle whose corners all lie outside may
+    cross it (a huge wall far off). A triangle whose corners all lie at ``default`` or deeper is not
+    looked at (it cannot be nearer); of the others, those wholly inside give their corners' depth,
+    those outside one plane are skipped, the rest are clipped (:func:`clipped_depth_min`).
     ``default`` if none. Row blocks over the thread pool."""
-    if tris is None or len(tris) == 0:
+    pts, tris = mesh
+    pts = np.asarray(pts)
+    tris = np.asarray(tris).reshape(-1, 3)
+    if len(tris) == 0:
         return default
     from wsoft.parallel import run_row_blocks
 
+    depth = np.empty(len(pts), np.float64)
+
+    def depths(a: int, e: int) -> None:  # the view depth of every point, alone (the cheap test first)
+        d = pts[a:e] - origin
+        depth[a:e] = d[:, 0] * axes[0, 2] + d[:, 1] * axes[1, 2] + d[:, 2] * axes[2, 2]
+
+    run_row_blocks(len(pts), depths)
     found = []
 
     def block(a: int, e: int) -> None:
-        w = tris[a:e]
+        t = tris[a:e]
+        t = t[np.minimum(np.minimum(depth[t[:, 0]], depth[t[:, 1]]), depth[t[:, 2]]) < default]
+        if not len(t):
+            return
+        w = to_frame(pts[t.ravel()], origin, axes, threads=False).reshape(-1, 3, 3)
         s = _plane_values(w, planes)  # [n, 3 corners, planes]
         out = np.any(np.all(s < 0.0, axis=1), axis=1)
         inside = np.all(s >= 0.0, axis=(1, 2))
@@ -214,31 +232,20 @@ def _triangle_depth_min(tris: np.ndarray, planes: np.ndarray, default: float) ->
 
 
 def distant_caster_depth(vp: np.ndarray | None, window, zr_min: float, zr_max: float, tan_a: float,
-                         triangles: np.ndarray | None = None) -> float:
+                         mesh=None, origin: np.ndarray | None = None, axes: np.ndarray | None = None) -> float:
     """Where a distant light's depth range starts: the smallest view depth of the casters that can
     block part of its cone (half-angle tangent ``tan_a``; 0: its central direction) from a receiver
     in ``window`` at depth ``<= zr_max`` (the region of :func:`cone_planes`), and ``zr_min`` when
-    none is nearer. ``vp``: the caster points in view space; ``triangles``: the casting triangles
-    in view space (``[T, 3, 3]``), whose interiors count too (a huge wall far off whose corners all
-    lie outside the region). The window then grows by ``tan_a * (zr_max - depth)`` on every side
+    none is nearer. ``vp``: the caster points in view space; ``mesh``: the casting triangles
+    (world points ``[V, 3]``, triangles ``[T, 3]``) of the view at ``origin`` along ``axes``, whose
+    interiors count too (a huge wall far off whose corners all lie outside the region). The window then grows by ``tan_a * (zr_max - depth)`` on every side
     to hold every such caster: a caster at depth z counts only within ``tan_a * (zr_max - z)`` of
     the window, which is never more."""
     planes = cone_planes(window, zr_max, tan_a)
     zc = _cone_depth_min(vp, planes, zr_min)
-    if triangles is not None:
-        zc = _triangle_depth_min(triangles, planes, zc)
+    if mesh is not None:
+        zc = _triangle_depth_min(mesh, origin, axes, planes, zc)
     return zc
-
-
-def _view_triangles(caster_triangles, origin: np.ndarray, axes: np.ndarray) -> np.ndarray | None:
-    """The casting triangles ``caster_triangles()`` gives (world corners ``[T, 3, 3]``) in view space,
-    float64 ``[T, 3, 3]`` (None: none given)."""
-    if caster_triangles is None:
-        return None
-    tris = np.asarray(caster_triangles()).reshape(-1, 3)
-    if len(tris) == 0:
-        return None
-    return to_frame(tris, origin, axes).reshape(-1, 3, 3)
 
 
 FIT_BLOCK = 8192  # points a thread of the fit's reduction kernels walks (one row of partial results each)
@@ -438,7 +445,8 @@ def fit_light_view(
     ``(z_r - z) tan a`` of the receivers' window, ``casters``, else the scene's bounds' corners
     inside the window's prism), and its window grows by ``(z_r - z) tan a`` for the nearest; a
     caster far off that cannot shadow a receiver moves neither. ``caster_triangles`` (a callable
-    giving the casting triangles' world corners, ``[T, 3, 3]``; read for a distant light only)
+    giving the casting triangles as world points ``[V, 3]`` and triangles ``[T, 3]`` into them,
+    :meth:`Scene.caster_mesh <wsoft.scene.types.Scene.caster_mesh>`; read for a distant light only)
     makes the interiors count too: a huge wall far off whose corners all lie outside that region
     but which crosses it. Without them such a caster keeps its true, smaller depth in the map
     (nearer than the range's start), and the window does not grow for it.
@@ -475,8 +483,8 @@ def fit_light_view(
         zr_min, zr_max = float(vlo[2]), float(vhi[2])
         vp = to_frame(np.asarray(pts).reshape(-1, 3), center, axes) if pts is not None and len(pts) else None
         tan_a = math.tan(math.radians(0.5 * light.angle_deg)) if casters is not None and light.angle_deg > 0 else 0.0
-        tris = _view_triangles(caster_triangles, center, axes)
-        zc = distant_caster_depth(vp, (l, r, b, t), zr_min, zr_max, tan_a, tris)
+        mesh = caster_triangles() if caster_triangles is not None else None
+        zc = distant_caster_depth(vp, (l, r, b, t), zr_min, zr_max, tan_a, mesh, center, axes)
         g = tan_a * max(zr_max - zc, 0.0)
         l, r, b, t = l - g, r + g, b - g, t + g
         # the origin a little before the nearest caster: depths stay positive and their float

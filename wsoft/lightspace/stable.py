@@ -42,7 +42,7 @@ import math
 import numpy as np
 
 from wsoft.lightspace.fit import (
-    _caster_growth, _far_light_depths, _fit_points, _frame_bounds, _local_fit_stats, _view_triangles, distant_axes, distant_caster_depth,
+    _caster_growth, _far_light_depths, _fit_points, _frame_bounds, _local_fit_stats, distant_axes, distant_caster_depth,
     local_axes, omni_axes, receiver_bounds,
 )
 from wsoft.lightspace.view import MAX_TAN, LightView, far_light, frame_extent_of_bounds, to_frame
@@ -161,14 +161,14 @@ def _stable_distant(light, both, rlo, rhi, scene_lo, scene_hi, size, margin, mar
         return vc[0] - h, vc[0] + h, vc[1] - h, vc[1] + h
 
     tan_a = math.tan(math.radians(0.5 * light.angle_deg)) if casters is not None and light.angle_deg > 0 else 0.0
-    tris = _view_triangles(caster_triangles, anchor, axes)
-    zc = distant_caster_depth(vp, square(half), zr_min, zr_max, tan_a, tris)
+    mesh = caster_triangles() if caster_triangles is not None else None
+    zc = distant_caster_depth(vp, square(half), zr_min, zr_max, tan_a, mesh, anchor, axes)
     g = tan_a * max(zr_max - zc, 0.0)
     radius = ladder_up(half + g)
     l, r, tx, ix = snapped_window(vc[0] - radius, vc[0] + radius, size, margin_texels)
     b, t, ty, iy = snapped_window(vc[1] - radius, vc[1] + radius, size, margin_texels)
     # the whole window's prism: its nearer casters keep positive depths
-    zc = min(zc, distant_caster_depth(vp, (l, r, b, t), zr_min, math.inf, 0.0, tris))
+    zc = min(zc, distant_caster_depth(vp, (l, r, b, t), zr_min, math.inf, 0.0, mesh, anchor, axes))
     lead = 1e-3 * ext
     z0, z1, step = snapped_depths(zc - lead, zr_max + lead)
     cx, cy = 0.5 * (l + r), 0.5 * (b + t)

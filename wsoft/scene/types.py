@@ -413,18 +413,20 @@ class Scene:
             return np.concatenate([own, extra]).astype(np.float32)
         return own
 
-    def caster_triangles(self) -> np.ndarray:
-        """The corners of every triangle, float32 ``[T, 3, 3]`` (what a distant light's view tests
-        for casters crossing its region, :func:`~wsoft.lightspace.fit.distant_caster_depth`). Of an
-        instanced scene: the soup's, plus the 12 triangles of every instance's world bounds
-        (:meth:`Instances.corners`: every instanced triangle lies inside its box)."""
-        own = self.points[self.triangles] if self.triangle_count else np.zeros((0, 3, 3), np.float32)
+    def caster_mesh(self) -> tuple[np.ndarray, np.ndarray]:
+        """Every triangle as (points float32 ``[V, 3]``, triangles ``[T, 3]`` into them): what a
+        distant light's view tests for casters crossing its region
+        (:func:`~wsoft.lightspace.fit.distant_caster_depth`). Of an instanced scene: the soup's,
+        plus the 12 triangles of every instance's world bounds (:meth:`Instances.corners`: every
+        instanced triangle lies inside its box)."""
+        pts = np.asarray(self.points, np.float32)
+        tris = np.asarray(self.triangles).reshape(-1, 3)
         if self.instanced:
-            corners = self.instances.corners().reshape(-1, 8, 3)
-            faces = np.array(BOX_TRIANGLES, np.int64)
-            boxes = corners[:, faces].reshape(-1, 3, 3)
-            return np.concatenate([own, boxes]).astype(np.float32)
-        return np.asarray(own, np.float32)
+            corners = self.instances.corners()
+            boxes = (np.arange(len(corners) // 8, dtype=np.int64)[:, None, None] * 8 + np.array(BOX_TRIANGLES, np.int64)[None]).reshape(-1, 3)
+            tris = np.concatenate([tris.astype(np.int64), boxes + len(pts)])
+            pts = np.concatenate([pts, corners]).astype(np.float32)
+        return pts, tris
 
     @property
     def diagonal(self) -> float:
