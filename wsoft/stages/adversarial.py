@@ -1003,7 +1003,7 @@ KNOWN: dict[tuple[str, str], str] = {
                               "receiver: 0.022, but greece's MAE 0.0425 -> 0.0472)",
     **{("sun_huge_far_wall", t): f"the far wall's penumbra missing (mean V {v} on the ground, exact 0.800): the wall's corners lie far "
                                   "outside the region where a caster can shadow a receiver, and the light view is fitted to caster points "
-                                  "only (RenderContext.light_view gives fit_light_view no caster_triangles, Scene.caster_triangles), so its "
+                                  "only (RenderContext.light_view gives fit_light_view no caster_triangles, Scene.caster_mesh), so its "
                                   "interior crossing that region is not seen"
        for t, v in (("pcss", "1.000"), ("vssm", "0.994"), ("essm", "0.998"), ("msm_soft", "1.000"), ("ssm", "1.000"))},
     ("room_ceiling", "salzman"): "the floor lit (mean V 0.83): its far bound, the nearest surface behind the casters, is the occluder "
