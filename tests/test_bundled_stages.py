@@ -15,7 +15,7 @@ from wsoft.stages.bundled import SCENES as GENERATORS
 
 # no random numbers: the same on every numpy (a Generator's streams may change between versions)
 PLAIN = ("box_plane", "contact", "multi_light", "cutout", "penumbra_ramp", "tower", "tunnel_fan", "fence_perforated",
-         "wedge_overlap", "ramp_slide", "ramp_static")
+         "wedge_overlap", "ramp_slide", "ramp_static", "room_lamp", "corridor_torch")
 
 
 def test_every_bundled_stage_has_a_generator():
@@ -58,3 +58,40 @@ def test_plain_generators_use_no_random_numbers(name, tmp_path, monkeypatch):
 
     monkeypatch.setattr(np.random, "default_rng", refuse)
     GENERATORS[name](str(tmp_path))
+
+
+@pytest.mark.parametrize("name", ["room_lamp", "corridor_torch"])
+def test_interiors_surround_their_light_and_render_without_nan(name):
+    """A light inside a closed room or corridor: receivers the camera sees lie on every side of it
+    (below, above, beyond and before it along the camera's view), and ``hard`` and the
+    reference render a small frame of it with no NaN, some of it lit and some in shadow."""
+    import warnings
+
+    import numpy as np
+
+    import wsoft
+    from wsoft.pipeline import load_stage
+
+    scene = load_stage(name)
+    (light,) = scene.lights
+    assert light.kind_name == "sphere" and len(scene.cameras) == 1
+    lo, hi = scene.points.min(axis=0), scene.points.max(axis=0)
+    assert np.all(lo < light.position) and np.all(light.position < hi)  # the light is inside the shell
+    frames = {}
+    for tech, params in (("hard", {"shadow_map_size": 256}), ("reference", {"samples": 8})):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # hard's single frustum leaves receivers beyond it lit, with a warning
+            frames[tech] = wsoft.render(scene, tech, width=48, height=36, device="cpu", **params)
+    for tech, f in frames.items():
+        V = np.asarray(f.V)
+        assert V.shape == (36, 48) and not np.isnan(V).any(), tech
+    V = np.asarray(frames["reference"].V)
+    assert (V > 0.99).mean() > 0.3 and (V < 0.01).mean() > 0.02, name
+    # directions from the light to the visible receivers: some below, some above, some behind
+    f = frames["reference"]
+    P = np.stack([f["P.X"], f["P.Y"], f["P.Z"]], axis=-1)[f["A"] > 0.5]
+    d = P - light.position
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    assert (d[:, 2] < -0.7).any() and (d[:, 2] > 0.7).any(), name
+    ahead = d @ -np.asarray(scene.cameras[0].to_world, np.float64)[:3, 2]  # along the camera's view
+    assert (ahead > 0.3).mean() > 0.1 and (ahead < -0.3).mean() > 0.1, name  # receivers beyond the light and before it

@@ -64,3 +64,14 @@ def test_a_modern_technique_dominates_a_paper_s_only_where_its_front_is_below_ev
     text = md.read_text()
     assert "| essm | 1 / 2 |" in text
     assert "`msm_soft` over `essm`: dominates on contact/Light; not on box_plane/Light." in text
+
+
+def test_the_interiors_are_among_the_sweeps_frames(monkeypatch):
+    """Every bundled stage outside NOT_IN_PARETO is swept, each shadow-casting light a frame: the
+    lights inside closed rooms (room_lamp, corridor_torch) among them."""
+    from wsoft import usd_scenes
+
+    monkeypatch.setattr(pareto, "scene_lights", lambda name: ["/World/L"])  # no stage loaded
+    swept = {c["scene"] for c in pareto.cases(False, ["cpu"])}
+    assert {"room_lamp", "corridor_torch"} <= swept
+    assert swept == set(usd_scenes.names()) - set(pareto.NOT_IN_PARETO)

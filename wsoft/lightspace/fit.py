@@ -110,6 +110,144 @@ def _prism_depth_min(v: np.ndarray, window, default: float) -> float:
     return min(found + [default])
 
 
+def cone_planes(window, zr_max: float, tan_a: float) -> np.ndarray:
+    """The region of a distant light's view (view space: x, y across, z along the light) where a
+    caster can block part of the light's cone (half-angle tangent ``tan_a``) from a receiver in the
+    window ``(l, r, b, t)`` no deeper than ``zr_max``: points at depth ``z <= zr_max`` within
+    ``tan_a * (zr_max - z)`` of the window on each axis (``tan_a = 0``: the window's prism up to
+    ``zr_max``). Five planes ``(n, d)`` as rows ``[nx, ny, nz, d]``, inside where ``n . p + d >= 0``."""
+    l, r, b, t = window
+    k, z = float(tan_a), float(zr_max)
+    kz = k * z if k else 0.0  # zr_max may be inf (the whole prism) where tan_a is 0
+    return np.array([[1.0, 0.0, -k, kz - l], [-1.0, 0.0, -k, kz + r], [0.0, 1.0, -k, kz - b], [0.0, -1.0, -k, kz + t],
+                     [0.0, 0.0, -1.0, z]])
+
+
+def _plane_values(p: np.ndarray, planes: np.ndarray) -> np.ndarray:
+    """``n . p + d`` of the points ``p`` (``[..., 3]``) for each plane row ``[nx, ny, nz, d]``:
+    ``[..., planes]``, without BLAS (see :func:`to_frame`)."""
+    p = p[..., None, :]
+    return p[..., 0] * planes[:, 0] + p[..., 1] * planes[:, 1] + p[..., 2] * planes[:, 2] + planes[:, 3]
+
+
+def _cone_depth_min(v: np.ndarray | None, planes: np.ndarray, default: float) -> float:
+    """Smallest view depth of the view-space points ``v`` inside the region of :func:`cone_planes`
+    (``default`` if none: only the points nearer are tested); row blocks over the thread pool, as
+    :func:`to_frame`."""
+    if v is None or len(v) == 0:
+        return default
+    from wsoft.parallel import run_row_blocks
+
+    found = []
+
+    def block(a: int, e: int) -> None:
+        w = v[a:e]
+        w = w[w[:, 2] < default]  # a point no nearer than ``default`` cannot lower it
+        inside = np.all(_plane_values(w, planes) >= 0.0, axis=-1)
+        if inside.any():
+            found.append(float(w[inside, 2].min()))
+
+    run_row_blocks(len(v), block)
+    return min(found + [default])
+
+
+def clipped_depth_min(tris: np.ndarray, planes: np.ndarray) -> np.ndarray:
+    """Per triangle (view space, float64 ``[M, 3, 3]``), the smallest depth (z) of its part inside
+    the convex region ``planes`` (rows ``[nx, ny, nz, d]``, inside where ``n . p + d >= 0``): the
+    triangle clipped by each plane in turn (Sutherland-Hodgman; a convex polygon gains at most one
+    corner per plane); ``inf`` where nothing of it is inside."""
+    m = len(tris)
+    kmax = 3 + len(planes)
+    poly = np.zeros((m, kmax, 3))
+    poly[:, :3] = tris
+    cnt = np.full(m, 3)
+    rows = np.arange(m)
+    for pl in planes:
+        s = _plane_values(poly, pl[None])[..., 0]
+        out = np.zeros_like(poly)
+        oc = np.zeros(m, int)
+        for j in range(kmax - 1):
+            valid = j < cnt
+            if not valid.any():
+                break
+            jn = np.where(valid, (j + 1) % np.maximum(cnt, 1), 0)
+            vi, vn = poly[:, j], poly[rows, jn]
+            si, sn = s[:, j], s[rows, jn]
+            keep = valid & (si >= 0.0)
+            out[rows[keep], oc[keep]] = vi[keep]
+            oc += keep
+            cross = valid & ((si >= 0.0) != (sn >= 0.0))
+            if cross.any():
+                tt = (si[cross] / (si[cross] - sn[cross]))[:, None]
+                out[rows[cross], oc[cross]] = vi[cross] + tt * (vn[cross] - vi[cross])
+                oc += cross
+        poly, cnt = out, oc
+    z = np.where(np.arange(kmax)[None, :] < cnt[:, None], poly[:, :, 2], np.inf)
+    return z.min(axis=1)
+
+
+def _triangle_depth_min(mesh, origin: np.ndarray, axes: np.ndarray, planes: np.ndarray, default: float) -> float:
+    """Smallest view depth of the parts of the triangles ``mesh`` (world points ``[V, 3]``, triangles
+    ``[T, 3]`` into them) inside the region ``planes`` of the view at ``origin`` along ``axes``
+    (:func:`cone_planes`), their interiors included: a triangle whose corners all lie outside may
+    cross it (a huge wall far off). A triangle whose corners all lie at ``default`` or deeper is not
+    looked at (it cannot be nearer); of the others, those wholly inside give their corners' depth,
+    those outside one plane are skipped, the rest are clipped (:func:`clipped_depth_min`).
+    ``default`` if none. Row blocks over the thread pool."""
+    pts, tris = mesh
+    pts = np.asarray(pts)
+    tris = np.asarray(tris).reshape(-1, 3)
+    if len(tris) == 0:
+        return default
+    from wsoft.parallel import run_row_blocks
+
+    depth = np.empty(len(pts), np.float64)
+
+    def depths(a: int, e: int) -> None:  # the view depth of every point, alone (the cheap test first)
+        d = pts[a:e] - origin
+        depth[a:e] = d[:, 0] * axes[0, 2] + d[:, 1] * axes[1, 2] + d[:, 2] * axes[2, 2]
+
+    run_row_blocks(len(pts), depths)
+    found = []
+
+    def block(a: int, e: int) -> None:
+        t = tris[a:e]
+        t = t[np.minimum(np.minimum(depth[t[:, 0]], depth[t[:, 1]]), depth[t[:, 2]]) < default]
+        if not len(t):
+            return
+        w = to_frame(pts[t.ravel()], origin, axes, threads=False).reshape(-1, 3, 3)
+        s = _plane_values(w, planes)  # [n, 3 corners, planes]
+        out = np.any(np.all(s < 0.0, axis=1), axis=1)
+        inside = np.all(s >= 0.0, axis=(1, 2))
+        if inside.any():
+            found.append(float(w[inside, :, 2].min()))
+        cut = ~out & ~inside
+        if cut.any():
+            z = clipped_depth_min(w[cut], planes)
+            if np.isfinite(z).any():
+                found.append(float(z[np.isfinite(z)].min()))
+
+    run_row_blocks(len(tris), block)
+    return min(found + [default])
+
+
+def distant_caster_depth(vp: np.ndarray | None, window, zr_min: float, zr_max: float, tan_a: float,
+                         mesh=None, origin: np.ndarray | None = None, axes: np.ndarray | None = None) -> float:
+    """Where a distant light's depth range starts: the smallest view depth of the casters that can
+    block part of its cone (half-angle tangent ``tan_a``; 0: its central direction) from a receiver
+    in ``window`` at depth ``<= zr_max`` (the region of :func:`cone_planes`), and ``zr_min`` when
+    none is nearer. ``vp``: the caster points in view space; ``mesh``: the casting triangles
+    (world points ``[V, 3]``, triangles ``[T, 3]``) of the view at ``origin`` along ``axes``, whose
+    interiors count too (a huge wall far off whose corners all lie outside the region). The window then grows by ``tan_a * (zr_max - depth)`` on every side
+    to hold every such caster: a caster at depth z counts only within ``tan_a * (zr_max - z)`` of
+    the window, which is never more."""
+    planes = cone_planes(window, zr_max, tan_a)
+    zc = _cone_depth_min(vp, planes, zr_min)
+    if mesh is not None:
+        zc = _triangle_depth_min(mesh, origin, axes, planes, zc)
+    return zc
+
+
 FIT_BLOCK = 8192  # points a thread of the fit's reduction kernels walks (one row of partial results each)
 F64_BIG = wp.constant(wp.float64(1.0e300))
 
@@ -282,6 +420,7 @@ def fit_light_view(
     casters: np.ndarray | None = None,
     all_casters=None,
     side_growth: tuple[float, float, float, float] | None = None,
+    caster_triangles=None,
 ) -> LightView:
     """Fit a view of ``light`` to ``receivers`` (world points [N, 3], the camera's visible surface).
 
@@ -301,9 +440,16 @@ def fit_light_view(
     that side grows at least as far (:meth:`~wsoft.pipeline.context.RenderContext.light_view`).
 
     Every scale in the view comes from :func:`frame_extent` (receivers and the light), not the
-    scene's bounds: a distant light's depth range starts at the nearest caster vertex inside the
-    window's prism (``casters``, else the scene's bounds' corners inside it); casters nearer
-    still (a huge triangle whose corners are far outside) keep their true, smaller depth.
+    scene's bounds: a distant light's depth range starts at the nearest caster that can block part
+    of its cone from a receiver (:func:`distant_caster_depth`: a caster point within
+    ``(z_r - z) tan a`` of the receivers' window, ``casters``, else the scene's bounds' corners
+    inside the window's prism), and its window grows by ``(z_r - z) tan a`` for the nearest; a
+    caster far off that cannot shadow a receiver moves neither. ``caster_triangles`` (a callable
+    giving the casting triangles as world points ``[V, 3]`` and triangles ``[T, 3]`` into them,
+    :meth:`Scene.caster_mesh <wsoft.scene.types.Scene.caster_mesh>`; read for a distant light only)
+    makes the interiors count too: a huge wall far off whose corners all lie outside that region
+    but which crosses it. Without them such a caster keeps its true, smaller depth in the map
+    (nearer than the range's start), and the window does not grow for it.
 
     A local light beyond :data:`~wsoft.lightspace.view.LIGHT_REACH` receiver diagonals of the
     receivers (:func:`~wsoft.lightspace.view.far_light`) gets a depth range fitted to its casters
@@ -336,14 +482,11 @@ def fit_light_view(
         b, t = vlo[1] - pad, vhi[1] + pad
         zr_min, zr_max = float(vlo[2]), float(vhi[2])
         vp = to_frame(np.asarray(pts).reshape(-1, 3), center, axes) if pts is not None and len(pts) else None
-        zc = _prism_depth_min(vp, (l, r, b, t), zr_min)
-        if casters is not None and light.angle_deg > 0:
-            tan_a = math.tan(math.radians(0.5 * light.angle_deg))
-            for _ in range(2):  # the widened prism may hold nearer casters
-                g = tan_a * max(zr_max - zc, 0.0)
-                zc = _prism_depth_min(vp, (l - g, r + g, b - g, t + g), zc)
-            g = tan_a * max(zr_max - zc, 0.0)
-            l, r, b, t = l - g, r + g, b - g, t + g
+        tan_a = math.tan(math.radians(0.5 * light.angle_deg)) if casters is not None and light.angle_deg > 0 else 0.0
+        mesh = caster_triangles() if caster_triangles is not None else None
+        zc = distant_caster_depth(vp, (l, r, b, t), zr_min, zr_max, tan_a, mesh, center, axes)
+        g = tan_a * max(zr_max - zc, 0.0)
+        l, r, b, t = l - g, r + g, b - g, t + g
         # the origin a little before the nearest caster: depths stay positive and their float
         # precision is that of the caster-to-receiver distance
         lead = 1e-3 * ext

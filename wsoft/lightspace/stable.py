@@ -42,8 +42,8 @@ import math
 import numpy as np
 
 from wsoft.lightspace.fit import (
-    _caster_growth, _far_light_depths, _fit_points, _frame_bounds, _local_fit_stats, _prism_depth_min, distant_axes, local_axes,
-    omni_axes, receiver_bounds,
+    _caster_growth, _far_light_depths, _fit_points, _frame_bounds, _local_fit_stats, distant_axes, distant_caster_depth,
+    local_axes, omni_axes, receiver_bounds,
 )
 from wsoft.lightspace.view import MAX_TAN, LightView, far_light, frame_extent_of_bounds, to_frame
 from wsoft.scene.types import LIGHT_CYLINDER, LIGHT_DISTANT, LIGHT_POINT, LIGHT_SPHERE, Light
@@ -106,6 +106,7 @@ def fit_stable_view(
     anchor: np.ndarray | None = None,
     region: np.ndarray | None = None,
     down: np.ndarray | None = None,
+    caster_triangles=None,
 ) -> LightView:
     """A stable view of ``light`` (module docstring) holding ``receivers`` (world points [N, 3], the
     camera's visible surface) and ``region`` (more world points, e.g. a sequence's receivers; None:
@@ -128,7 +129,8 @@ def fit_stable_view(
     ext = ladder_up(frame_extent_of_bounds(rlo, rhi, light))
     anchor = np.zeros(3) if anchor is None else np.asarray(anchor, np.float64)
     if light.kind == LIGHT_DISTANT:
-        return _stable_distant(light, both, rlo, rhi, scene_lo, scene_hi, size, margin, margin_texels, casters, anchor, ext)
+        return _stable_distant(light, both, rlo, rhi, scene_lo, scene_hi, size, margin, margin_texels, casters, anchor, ext,
+                               caster_triangles)
     has_region = region is not None and len(region) > 0
     if light.kind in (LIGHT_SPHERE, LIGHT_POINT, LIGHT_CYLINDER):
         d = np.asarray(region, np.float64).reshape(-1, 3).mean(axis=0) - light.position if has_region else down
@@ -140,7 +142,8 @@ def fit_stable_view(
     return _stable_local(light, axes, rec, pts, rlo, rhi, size, margin, margin_texels, casters, all_casters, side_growth, has_region, ext)
 
 
-def _stable_distant(light, both, rlo, rhi, scene_lo, scene_hi, size, margin, margin_texels, casters, anchor, ext) -> LightView:
+def _stable_distant(light, both, rlo, rhi, scene_lo, scene_hi, size, margin, margin_texels, casters, anchor, ext,
+                    caster_triangles=None) -> LightView:
     """A distant light's stable view: the square around the fitted region's bounding sphere (grown
     for soft casters, radius on the ladder), its centre on whole texels from ``anchor``, its depth
     range from the nearest caster in the window's prism to the farthest receiver, snapped."""
@@ -157,18 +160,15 @@ def _stable_distant(light, both, rlo, rhi, scene_lo, scene_hi, size, margin, mar
     def square(h):
         return vc[0] - h, vc[0] + h, vc[1] - h, vc[1] + h
 
-    zc = _prism_depth_min(vp, square(half), zr_min)
-    g = 0.0
-    if casters is not None and light.angle_deg > 0:
-        tan_a = math.tan(math.radians(0.5 * light.angle_deg))
-        for _ in range(2):  # the widened prism may hold nearer casters
-            g = tan_a * max(zr_max - zc, 0.0)
-            zc = _prism_depth_min(vp, square(half + g), zc)
-        g = tan_a * max(zr_max - zc, 0.0)
+    tan_a = math.tan(math.radians(0.5 * light.angle_deg)) if casters is not None and light.angle_deg > 0 else 0.0
+    mesh = caster_triangles() if caster_triangles is not None else None
+    zc = distant_caster_depth(vp, square(half), zr_min, zr_max, tan_a, mesh, anchor, axes)
+    g = tan_a * max(zr_max - zc, 0.0)
     radius = ladder_up(half + g)
     l, r, tx, ix = snapped_window(vc[0] - radius, vc[0] + radius, size, margin_texels)
     b, t, ty, iy = snapped_window(vc[1] - radius, vc[1] + radius, size, margin_texels)
-    zc = _prism_depth_min(vp, (l, r, b, t), zc)  # the whole window's prism: its nearer casters keep positive depths
+    # the whole window's prism: its nearer casters keep positive depths
+    zc = min(zc, distant_caster_depth(vp, (l, r, b, t), zr_min, math.inf, 0.0, mesh, anchor, axes))
     lead = 1e-3 * ext
     z0, z1, step = snapped_depths(zc - lead, zr_max + lead)
     cx, cy = 0.5 * (l + r), 0.5 * (b + t)

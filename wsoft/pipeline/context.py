@@ -276,6 +276,7 @@ class RenderContext:
             extra = {"anchor": self._world_origin(), "region": region, "down": self._down()} if stable else {}
             fit = functools.partial(fit_stable_view if stable else fit_light_view, light, rec, lo, hi, size,
                                     casters=self.scene.caster_points if soft or distant else None, all_casters=lambda: self.scene.caster_points,
+                                    caster_triangles=self.scene.caster_mesh if distant else None,
                                     **extra)
             view = fit()
             if probe:

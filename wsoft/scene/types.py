@@ -24,6 +24,9 @@ LIGHT_CYLINDER = 5  # CylinderLight: its side along the frame's X (a line light:
 LIGHT_KIND_NAMES = {LIGHT_RECT: "rect", LIGHT_DISK: "disk", LIGHT_SPHERE: "sphere", LIGHT_DISTANT: "distant", LIGHT_POINT: "point",
                     LIGHT_CYLINDER: "cylinder"}
 
+# the 12 triangles of a box's 8 corners (corner k: bit 0 -> x, bit 1 -> y, bit 2 -> z high)
+BOX_TRIANGLES = ((0, 2, 3), (0, 3, 1), (4, 5, 7), (4, 7, 6), (0, 1, 5), (0, 5, 4), (2, 6, 7), (2, 7, 3), (0, 4, 6), (0, 6, 2),
+                 (1, 3, 7), (1, 7, 5))
 EXACT_CASTER_POINTS = 4_000_000  # instanced vertices up to which Scene.caster_points holds them all (else instance box corners)
 
 WRAP_REPEAT = 0
@@ -409,6 +412,21 @@ class Scene:
             extra = inst.world_vertices() if inst.placed_vertices() <= EXACT_CASTER_POINTS else inst.corners()
             return np.concatenate([own, extra]).astype(np.float32)
         return own
+
+    def caster_mesh(self) -> tuple[np.ndarray, np.ndarray]:
+        """Every triangle as (points float32 ``[V, 3]``, triangles ``[T, 3]`` into them): what a
+        distant light's view tests for casters crossing its region
+        (:func:`~wsoft.lightspace.fit.distant_caster_depth`). Of an instanced scene: the soup's,
+        plus the 12 triangles of every instance's world bounds (:meth:`Instances.corners`: every
+        instanced triangle lies inside its box)."""
+        pts = np.asarray(self.points, np.float32)
+        tris = np.asarray(self.triangles).reshape(-1, 3)
+        if self.instanced:
+            corners = self.instances.corners()
+            boxes = (np.arange(len(corners) // 8, dtype=np.int64)[:, None, None] * 8 + np.array(BOX_TRIANGLES, np.int64)[None]).reshape(-1, 3)
+            tris = np.concatenate([tris.astype(np.int64), boxes + len(pts)])
+            pts = np.concatenate([pts, corners]).astype(np.float32)
+        return pts, tris
 
     @property
     def diagonal(self) -> float:

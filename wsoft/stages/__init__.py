@@ -20,6 +20,7 @@ The rest of the package, by idea:
   must give); :mod:`~wsoft.stages.failures`, :mod:`~wsoft.stages.essm_cases`,
   :mod:`~wsoft.stages.ssm_cases`, :mod:`~wsoft.stages.moment_cases` — stages of known failures and
   paper cases (``moment_cases.stacked_plates``: light bleeding under stacked occluders);
+  :mod:`~wsoft.stages.omni_cases` — a point light at the centre of a closed box (cube-map cases);
   :mod:`~wsoft.stages.pipeline` — the USD pipeline stages (render settings, shadowLink).
 * :mod:`~wsoft.stages.scenes` — the generators of the bundled stages;
   ``python -m wsoft.stages.bundled`` (:mod:`~wsoft.stages.bundled`) regenerates them.

@@ -558,6 +558,37 @@ def b_room_ceiling(folder):
     return _save(st, folder, "room_ceiling")
 
 
+# a sun whose cone a wall far outside the receivers' window partly blocks: 8 degrees wide, arriving from
+# 30 degrees off the zenith on the -x side; the wall in the plane x = -100, 160 tall, its top edge seen
+# from the ground at 56-59 degrees of elevation: inside the cone (56-64), above the light's centre (60)
+SUN_WALL_ANGLE = 8.0
+SUN_WALL_TOWARD = (-0.5, 0.0, math.sqrt(0.75))
+SUN_WALL_X, SUN_WALL_HEIGHT = -100.0, 160.0
+
+
+def _sun_wall(folder: str, name: str, half_width: float) -> str:
+    """A ground (+-5) under an 8-degree sun, and a double-sided wall far off (x = -100, 160 tall,
+    y within +-``half_width``) that blocks part of the sun's cone from every receiver but never its
+    centre: the exact answer is a penumbra over the whole ground, V 0.6-0.96."""
+    st = make_stage()
+    add_quad(st, "/World/Ground", (0, 0, 0), 5)
+    add_sun(st, "/World/Light", SUN_WALL_ANGLE, toward=SUN_WALL_TOWARD)
+    x, h, w = SUN_WALL_X, SUN_WALL_HEIGHT, half_width
+    add_mesh(st, "/World/Wall", ([(x, -w, 0.0), (x, w, 0.0), (x, w, h), (x, -w, h)], [4], [0, 1, 2, 3]), True, minimal=True)
+    add_camera(st, "/World/Cam", (0, -6, 5), (0, 0, 0))
+    return _save(st, folder, name)
+
+
+def b_sun_far_wall(folder):
+    """The wall 16 wide: its corners lie where a caster can block part of the sun's cone from a receiver."""
+    return _sun_wall(folder, "sun_far_wall", 8.0)
+
+
+def b_sun_huge_far_wall(folder):
+    """The wall 2e4 wide: its corners lie far outside that region, its interior crosses it."""
+    return _sun_wall(folder, "sun_huge_far_wall", 1e4)
+
+
 # -- texture networks: the UsdPreviewSurface nodes between a cutout's texture and its mesh (wsoft.scene.usd_texture)
 
 
@@ -733,6 +764,52 @@ def far_side_dark(ch, base=None, technique="") -> str | None:
     return None
 
 
+# techniques whose V is the light's central direction's, filtered by a kernel of fixed width (no penumbra
+# sized from the light: salzman's one blur width for every penumbra)
+CENTRAL = ("hard", "pcf", "vsm", "esm", "evsm", "msm", "izb", "salzman")
+
+
+def _sun_cone(n: int = 2048) -> np.ndarray:
+    """``n`` unit directions toward the sun of :func:`_sun_wall`, evenly over its cone (a sunflower
+    pattern over the disk of the cone's half-angle)."""
+    c = np.asarray(SUN_WALL_TOWARD, np.float64)
+    c /= np.linalg.norm(c)
+    u = np.cross(c, [0.0, 1.0, 0.0])
+    u /= np.linalg.norm(u)
+    v = np.cross(c, u)
+    k = np.arange(n) + 0.5
+    rad = math.tan(math.radians(0.5 * SUN_WALL_ANGLE)) * np.sqrt(k / n)
+    phi = k * math.pi * (3.0 - math.sqrt(5.0))
+    d = c + rad[:, None] * (np.cos(phi)[:, None] * u + np.sin(phi)[:, None] * v)
+    return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+
+def sun_wall_penumbra(half_width: float):
+    """A check of :func:`_sun_wall`'s stage with a wall of ``half_width``: the mean V over the ground
+    within 0.1 of the exact visible fraction of the sun's cone past the wall (of the light's centre
+    alone, never blocked, for the fixed-filter techniques of :data:`CENTRAL`). A map that misses the
+    wall gives about 0.97 where the exact answer is about 0.8."""
+
+    def check(ch, base=None, technique="") -> str | None:
+        cov = _covered(ch) & (np.abs(ch["P.Z"]) < 1e-4)
+        if cov.sum() < 100:
+            return f"{int(cov.sum())} ground pixels"
+        p = np.stack([ch["P.X"], ch["P.Y"], ch["P.Z"]], -1)[cov].astype(np.float64)
+        c = np.asarray(SUN_WALL_TOWARD, np.float64)
+        dirs = c[None] / np.linalg.norm(c) if technique in CENTRAL else _sun_cone()
+        t = (SUN_WALL_X - p[:, None, 0]) / dirs[None, :, 0]  # along each direction to the wall's plane
+        hy = p[:, None, 1] + t * dirs[None, :, 1]
+        hz = p[:, None, 2] + t * dirs[None, :, 2]
+        blocked = (t > 0) & (hz >= 0.0) & (hz <= SUN_WALL_HEIGHT) & (np.abs(hy) <= half_width)
+        exact = 1.0 - blocked.mean(axis=1)
+        got = ch["V"][cov].astype(np.float64)
+        d = abs(got.mean() - exact.mean())
+        return None if d <= 0.1 else f"mean V {got.mean():.3f} on {int(cov.sum())} ground pixels, the exact {exact.mean():.3f}"
+
+    check.__doc__ = f"The sun's visible fraction past a wall {2 * half_width:g} wide, mean over the ground within 0.1."
+    return check
+
+
 def same_as(other: str):
     def check(ch, base, technique="", frames=None) -> str | None:
         return _same_v(ch, frames[other], other)
@@ -843,6 +920,10 @@ CASES: list[Case] = [
          note="a 0.53° sphere light 1e4 up: the shadow it casts from 100 up"),
     Case("room_ceiling", b_room_ceiling, check=all_dark, silent_hazard=True,
          note="camera inside a closed double-sided room, the lamp half a unit above its ceiling"),
+    Case("sun_far_wall", b_sun_far_wall, check=sun_wall_penumbra(8.0), silent_hazard=True,
+         note="an 8-degree sun partly blocked by a wall 100 away, outside the receivers' window: a penumbra over the whole ground"),
+    Case("sun_huge_far_wall", b_sun_huge_far_wall, check=sun_wall_penumbra(1e4), silent_hazard=True,
+         note="the same wall 2e4 wide: its corners far outside the region where a caster can shadow a receiver"),
     # texture networks: the UsdPreviewSurface nodes between a cutout's texture and its mesh
     Case("cutout_clamp", b_cutout_clamp, note="8-bit cutout texture, wrapS = wrapT = clamp"),
     Case("cutout_varname_uv", b_cutout_varname_uv, check=same_as("cutout_8bit"), silent_hazard=True,

@@ -17,7 +17,7 @@ import os
 import sys
 from collections.abc import Callable, Sequence
 
-from wsoft.stages.scenes import animated, basics, bridge, city, forest, organic, stsv, tower, tunnel_fan
+from wsoft.stages.scenes import animated, basics, bridge, city, forest, interiors, organic, stsv, tower, tunnel_fan
 from wsoft.usd_scenes import folder as bundled_folder
 
 # name -> generator(out_dir) -> {"file": path, "triangles": n, ...}
@@ -31,6 +31,8 @@ SCENES: dict[str, Callable[[str], dict[str, object]]] = {
     "lightmapped_bridge": bridge.scene_lightmapped_bridge,
     "tower": tower.scene_tower,
     "tunnel_fan": tunnel_fan.scene_tunnel_fan,
+    "room_lamp": interiors.scene_room_lamp,
+    "corridor_torch": interiors.scene_corridor_torch,
     "forest": forest.scene_forest,
     "ogre": organic.scene_ogre,
     "plants": organic.scene_plants,
