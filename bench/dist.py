@@ -20,9 +20,12 @@ resumes from ``<sweep>.jsonl`` like an in-process sweep (nothing lost, nothing w
   Failed rows are left out of the report and run again by a rerun.
 * References are cached by key: in ``--cache-dir`` when every worker sees that folder, and in any
   case returned to the driver, which keeps them in its own cache and hands them to the jobs.
-* Jobs are grouped by scene: each scene's jobs prefer one worker (a loose restriction that work
-  stealing may still move), which loads the scene and builds its BVH once (``scene_load_s`` on the
-  first job of that scene, 0 on the rest) and compiles kernels once (``compile_s``).
+* Jobs are grouped by scene: they are submitted scene by scene with falling priority, so a worker
+  takes one scene's jobs one after another, and each worker process loads a scene and builds its
+  BVH once (``scene_load_s``, ``scene_was_loaded`` on the later jobs) and compiles or loads a kernel
+  module once (``compile_s``: the seconds within the job). (Dask's loose worker restrictions would
+  pin a scene to a worker, but a job so pinned may land, once its worker dies, on a worker without
+  the timing resource.)
 """
 
 from __future__ import annotations
@@ -227,17 +230,6 @@ def dashboard_text(client) -> str:
     return f"Dask dashboard: {client.dashboard_link}{pages}"
 
 
-def _affinity(groups: list[str], counts: dict[str, int], workers: list[str]) -> dict[str, str]:
-    """Each scene group's preferred worker: the largest groups first, each to the least loaded worker."""
-    load = {w: 0 for w in workers}
-    out = {}
-    for g in sorted(groups, key=lambda g: -counts[g]):
-        w = min(load, key=lambda w: (load[w], w))
-        out[g] = w
-        load[w] += counts[g]
-    return out
-
-
 def failed_row(sweep: str, case: dict, error: str, worker: dict | None = None) -> dict:
     from wsoft.bench.harness import case_key
 
@@ -298,8 +290,6 @@ def _drive(sweep, module, todo, ctx, jsonl, *, cluster, scheduler, scenes, cache
             if not ws:
                 raise ParameterError(f"no Dask worker declares the resource {r} that timed jobs need "
                                      f"(start one with: dask worker {scheduler or ''} --resources {r}=1)")
-        counts = {g: sum(c.get("scene", "") == g for c in todo) for g in order}
-        prefer = {r: _affinity(order, counts, ws) for r, ws in holders.items()}
         # error-only jobs: the references, each once, before the timed jobs
         refs: dict[str, object] = {}
         ref_futures = []
@@ -320,8 +310,7 @@ def _drive(sweep, module, todo, ctx, jsonl, *, cluster, scheduler, scenes, cache
             r = timing_resource(case)
             deps = [refs[reference_key(kw)] for kw in (references(case) if references else [])]
             f = client.submit(run_job, module, case, ctx["stem"], ctx["quick"], scenes, cache_dir, *deps, key=job_key(sweep, case),
-                              resources={r: 1}, retries=RETRIES, priority=-i, workers=[prefer[r][case.get("scene", "")]],
-                              allow_other_workers=True)
+                              resources={r: 1}, retries=RETRIES, priority=-i)
             futures[f.key] = (f, case)
         failed = 0
         bar = tqdm(total=len(futures), desc=f"{sweep} on Dask", unit="row", file=sys.stderr)

@@ -277,7 +277,7 @@ def run_sweep(name: str, *, quick: bool = False, device: list[str] | None = None
     mod = importlib.import_module(SWEEPS[name])
     if scenes and not Path(scenes).is_dir():  # a bad --scenes is an error before anything runs (or is remembered)
         raise ParameterError(f"--scenes {scenes}: no such folder")
-    distributed = bool(workers) or bool(scheduler)
+    distributed = workers is not None or bool(scheduler)
     if distributed:
         from wsoft.bench import dist
 
@@ -319,7 +319,7 @@ def run_sweep(name: str, *, quick: bool = False, device: list[str] | None = None
     rows = [r for r in finished_rows(jsonl) if r["key"] in keys]
     cmd = f"wsoft bench {name}" + (" --quick" if quick else "") + "".join(f" --device {d}" for d in (device or [])) + \
         (f" --out-dir {out_dir}" if str(out_dir) != "reports" else "") + (f" --scenes {scenes}" if scenes else "") + \
-        (f" --workers {workers}" if workers else "") + (f" --scheduler {scheduler}" if scheduler else "")
+        (f" --workers {workers}" if workers is not None else "") + (f" --scheduler {scheduler}" if scheduler else "")
     md = out / f"{stem}.md"
     mod.report(rows, md, ctx | {"command": cmd})
     print(f"wrote {md} ({len(rows)} rows){f'; {failed} rows failed' if failed else ''}", file=sys.stderr)

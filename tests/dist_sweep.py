@@ -1,6 +1,6 @@
 """A sweep small enough for the distributed tests (tests/test_dist.py): three rows of ``hard`` on two
 bundled stages at 48x36, plus the rows a test asks for in ``$WSOFT_DIST_SWEEP`` (a JSON list):
-``{"kind": "slow", "dir": D, "seconds": S}`` writes ``D/started-<pid>`` and sleeps S seconds before
+``{"kind": "slow", "dir": D, "seconds": S}`` writes ``D/started-<pid>-<ns>`` and sleeps S seconds before
 its row (a job to kill its worker under), ``{"kind": "raise"}`` raises a WsoftError,
 ``{"kind": "crash"}`` kills its own worker process. Workers import it by name (``dist_sweep``),
 with tests/ on their path."""
@@ -16,7 +16,7 @@ from pathlib import Path
 from wsoft.bench.common import render_references, render_row
 
 SWEEP = "dist-test"
-MODULE = "dist_sweep"
+MODULE = "dist_sweep"  # the name workers import it by
 references = render_references
 
 
@@ -29,7 +29,7 @@ def cases(quick: bool, devices: list[str]) -> list[dict]:
 
 def run_case(case: dict, ctx: dict) -> dict:
     if case["kind"] == "slow":
-        (Path(case["dir"]) / f"started-{os.getpid()}").write_text("")
+        (Path(case["dir"]) / f"started-{os.getpid()}-{time.time_ns()}").write_text("")
         time.sleep(case["seconds"])
         return {"slow": True}
     if case["kind"] == "raise":
@@ -45,3 +45,19 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
     from wsoft.bench.common import report_header
 
     md.write_text("\n".join(report_header(SWEEP, rows, md, ctx)) + "\n")
+
+
+def register() -> None:
+    """Make ``wsoft bench dist-test`` this sweep, in this process."""
+    from wsoft.bench import harness
+
+    harness.SWEEPS[SWEEP] = MODULE
+
+
+if __name__ == "__main__":  # the driver as its own process: python dist_sweep.py ARGS (wsoft's command line)
+    import sys
+
+    from wsoft.cli import main
+
+    register()
+    sys.exit(main(sys.argv[1:]))
