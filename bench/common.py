@@ -15,7 +15,7 @@ from wsoft.bench.harness import ground_truth, measure_render, reference
 def render_references(case: dict) -> list[dict]:
     """The reference :func:`render_row` measures ``case`` against, as :func:`~wsoft.bench.harness.reference`'s
     arguments (a sweep module's ``references``: error-only jobs a distributed sweep runs apart)."""
-    if "ref_samples" not in case:
+    if case.get("kind") != "render" or "ref_samples" not in case:
         return []
     return [{"name": case["scene"], "width": case["width"], "height": case["height"], "light": case["light"], "samples": case["ref_samples"],
              "device": case["device"], "casters": case.get("ref_casters", "all")}]

@@ -106,7 +106,7 @@ def reference_key(kw: dict) -> str:
 
 # -- on the workers ---------------------------------------------------------------------------------
 
-_WARM: dict[tuple[str, str], float] = {}  # (scene, device) -> seconds its load and BVH took in this worker process
+_WARM: dict[tuple[str, str], tuple[float, float]] = {}  # (scene, device) -> (seconds of its load and BVH, of kernel loads among them)
 
 
 def _setup(scenes: str | None, cache_dir: str | None) -> None:
@@ -127,24 +127,28 @@ def _worker() -> dict:
         return {"address": None, "name": None, "pid": os.getpid(), "resources": {}}
 
 
-def _warm_scene(name, device) -> tuple[float, bool]:
+def _warm_scene(name, device) -> tuple[float, float, bool]:
     """Load scene ``name`` and build its BVH on ``device`` once per worker process: (the seconds that
-    took, whether this process held it already). A scene that does not load is left to the job."""
+    took, less the kernel compiles and loads among them; those; whether this process held the scene
+    already). A scene that does not load is left to the job."""
     from wsoft.bench import harness
     from wsoft.errors import WsoftError
+    from wsoft.parallel import compile_time
     from wsoft.scene.device import upload_scene
 
     if not isinstance(name, str) or not isinstance(device, str):
-        return 0.0, False
+        return 0.0, 0.0, False
     if (name, device) in _WARM:
-        return _WARM[(name, device)], True
+        return *_WARM[(name, device)], True
     t0 = time.perf_counter()
     try:
         harness.load(name).device_copy(device, upload_scene)
     except (WsoftError, OSError):
-        return 0.0, False
-    _WARM[(name, device)] = time.perf_counter() - t0
-    return _WARM[(name, device)], False
+        return 0.0, 0.0, False
+    t1 = time.perf_counter()
+    kernels = compile_time(t0, t1)[0]
+    _WARM[(name, device)] = (t1 - t0 - kernels, kernels)
+    return *_WARM[(name, device)], False
 
 
 def _store_reference(ref: dict) -> None:
@@ -180,7 +184,7 @@ def run_job(module: str, case: dict, stem: str, quick: bool, scenes: str | None,
     for ref in refs:
         _store_reference(ref)
     info = _worker() | {"device": case.get("device"), "load_start": round(os.getloadavg()[0], 2) if hasattr(os, "getloadavg") else None}
-    scene_load_s, warm = _warm_scene(case.get("scene"), case.get("device"))
+    scene_load_s, warm_compile_s, warm = _warm_scene(case.get("scene"), case.get("device"))
     mod = importlib.import_module(module)
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="wsoft-job-") as tmp:
@@ -190,20 +194,15 @@ def run_job(module: str, case: dict, stem: str, quick: bool, scenes: str | None,
             return {"error": exc.line(), "worker": info}
         files = {p.relative_to(tmp).as_posix(): p.read_bytes() for p in sorted(Path(tmp).rglob("*")) if p.is_file()}
     t1 = time.perf_counter()
-    info |= {"scene_load_s": round(scene_load_s, 3), "scene_was_loaded": warm, "compile_s": round(compile_time(t0, t1)[0], 3),
-             "job_s": round(t1 - t0, 3)}
+    warm_s = 0.0 if warm else scene_load_s + warm_compile_s
+    info |= {"scene_load_s": round(scene_load_s, 3), "scene_was_loaded": warm,
+             "compile_s": round(compile_time(t0, t1)[0] + (0.0 if warm else warm_compile_s), 3), "job_s": round(t1 - t0, 3)}
     row["machine"] = harness.machine()
     row["worker"] = info
-    return {"row": row, "files": files, "seconds": round(t1 - t0 + (0 if warm else scene_load_s), 2)}
+    return {"row": row, "files": files, "seconds": round(t1 - t0 + warm_s, 2)}
 
 
 # -- on the driver ------------------------------------------------------------------------------------
-
-
-def _limit_failures(dask_scheduler=None, n: int = ALLOWED_FAILURES) -> int:
-    """On the scheduler: a task that killed more than ``n`` workers fails (KilledWorker)."""
-    dask_scheduler.allowed_failures = min(dask_scheduler.allowed_failures, n)
-    return dask_scheduler.allowed_failures
 
 
 def _embedded(n: int, threads: int, resources: dict | None):
@@ -271,7 +270,11 @@ def _drive(sweep, module, todo, ctx, jsonl, *, cluster, scheduler, scenes, cache
         raise ParameterError(f"--scheduler {scheduler}: no Dask scheduler answers there ({exc})") from None
     with client:
         print(dashboard_text(client), file=sys.stderr)
-        client.run_on_scheduler(_limit_failures)
+        def limit_failures(dask_scheduler=None, n=ALLOWED_FAILURES):  # nested: sent by value, the scheduler needs no wsoft
+            dask_scheduler.allowed_failures = min(dask_scheduler.allowed_failures, n)
+            return dask_scheduler.allowed_failures
+
+        client.run_on_scheduler(limit_failures)
         try:
             client.wait_for_workers(n_workers or 1, timeout=WAIT_FOR_WORKERS_S)
         except TimeoutError:
@@ -306,15 +309,19 @@ def _drive(sweep, module, todo, ctx, jsonl, *, cluster, scheduler, scenes, cache
                     refs[k] = client.submit(run_reference, kw, scenes, cache_dir, key=k, retries=RETRIES, priority=100)
                     ref_futures.append(refs[k])
         futures = {}
+        users = {k: 0 for k in refs}  # the timed jobs still to finish that need each reference
         for i, case in enumerate(todo):
             r = timing_resource(case)
-            deps = [refs[reference_key(kw)] for kw in (references(case) if references else [])]
+            dep_keys = [reference_key(kw) for kw in (references(case) if references else [])]
+            for k in dep_keys:
+                users[k] += 1
+            deps = [refs[k] for k in dep_keys]
             f = client.submit(run_job, module, case, ctx["stem"], ctx["quick"], scenes, cache_dir, *deps, key=job_key(sweep, case),
                               resources={r: 1}, retries=RETRIES, priority=-i)
-            futures[f.key] = (f, case)
+            futures[f.key] = (f, case, dep_keys)
         failed = 0
         bar = tqdm(total=len(futures), desc=f"{sweep} on Dask", unit="row", file=sys.stderr)
-        for f in as_completed(list(ref_futures) + [f for f, _ in futures.values()]):
+        for f in as_completed(list(ref_futures) + [f for f, _, _ in futures.values()]):
             if f.key not in futures:  # a reference: the driver keeps it too
                 if f.status == "finished":
                     path_ref = f.result()
@@ -326,7 +333,7 @@ def _drive(sweep, module, todo, ctx, jsonl, *, cluster, scheduler, scenes, cache
                         tmp.write_bytes(path_ref["data"])
                         os.replace(tmp, target)
                 continue
-            case = futures[f.key][1]
+            _, case, dep_keys = futures[f.key]
             bar.update(1)
             if f.status != "finished":
                 exc = f.exception()
@@ -348,5 +355,9 @@ def _drive(sweep, module, todo, ctx, jsonl, *, cluster, scheduler, scenes, cache
                 tqdm.write(f"row failed ({row['error']}): {case_key(case)}", file=sys.stderr)
             append_row(jsonl, row)
             f.release()
+            for k in dep_keys:  # a reference no job needs any more leaves the workers' memory
+                users[k] -= 1
+                if users[k] == 0:
+                    refs[k].release()
         bar.close()
         return failed

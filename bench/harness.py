@@ -9,9 +9,12 @@ ends by writing ``<out-dir>/<sweep>.md``. ``--quick`` is the CI-sized version an
 Scenes are looked up by name in the bundled stages (``wsoft.usd_scenes``, installed with the
 package) or in ``--scenes DIR`` / ``$WSOFT_SCENES``.
 
-References are cached on disk (``$WSOFT_CACHE_DIR``, default ``~/.cache/wsoft``) by scene
-file (path, size, modification time), time code, camera, light, resolution, sample count
+References are cached on disk (``$WSOFT_CACHE_DIR`` or ``--cache-dir``, default ``~/.cache/wsoft``)
+by scene file (path, size, modification time), time code, camera, light, resolution, sample count
 and seed.
+
+``--workers N`` / ``--scheduler ADDRESS`` run the rows as jobs on Dask workers
+(:mod:`wsoft.bench.dist`); this process still writes every row, as it finishes.
 """
 
 from __future__ import annotations
@@ -33,7 +36,7 @@ SWEEPS = {"foundation": "wsoft.bench.foundation", "filtered": "wsoft.bench.filte
           "ssm-table1": "wsoft.bench.ssm_table1", "ssm-table2": "wsoft.bench.ssm_table2", "pareto": "wsoft.bench.pareto",
           "adversarial": "wsoft.bench.adversarial", "usd-pipeline": "wsoft.bench.usd_pipeline",
           "instancing": "wsoft.bench.instancing", "stsv": "wsoft.bench.stsv", "modern": "wsoft.bench.modern",
-          "temporal": "wsoft.bench.temporal"}
+          "temporal": "wsoft.bench.temporal", "distributed": "wsoft.bench.distributed"}
 SWEEP_ALIASES = {"usd_pipeline": "usd-pipeline"}  # other spellings `wsoft bench` accepts (words joined by "-" in SWEEPS)
 REFERENCE_VERSION = 4  # bump when the reference changes (2: rows render one named light; 3: the receiver's horizon, ray offsets from the frame's extent; 4: the shaded R, G, B for ꟻLIP)
 _SCENE_DIR: Path | None = None
@@ -260,6 +263,27 @@ def finished_rows(path: Path) -> list[dict]:
     return [r for r in read_rows(path) if not r.get("failed")]
 
 
+def run_in_process(name: str, mod, todo: list[dict], ctx: dict, jsonl: Path) -> int:
+    """Run the cases ``todo`` of sweep ``name`` (module ``mod``) one after another in this process,
+    appending each row to ``jsonl`` as it finishes; returns the number of rows that failed."""
+    from tqdm import tqdm
+
+    from wsoft.errors import WsoftError
+
+    failed = 0
+    for case in tqdm(todo, desc=name, unit="row", file=sys.stderr):
+        t0 = time.time()
+        try:
+            row = mod.run_case(case, ctx)
+        except WsoftError as exc:
+            failed += 1
+            tqdm.write(f"row failed ({exc.line()}): {case_key(case)}", file=sys.stderr)
+            continue
+        row.update({"key": case_key(case), "sweep": name, "case": case, "finished": time.strftime("%Y-%m-%dT%H:%M:%S"), "row_seconds": round(time.time() - t0, 2), "machine": machine()})
+        append_row(jsonl, row)
+    return failed
+
+
 def run_sweep(name: str, *, quick: bool = False, device: list[str] | None = None, out_dir: str = "reports", fresh: bool = False,
               scenes: str | None = None, workers: int | None = None, scheduler: str | None = None, resources: dict | None = None,
               threads_per_worker: int = 1, cache_dir: str | None = None) -> int:
@@ -268,9 +292,7 @@ def run_sweep(name: str, *, quick: bool = False, device: list[str] | None = None
     address) send its rows to Dask workers (:mod:`wsoft.bench.dist`); ``resources``: what each
     embedded worker declares. ``cache_dir``: the references' cache (``$WSOFT_CACHE_DIR``), a folder
     every worker sees."""
-    from tqdm import tqdm
-
-    from wsoft.errors import ParameterError, WsoftError
+    from wsoft.errors import ParameterError
     from wsoft.parallel import resolve_device
 
     name = sweep_name(name)
@@ -298,23 +320,13 @@ def run_sweep(name: str, *, quick: bool = False, device: list[str] | None = None
     cases = mod.cases(quick=quick, devices=devices)
     todo = [c for c in cases if case_key(c) not in done]
     print(f"sweep {name}{' (quick)' if quick else ''}: {len(cases)} rows, {len(cases) - len(todo)} already in {jsonl}", file=sys.stderr)
-    failed = 0
     ctx = {"out_dir": out, "stem": stem, "quick": quick}
     if distributed:
         failed = dist.run_jobs(name, SWEEPS[name], todo, ctx, jsonl, workers=workers, scheduler=scheduler, resources=resources,
                                threads_per_worker=threads_per_worker, scenes=scenes,
                                cache_dir=os.environ["WSOFT_CACHE_DIR"] if cache_dir else None)
-        todo = []
-    for case in tqdm(todo, desc=name, unit="row", file=sys.stderr):
-        t0 = time.time()
-        try:
-            row = mod.run_case(case, ctx)
-        except WsoftError as exc:
-            failed += 1
-            tqdm.write(f"row failed ({exc.line()}): {case_key(case)}", file=sys.stderr)
-            continue
-        row.update({"key": case_key(case), "sweep": name, "case": case, "finished": time.strftime("%Y-%m-%dT%H:%M:%S"), "row_seconds": round(time.time() - t0, 2), "machine": machine()})
-        append_row(jsonl, row)
+    else:
+        failed = run_in_process(name, mod, todo, ctx, jsonl)
     keys = {case_key(c) for c in cases}
     rows = [r for r in finished_rows(jsonl) if r["key"] in keys]
     cmd = f"wsoft bench {name}" + (" --quick" if quick else "") + "".join(f" --device {d}" for d in (device or [])) + \
