@@ -304,7 +304,7 @@ def _drive(sweep, module, todo, ctx, jsonl, *, cluster, scheduler, scenes, cache
                     continue
                 path = reference_path(**kw)
                 if path.exists():  # the driver holds it: hand it to the jobs
-                    refs[k] = client.scatter({"file": path.name, "data": path.read_bytes()}, hash=False)
+                    refs[k] = client.scatter([{"file": path.name, "data": path.read_bytes()}], hash=False)[0]
                 else:
                     refs[k] = client.submit(run_reference, kw, scenes, cache_dir, key=k, retries=RETRIES, priority=100)
                     ref_futures.append(refs[k])
