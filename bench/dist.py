@@ -17,6 +17,9 @@ resumes from ``<sweep>.jsonl`` like an in-process sweep (nothing lost, nothing w
 * A job whose worker dies is run again on another (Dask reschedules it); one that killed two
   workers is recorded as failed with its error (``distributed.scheduler.allowed-failures`` = 1), as
   is one that raises (a :class:`~wsoft.errors.WsoftError` at once, anything else after one retry).
+  Dask counts a worker's death against every task assigned to it, so the driver submits a timed
+  job only when a unit of its resource is free: the jobs queued behind a crashing one are not
+  blamed for it.
   Failed rows are left out of the report and run again by a rerun.
 * References are cached by key: in ``--cache-dir`` when every worker sees that folder, and in any
   case returned to the driver, which keeps them in its own cache and hands them to the jobs.
@@ -109,12 +112,17 @@ def reference_key(kw: dict) -> str:
 _WARM: dict[tuple[str, str], tuple[float, float]] = {}  # (scene, device) -> (seconds of its load and BVH, of kernel loads among them)
 
 
+_OWN_CACHE = os.environ.get("WSOFT_CACHE_DIR")  # the worker's own reference cache, where a job names none
+
+
 def _setup(scenes: str | None, cache_dir: str | None) -> None:
     from wsoft.bench.harness import set_scenes_dir
 
     set_scenes_dir(scenes)
-    if cache_dir:
-        os.environ["WSOFT_CACHE_DIR"] = cache_dir
+    if cache_dir or _OWN_CACHE:
+        os.environ["WSOFT_CACHE_DIR"] = cache_dir or _OWN_CACHE
+    else:
+        os.environ.pop("WSOFT_CACHE_DIR", None)
 
 
 def _worker() -> dict:
@@ -270,6 +278,7 @@ def _drive(sweep, module, todo, ctx, jsonl, *, cluster, scheduler, scenes, cache
         raise ParameterError(f"--scheduler {scheduler}: no Dask scheduler answers there ({exc})") from None
     with client:
         print(dashboard_text(client), file=sys.stderr)
+
         def limit_failures(dask_scheduler=None, n=ALLOWED_FAILURES):  # nested: sent by value, the scheduler needs no wsoft
             dask_scheduler.allowed_failures = min(dask_scheduler.allowed_failures, n)
             return dask_scheduler.allowed_failures
@@ -308,32 +317,41 @@ def _drive(sweep, module, todo, ctx, jsonl, *, cluster, scheduler, scenes, cache
                 else:
                     refs[k] = client.submit(run_reference, kw, scenes, cache_dir, key=k, retries=RETRIES, priority=100)
                     ref_futures.append(refs[k])
-        futures = {}
+        # the timed jobs, each resource's in the sweep's order, no more at a time than workers hold that resource:
+        # Dask counts a worker's death against every task assigned to it, queued ones included, so a timed job is
+        # submitted only when a unit of its resource is free, and a job that kills workers fails alone
         users = {k: 0 for k in refs}  # the timed jobs still to finish that need each reference
+        pending: dict[str, list[tuple[int, dict, list[str]]]] = {r: [] for r in needed}
         for i, case in enumerate(todo):
-            r = timing_resource(case)
             dep_keys = [reference_key(kw) for kw in (references(case) if references else [])]
             for k in dep_keys:
                 users[k] += 1
-            deps = [refs[k] for k in dep_keys]
-            f = client.submit(run_job, module, case, ctx["stem"], ctx["quick"], scenes, cache_dir, *deps, key=job_key(sweep, case),
-                              resources={r: 1}, retries=RETRIES, priority=-i)
-            futures[f.key] = (f, case, dep_keys)
-        failed = 0
-        bar = tqdm(total=len(futures), desc=f"{sweep} on Dask", unit="row", file=sys.stderr)
-        for f in as_completed(list(ref_futures) + [f for f, _, _ in futures.values()]):
-            if f.key not in futures:  # a reference: the driver keeps it too
-                if f.status == "finished":
-                    path_ref = f.result()
-                    from wsoft.bench.harness import cache_dir as driver_cache
+            pending[timing_resource(case)].append((i, case, dep_keys))
+        futures: dict[str, tuple[object, dict, list[str], str]] = {}
+        running = as_completed(ref_futures)
 
-                    target = driver_cache() / path_ref["file"]
-                    if not target.exists():
-                        tmp = target.with_suffix(".tmp")
-                        tmp.write_bytes(path_ref["data"])
-                        os.replace(tmp, target)
+        def submit_more() -> None:
+            workers = client.scheduler_info(n_workers=-1)["workers"].values()
+            for r, queue in pending.items():
+                slots = max(1, int(sum(w.get("resources", {}).get(r, 0) for w in workers)))
+                busy = sum(1 for *_, res in futures.values() if res == r)
+                while queue and busy < slots:
+                    i, case, dep_keys = queue.pop(0)
+                    f = client.submit(run_job, module, case, ctx["stem"], ctx["quick"], scenes, cache_dir, *[refs[k] for k in dep_keys],
+                                      key=job_key(sweep, case), resources={r: 1}, retries=RETRIES, priority=-i)
+                    futures[f.key] = (f, case, dep_keys, r)
+                    running.add(f)
+                    busy += 1
+
+        submit_more()
+        failed = 0
+        bar = tqdm(total=len(todo), desc=f"{sweep} on Dask", unit="row", file=sys.stderr)
+        for f in running:
+            if f.key not in futures:  # a reference: the driver keeps it in its own cache too
+                if f.status == "finished":
+                    _store_reference(f.result())
                 continue
-            _, case, dep_keys = futures[f.key]
+            _, case, dep_keys, _ = futures.pop(f.key)
             bar.update(1)
             if f.status != "finished":
                 exc = f.exception()
@@ -359,5 +377,6 @@ def _drive(sweep, module, todo, ctx, jsonl, *, cluster, scheduler, scenes, cache
                 users[k] -= 1
                 if users[k] == 0:
                     refs[k].release()
+            submit_more()
         bar.close()
         return failed

@@ -89,10 +89,13 @@ def test_bad_distributed_options_are_one_line_errors(dask_installed, tmp_path):
 
 def test_local_cluster_rows_match_in_process_and_failures_are_rows(dask_installed, sweep, in_process, tmp_path, capsys):
     """--workers 2: the render rows equal the in-process run's; the first worker alone (MACHINE=1) times;
-    a row that raises and a row that kills its worker twice are recorded failed, with their errors."""
+    the references land in --cache-dir; a row that raises and a row that kills its worker twice are
+    recorded failed, with their errors."""
     sweep([{"kind": "raise"}, {"kind": "crash"}])
     out = tmp_path / "reports"
-    assert harness.run_sweep(dist_sweep.SWEEP, quick=True, device=["cpu"], out_dir=str(out), workers=2) == 1
+    shared = tmp_path / "shared"
+    assert harness.run_sweep(dist_sweep.SWEEP, quick=True, device=["cpu"], out_dir=str(out), workers=2, cache_dir=str(shared)) == 1
+    assert len(list((shared / "references").glob("*.npz"))) == 2  # box_plane's and contact's, in --cache-dir
     err = capsys.readouterr().err
     assert "Dask dashboard: http://127.0.0.1:" in err and "2 Dask workers on 127.0.0.1; 5 jobs" in err
     rows = harness.read_rows(out / f"{dist_sweep.SWEEP}-quick.jsonl")
@@ -136,7 +139,7 @@ def stop(p: subprocess.Popen) -> None:
 def cluster(dask_installed, tmp_path):
     """A real ``dask scheduler`` and two ``dask worker`` processes (MACHINE=1 each) on 127.0.0.1, random free ports."""
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([ROOT, str(HERE), os.environ.get("PYTHONPATH", "")]),
-               WSOFT_CACHE_DIR=str(tmp_path / "cache"))
+               WSOFT_CACHE_DIR=str(tmp_path / "worker-cache"))  # the driver's is another folder
     port = free_port()
     address = f"tcp://127.0.0.1:{port}"
     dask = [sys.executable, "-m", "distributed.cli.dask_scheduler"]
@@ -164,11 +167,13 @@ def wait_for(test, what: str, timeout: float = 60.0):
 
 def test_real_cluster_survives_a_killed_worker_and_a_killed_driver(cluster, in_process, tmp_path):
     """Through ``dask scheduler`` + 2 ``dask worker``: kill the worker running the slow row (by its pid),
-    then the driver; a second driver finishes the sweep: every row once, errors equal to in-process."""
+    then the driver; a second driver finishes the sweep: every row once, errors equal to in-process.
+    The references come back to the driver's cache (the workers have caches of their own)."""
     address, env = cluster
     marks = tmp_path / "marks"
     marks.mkdir()
-    env = dict(env, WSOFT_DIST_SWEEP=json.dumps([{"kind": "slow", "dir": str(marks), "seconds": 2.5}]))
+    env = dict(env, WSOFT_DIST_SWEEP=json.dumps([{"kind": "slow", "dir": str(marks), "seconds": 2.5}]),
+               WSOFT_CACHE_DIR=str(tmp_path / "driver-cache"))
     out = tmp_path / "reports"
     jsonl = out / f"{dist_sweep.SWEEP}-quick.jsonl"
     cmd = [sys.executable, str(HERE / "dist_sweep.py"), "bench", dist_sweep.SWEEP, "--quick", "--device", "cpu", "--out-dir", str(out),
@@ -183,6 +188,7 @@ def test_real_cluster_survives_a_killed_worker_and_a_killed_driver(cluster, in_p
         stop(driver)
     before = harness.read_rows(jsonl)
     assert not any(r["case"]["kind"] == "slow" for r in before), "the driver was to be killed before the slow row finished"
+    assert len(list((tmp_path / "driver-cache" / "references").glob("*.npz"))) == 2  # box_plane's and contact's, returned
     p = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=120, cwd=ROOT)
     assert p.returncode == 0, p.stderr
     assert f"4 rows, {len(before)} already in" in p.stderr
