@@ -300,8 +300,8 @@ def _drive(sweep, module, todo, ctx, jsonl, *, cluster, scheduler, scenes, cache
         holders = {r: sorted(a for a, w in info.items() if w.get("resources", {}).get(r, 0) >= 1) for r in needed}
         for r, ws in holders.items():
             if not ws:
-                raise ParameterError(f"no Dask worker declares the resource {r} that timed jobs need "
-                                     f"(start one with: dask worker {scheduler or ''} --resources {r}=1)")
+                how = f"dask worker {scheduler} --resources {r}=1" if scheduler else f"wsoft bench ... --resources {r}=1"
+                raise ParameterError(f"no Dask worker declares the resource {r} that timed jobs need (give one it: {how})")
         # error-only jobs: the references, each once, before the timed jobs
         refs: dict[str, object] = {}
         ref_futures = []

@@ -126,8 +126,9 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
             L.append(f"| {r['round']} | {r['mode']} | {host} | {len(mine)} | {min(loads):.1f}-{max(loads):.1f} | {statistics.median(ms):.2f} | "
                      + (f"{statistics.median(rel):.2f}" if rel else "-") + " |")
     L += ["", "## Warm-up on the workers", "",
-          "Per cluster run: each worker process's scene loads with their BVH builds (once per worker and scene) and the kernel "
-          "compiles and loads within its timed jobs.", "", "| round | host | worker pid | scenes loaded | load + BVH s | compile s | job s |",
+          "Per cluster run and worker process that ran timed jobs: its scene loads with their BVH builds (once per worker and scene; "
+          "the first also holds Warp's start), the kernel compiles and loads within its timed jobs and their scenes' warm-up, and "
+          "the seconds of its jobs, warm-up included.", "", "| round | host | worker pid | scenes loaded | load + BVH s | compile s | job s |",
           "|---|---|---|---|---|---|---|"]
     for r in sorted(rows, key=lambda r: r["round"]):
         if r["mode"] == MODES[0]:
