@@ -197,3 +197,26 @@ def test_real_cluster_survives_a_killed_worker_and_a_killed_driver(cluster, in_p
     assert not any(r.get("failed") for r in rows)
     same_errors(rows, in_process)
     assert len(list(marks.iterdir())) >= 3  # killed once, cut off with the driver once, finished
+
+
+def test_distributed_report_counts_equal_errors_and_groups_by_host(tmp_path):
+    """``wsoft bench distributed``'s report: error figures compared setting by setting (one differs
+    here), wall-time ratios within a round, frame times per host (never a ratio across hosts)."""
+    from wsoft.bench import distributed
+
+    def run(mode, rnd, wall, host, mae, ms, pid=None):
+        return {"mode": mode, "round": rnd, "sweep": "pareto", "device": "cpu", "rc": 0, "wall_s": wall, "rows": [
+            {"key": "k", "scene": "box_plane", "light": "/World/Light", "host": host, "load": 1.0, "threads": 2, "pid": pid,
+             "scene_load_s": 0.5 if pid else None, "scene_was_loaded": False, "compile_s": 0.25 if pid else None, "row_seconds": 3.0,
+             "entries": [{"label": "hard", "error": {"mae": mae}, "frame_ms": ms}, {"label": "pcss", "error": {"mae": 0.2}, "frame_ms": 2 * ms}]}]}
+
+    rows = [run("in-process", 0, 10.0, "a", 0.1, 4.0), run("workers=2", 0, 15.0, "a", 0.1, 5.0, pid=7),
+            run("workers=2", 1, 30.0, "b", 0.3, 8.0, pid=9), run("in-process", 1, 12.0, "a", 0.1, 4.0)]
+    md = tmp_path / "distributed.md"
+    distributed.report(rows, md, {"quick": False, "command": "wsoft bench distributed"})
+    text = md.read_text()
+    assert "per round: 1.50, 2.50." in text and "ratio, 1.20," in text
+    assert "round 0 workers=2: 2 of 2 settings" in text and "round 1 workers=2: 1 of 2 settings" in text
+    assert "| 0 | workers=2 | a | 1 | 1.0-1.0 | 7.50 | 1.25 |" in text
+    assert "| 1 | workers=2 | b | 1 | 1.0-1.0 | 12.00 | - |" in text  # host b has no in-process run: no ratio
+    assert "| 0 | a | 7 | box_plane | 0.50 | 0.25 | 3.0 |" in text
