@@ -12,6 +12,15 @@ import numpy as np
 from wsoft.bench.harness import ground_truth, measure_render, reference
 
 
+def render_references(case: dict) -> list[dict]:
+    """The reference :func:`render_row` measures ``case`` against, as :func:`~wsoft.bench.harness.reference`'s
+    arguments (a sweep module's ``references``: error-only jobs a distributed sweep runs apart)."""
+    if case.get("kind") != "render" or "ref_samples" not in case:
+        return []
+    return [{"name": case["scene"], "width": case["width"], "height": case["height"], "light": case["light"], "samples": case["ref_samples"],
+             "device": case["device"], "casters": case.get("ref_casters", "all")}]
+
+
 def render_row(case: dict, ctx: dict, extra=None) -> dict:
     """Render ``case`` (median of 3 after a warm-up) with its error against the cached reference,
     measured by the graph's metric pass. ``extra(frame, reference) -> dict`` adds a sweep's own
@@ -140,7 +149,35 @@ def report_header(sweep: str, rows: list[dict], md: Path, ctx: dict) -> list[str
     L.append("Error is against the cached ray-traced reference on the same covered pixels, measured by the frame graph's metric pass;")
     L.append("penumbra = reference in (0.01, 0.99); `>3se` = fraction of pixels further than 3 reference standard errors from it.")
     L.append("Times: median of 3 runs after a warm-up.")
+    L += host_lines(rows)
     L.append("")
+    return L
+
+
+def host_lines(rows: list[dict]) -> list[str]:
+    """Where the rows ran, per host (rows, Warp's CPU threads, the hosts' load as rows finished), and
+    for rows run on Dask workers the warm-up apart: each worker's scene loads with their BVH (once per
+    worker and scene) and the kernel compiles and loads during the rows. Nothing for rows from
+    one host run in-process."""
+    by_host: dict[str, list[dict]] = {}
+    for r in rows:
+        by_host.setdefault(r.get("machine", {}).get("host", "?"), []).append(r)
+    workers = [r for r in rows if r.get("worker")]
+    if len(by_host) <= 1 and not workers:
+        return []
+    L = []
+    for host, mine in sorted(by_host.items()):
+        loads = [r["machine"]["load"] for r in mine if r.get("machine", {}).get("load") is not None]
+        threads = sorted({r["machine"].get("threads") for r in mine if "machine" in r}, key=str)
+        L.append(f"Host `{host}`: {len(mine)} rows, {'/'.join(map(str, threads))} CPU threads"
+                 + (f", load {min(loads):.1f}-{max(loads):.1f}" if loads else "") + ".")
+    if len(by_host) > 1:
+        L.append("Times compare only within one host: read each time beside the rows of its own host.")
+    if workers:
+        loads = {(r["machine"].get("host"), r["worker"]["pid"], r["scene"]): r["worker"]["scene_load_s"] for r in workers if "scene" in r}
+        L.append(f"Dask workers: {len({(r['machine'].get('host'), r['worker']['pid']) for r in workers})} processes ran the rows; "
+                 f"scene loads and BVH builds {sum(loads.values()):.1f} s ({len(loads)} worker-scene pairs, once each); "
+                 f"kernel compiles and loads within the rows {sum(r['worker'].get('compile_s', 0) for r in workers):.1f} s.")
     return L
 
 

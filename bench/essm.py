@@ -9,8 +9,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from wsoft.bench.common import (accuracy_table, error_vs_time, image_list, lowest_mae, params_label, params_text, render_row, report_header,
-                                side_by_side)
+from wsoft.bench.common import (accuracy_table, error_vs_time, image_list, lowest_mae, params_label, params_text, render_references, render_row,
+                                report_header, side_by_side)
 
 FULL_VIEWS = [("ogre", None), ("plants", None), ("dinosaurs", None), ("city", "Rect")]
 QUICK_VIEWS = [("box_plane", None)]
@@ -37,6 +37,9 @@ def variations() -> dict[str, list[dict]]:
     d = essm.defaults()
     out = {q.param: [{q.param: v} for v in q.values if v != d[q.param]] for q in essm.quality}
     return out | STORAGE_VARIATIONS
+
+
+references = render_references  # each render row's reference: error-only jobs of a distributed sweep (wsoft.bench.dist)
 
 
 def cases(quick: bool, devices: list[str]) -> list[dict]:

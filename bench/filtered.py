@@ -11,7 +11,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from wsoft.bench.common import accuracy_table, counters, error_vs_time, image_list, lowest_mae, params_text, render_row, report_header
+from wsoft.bench.common import (accuracy_table, counters, error_vs_time, image_list, lowest_mae, params_text, render_references, render_row,
+                                report_header)
 
 TECHNIQUES = ("pcf", "pcss", "vsm", "esm", "salzman")  # each swept over its main quality knob (Technique.quality[0])
 
@@ -25,6 +26,9 @@ def main_knob(name: str):
 DYNAMIC_SCENES = {"lightmapped_bridge"}
 FULL_VIEWS = [("box_plane", None), ("contact", None), ("penumbra_ramp", None), ("lightmapped_bridge", "Sun")]
 QUICK_VIEWS = [("box_plane", None)]
+
+
+references = render_references  # each render row's reference: error-only jobs of a distributed sweep (wsoft.bench.dist)
 
 
 def cases(quick: bool, devices: list[str]) -> list[dict]:

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from wsoft.bench.common import accuracy_table, error_vs_time, image_list, render_row, report_header
+from wsoft.bench.common import accuracy_table, error_vs_time, image_list, render_references, render_row, report_header
 from wsoft.bench.harness import load
 
 FULL_VIEWS = [
@@ -34,6 +34,9 @@ BASELINES = {
                 "a 9-16 texel box takes this checkout's flat loop, whose depth is evaluated from the box's first texel centre rather "
                 "than from its line's"),
 }
+
+
+references = render_references  # each render row's reference: error-only jobs of a distributed sweep (wsoft.bench.dist)
 
 
 def cases(quick: bool, devices: list[str]) -> list[dict]:

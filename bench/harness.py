@@ -9,9 +9,12 @@ ends by writing ``<out-dir>/<sweep>.md``. ``--quick`` is the CI-sized version an
 Scenes are looked up by name in the bundled stages (``wsoft.usd_scenes``, installed with the
 package) or in ``--scenes DIR`` / ``$WSOFT_SCENES``.
 
-References are cached on disk (``$WSOFT_CACHE_DIR``, default ``~/.cache/wsoft``) by scene
-file (path, size, modification time), time code, camera, light, resolution, sample count
+References are cached on disk (``$WSOFT_CACHE_DIR`` or ``--cache-dir``, default ``~/.cache/wsoft``)
+by scene file (path, size, modification time), time code, camera, light, resolution, sample count
 and seed.
+
+``--workers N`` / ``--scheduler ADDRESS`` run the rows as jobs on Dask workers
+(:mod:`wsoft.bench.dist`); this process still writes every row, as it finishes.
 """
 
 from __future__ import annotations
@@ -33,7 +36,8 @@ SWEEPS = {"foundation": "wsoft.bench.foundation", "filtered": "wsoft.bench.filte
           "ssm-table1": "wsoft.bench.ssm_table1", "ssm-table2": "wsoft.bench.ssm_table2", "pareto": "wsoft.bench.pareto",
           "adversarial": "wsoft.bench.adversarial", "usd-pipeline": "wsoft.bench.usd_pipeline",
           "instancing": "wsoft.bench.instancing", "stsv": "wsoft.bench.stsv", "modern": "wsoft.bench.modern",
-          "temporal": "wsoft.bench.temporal", "cube": "wsoft.bench.cube"}
+          "temporal": "wsoft.bench.temporal", "cube": "wsoft.bench.cube", "distributed": "wsoft.bench.distributed",
+          "auto": "wsoft.bench.auto"}
 SWEEP_ALIASES = {"usd_pipeline": "usd-pipeline"}  # other spellings `wsoft bench` accepts (words joined by "-" in SWEEPS)
 REFERENCE_VERSION = 4  # bump when the reference changes (2: rows render one named light; 3: the receiver's horizon, ray offsets from the frame's extent; 4: the shaded R, G, B for ꟻLIP)
 _SCENE_DIR: Path | None = None
@@ -98,6 +102,19 @@ def first_light(name: str, light: str | None) -> str:
     return light or load(name).lights[0].path
 
 
+def reference_path(name: str, *, width: int, height: int, light: str | None, samples: int, seed: int = 0, camera: str | None = None,
+                   casters: str = "all", time: float | None = None, device: str | None = None) -> Path:
+    """The file in :func:`cache_dir` that holds :func:`reference`'s result for these arguments: named by
+    a hash of the scene file (path, size, modification time), the view, the light and the sampling
+    (``device`` does not enter: the reference is the same on every device)."""
+    f = scene_file(name)
+    st = os.stat(f)
+    light = first_light(name, light)
+    ident = json.dumps([os.path.abspath(f), st.st_size, st.st_mtime_ns, camera, light, width, height, samples, seed, REFERENCE_VERSION]
+                       + ([casters] if casters != "all" else []) + ([float(time)] if time is not None else []))
+    return cache_dir() / (hashlib.sha256(ident.encode()).hexdigest()[:24] + ".npz")
+
+
 def reference(name: str, *, width: int, height: int, light: str | None, samples: int, seed: int = 0, camera: str | None = None,
               device: str | None = None, casters: str = "all", time: float | None = None, scene=None) -> dict:
     """The cached reference (V, V_stderr, A, its shaded image R, G, B lit by that light alone, and
@@ -110,11 +127,8 @@ def reference(name: str, *, width: int, height: int, light: str | None, samples:
     import wsoft
 
     f = scene_file(name)
-    st = os.stat(f)
     light = first_light(name, light)
-    ident = json.dumps([os.path.abspath(f), st.st_size, st.st_mtime_ns, camera, light, width, height, samples, seed, REFERENCE_VERSION]
-                       + ([casters] if casters != "all" else []) + ([float(time)] if time is not None else []))
-    path = cache_dir() / (hashlib.sha256(ident.encode()).hexdigest()[:24] + ".npz")
+    path = reference_path(name, width=width, height=height, light=light, samples=samples, seed=seed, camera=camera, casters=casters, time=time)
     if path.exists():
         z = np.load(path)
         return {k: z[k] for k in z.files} | {"cached": True, "samples": samples}
@@ -224,9 +238,13 @@ def case_key(case: dict) -> str:
 
 
 def machine() -> dict:
+    """Where a row was measured: the host, its CPU, the threads Warp's CPU launches use, the cores,
+    and the host's load (1-minute load average, ``os.getloadavg``) as the row finished."""
     from wsoft.parallel import cpu_threads
 
-    return {"python": platform.python_version(), "cpu": platform.processor() or platform.machine(), "threads": cpu_threads(), "cores": os.cpu_count()}
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else None
+    return {"python": platform.python_version(), "cpu": platform.processor() or platform.machine(), "threads": cpu_threads(), "cores": os.cpu_count(),
+            "host": platform.node(), "load": None if load is None else round(load, 2)}
 
 
 def sweep_name(name: str) -> str:
@@ -240,33 +258,20 @@ def sweep_name(name: str) -> str:
     return name
 
 
-def run_sweep(name: str, *, quick: bool = False, device: list[str] | None = None, out_dir: str = "reports", fresh: bool = False,
-              scenes: str | None = None) -> int:
+def finished_rows(path: Path) -> list[dict]:
+    """The rows of ``path`` that hold a result: rows recorded as failed (``"failed"``: a job of a
+    distributed sweep that raised or killed its workers) are left out, so a rerun runs them again."""
+    return [r for r in read_rows(path) if not r.get("failed")]
+
+
+def run_in_process(name: str, mod, todo: list[dict], ctx: dict, jsonl: Path) -> int:
+    """Run the cases ``todo`` of sweep ``name`` (module ``mod``) one after another in this process,
+    appending each row to ``jsonl`` as it finishes; returns the number of rows that failed."""
     from tqdm import tqdm
 
-    from wsoft.errors import ParameterError, WsoftError
-    from wsoft.parallel import resolve_device
+    from wsoft.errors import WsoftError
 
-    name = sweep_name(name)
-    mod = importlib.import_module(SWEEPS[name])
-    if scenes and not Path(scenes).is_dir():  # a bad --scenes is an error before anything runs (or is remembered)
-        raise ParameterError(f"--scenes {scenes}: no such folder")
-    set_scenes_dir(scenes)
-    devices = [resolve_device(d) for d in (device or [None])]
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    report = getattr(mod, "REPORT", name)  # a sweep module may name its report's files otherwise
-    stem = f"{report}-quick" if quick else report
-    jsonl = out / f"{stem}.jsonl"
-    if fresh and jsonl.exists():
-        jsonl.unlink()
-    drop_partial_row(jsonl)
-    done = {r["key"] for r in read_rows(jsonl)}
-    cases = mod.cases(quick=quick, devices=devices)
-    todo = [c for c in cases if case_key(c) not in done]
-    print(f"sweep {name}{' (quick)' if quick else ''}: {len(cases)} rows, {len(cases) - len(todo)} already in {jsonl}", file=sys.stderr)
     failed = 0
-    ctx = {"out_dir": out, "stem": stem, "quick": quick}
     for case in tqdm(todo, desc=name, unit="row", file=sys.stderr):
         t0 = time.time()
         try:
@@ -277,9 +282,57 @@ def run_sweep(name: str, *, quick: bool = False, device: list[str] | None = None
             continue
         row.update({"key": case_key(case), "sweep": name, "case": case, "finished": time.strftime("%Y-%m-%dT%H:%M:%S"), "row_seconds": round(time.time() - t0, 2), "machine": machine()})
         append_row(jsonl, row)
-    rows = [r for r in read_rows(jsonl) if r["key"] in {case_key(c) for c in cases}]
+    return failed
+
+
+def run_sweep(name: str, *, quick: bool = False, device: list[str] | None = None, out_dir: str = "reports", fresh: bool = False,
+              scenes: str | None = None, workers: int | None = None, scheduler: str | None = None, resources: dict | None = None,
+              threads_per_worker: int = 1, cache_dir: str | None = None) -> int:
+    """Run sweep ``name`` (see the module docstring). ``workers`` (an embedded Dask cluster of that many
+    processes, ``threads_per_worker`` threads each) or ``scheduler`` (a running Dask scheduler's
+    address) send its rows to Dask workers (:mod:`wsoft.bench.dist`); ``resources``: what each
+    embedded worker declares. ``cache_dir``: the references' cache (``$WSOFT_CACHE_DIR``), a folder
+    every worker sees."""
+    from wsoft.errors import ParameterError
+    from wsoft.parallel import resolve_device
+
+    name = sweep_name(name)
+    mod = importlib.import_module(SWEEPS[name])
+    if scenes and not Path(scenes).is_dir():  # a bad --scenes is an error before anything runs (or is remembered)
+        raise ParameterError(f"--scenes {scenes}: no such folder")
+    distributed = workers is not None or bool(scheduler)
+    if distributed:
+        from wsoft.bench import dist
+
+        dist.check(workers=workers, scheduler=scheduler, resources=resources, threads_per_worker=threads_per_worker)
+    if cache_dir:
+        os.environ["WSOFT_CACHE_DIR"] = str(Path(cache_dir).resolve())
+    set_scenes_dir(scenes)
+    devices = [resolve_device(d) for d in (device or [None])]
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    report = getattr(mod, "REPORT", name)  # a sweep module may name its report's files otherwise
+    stem = f"{report}-quick" if quick else report
+    jsonl = out / f"{stem}.jsonl"
+    if fresh and jsonl.exists():
+        jsonl.unlink()
+    drop_partial_row(jsonl)
+    done = {r["key"] for r in finished_rows(jsonl)}
+    cases = mod.cases(quick=quick, devices=devices)
+    todo = [c for c in cases if case_key(c) not in done]
+    print(f"sweep {name}{' (quick)' if quick else ''}: {len(cases)} rows, {len(cases) - len(todo)} already in {jsonl}", file=sys.stderr)
+    ctx = {"out_dir": out, "stem": stem, "quick": quick}
+    if distributed:
+        failed = dist.run_jobs(name, SWEEPS[name], todo, ctx, jsonl, workers=workers, scheduler=scheduler, resources=resources,
+                               threads_per_worker=threads_per_worker, scenes=scenes,
+                               cache_dir=os.environ["WSOFT_CACHE_DIR"] if cache_dir else None)
+    else:
+        failed = run_in_process(name, mod, todo, ctx, jsonl)
+    keys = {case_key(c) for c in cases}
+    rows = [r for r in finished_rows(jsonl) if r["key"] in keys]
     cmd = f"wsoft bench {name}" + (" --quick" if quick else "") + "".join(f" --device {d}" for d in (device or [])) + \
-        (f" --out-dir {out_dir}" if str(out_dir) != "reports" else "") + (f" --scenes {scenes}" if scenes else "")
+        (f" --out-dir {out_dir}" if str(out_dir) != "reports" else "") + (f" --scenes {scenes}" if scenes else "") + \
+        (f" --workers {workers}" if workers is not None else "") + (f" --scheduler {scheduler}" if scheduler else "")
     md = out / f"{stem}.md"
     mod.report(rows, md, ctx | {"command": cmd})
     print(f"wrote {md} ({len(rows)} rows){f'; {failed} rows failed' if failed else ''}", file=sys.stderr)

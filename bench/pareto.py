@@ -82,6 +82,12 @@ def settings(scene, light, sizes: list[int], quick: bool) -> list[tuple[str, dic
     return out
 
 
+def references(case: dict) -> list[dict]:
+    """The reference :func:`run_case` measures against (error-only work a distributed sweep runs apart)."""
+    return [{"name": case["scene"], "width": case["width"], "height": case["height"], "light": case["light"], "samples": case["ground_truth"],
+             "device": case["device"]}]
+
+
 def run_case(case: dict, ctx: dict) -> dict:
     name, light = case["scene"], case["light"]
     scene = load(name)

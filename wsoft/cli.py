@@ -705,8 +705,12 @@ def cmd_bench(args) -> int:
     for d in args.device or []:
         check_device(d)
     check_output(args.out_dir, "--out-dir", folder=True)
+    from wsoft.bench.dist import parse_resources
+
+    dist = dict(workers=args.workers, scheduler=args.scheduler, resources=parse_resources(args.resources),
+                threads_per_worker=args.threads_per_worker, cache_dir=args.cache_dir)
     with CompileNotice((args.device or [None])[0]):
-        return run_sweep(name, quick=args.quick, device=args.device, out_dir=args.out_dir, fresh=args.fresh, scenes=args.scenes)
+        return run_sweep(name, quick=args.quick, device=args.device, out_dir=args.out_dir, fresh=args.fresh, scenes=args.scenes, **dist)
 
 
 def _light_kinds(lights: list) -> str:
@@ -964,6 +968,15 @@ def parser() -> argparse.ArgumentParser:
     b.add_argument("--out-dir", default="reports", help="where rows, reports and images go (default: ./reports)")
     b.add_argument("--scenes", help="folder of the scenes (default: the stages installed with wsoft)")
     b.add_argument("--fresh", action="store_true", help="discard earlier rows instead of resuming")
+    b.add_argument("--workers", type=int, metavar="N", help="run the rows on an embedded Dask cluster of N worker processes "
+                   "(needs wsoft[dist]; the first worker alone times, the others compute references)")
+    b.add_argument("--scheduler", metavar="ADDRESS", help="run the rows on a running Dask cluster (tcp://HOST:8786); its workers that "
+                   "may time declare --resources MACHINE=1 (GPU=1 for CUDA)")
+    b.add_argument("--resources", metavar="NAME=N[,...]", help="what every embedded worker declares (MACHINE=1: each times on its own; "
+                   "default: the first worker holds MACHINE=1,GPU=1)")
+    b.add_argument("--threads-per-worker", type=int, default=1, metavar="N", help="Dask threads of each embedded worker (default 1)")
+    b.add_argument("--cache-dir", metavar="DIR", help="the references' cache, a folder every worker sees (default: $WSOFT_CACHE_DIR, "
+                   "else ~/.cache/wsoft)")
     b.set_defaults(fn=cmd_bench)
 
     w = sub.add_parser("warmup", help="compile every technique's kernels once (Warp's kernel cache), so later runs start at once",
