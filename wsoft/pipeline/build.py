@@ -55,7 +55,11 @@ def as_techniques(technique, params: dict) -> list:
                 raise ParameterError("parameters go to the technique's create(), not render()")
             return t
         if isinstance(t, tuple) and len(t) == 2:
-            return create(t[0], t[1])
+            t, p = t
+        if t == "auto":  # per light, the setting predicted to meet a budget or a target (wsoft.auto)
+            from wsoft.auto.choose import auto_technique
+
+            return auto_technique(p)
         if isinstance(t, str):
             return create(t, p)
         raise ParameterError(f"not a technique: {t!r}")
@@ -133,6 +137,8 @@ def build_graph(scene: Scene, technique, *, width: int | None = None, height: in
             built.lights[label] = []
             continue
         built.lights[label] = mine
+        if hasattr(tech, "technique_for"):  # auto: its budget is split between the lights it renders
+            tech.light_count = len(mine)
         built.visibility[label] = [visibility_of(ctx, tctx, l) for l in mine]
         built.channels[label] = _add_resolve(ctx, tech, label, mine, built.visibility[label], single=len(techs) == 1)
     return built
@@ -157,7 +163,13 @@ def visibility_of(ctx: RenderContext, tctx: TechniqueContext, light: Light) -> K
     every other technique is capped by its front fraction; receivers behind a one-sided light are
     counted and warned about (:meth:`~wsoft.pipeline.context.RenderContext.light_behind`)."""
     tech = tctx.tech
+    if hasattr(tech, "technique_for"):  # auto: the light's passes are those of the setting chosen for it
+        tech, choice = tech.technique_for(ctx, light)
+        tctx = ctx.technique(tech, tctx.label_)
+        tctx.counters(light)["auto"] = choice.record()
     vk = tech.add_passes(tctx, light)
+    if tctx.ctx.graph.producers.get(vk) and tctx.counters(light).get("auto", {}).get("warning"):
+        ctx.warn(ctx.graph.producers[vk], tctx.counters(light)["auto"]["warning"])
     if tech.distance_caveat and light.distance_limited:
         ctx.warn(ctx.graph.producers[vk], distance_caveat_warning(tech, light))
     if tech.ellipsoid_caveat and light.kind == LIGHT_SPHERE and light.elliptical:

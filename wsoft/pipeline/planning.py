@@ -57,7 +57,7 @@ def emission(scene: Scene, light: Light) -> dict:
 
 
 def plan(scene, techniques: list[str] | None = None, *, width: int | None = None, height: int | None = None, light=None,
-         camera=None) -> dict:
+         camera=None, auto: dict | None = None) -> dict:
     """What would run on ``scene`` (a :class:`Scene`, or what :func:`wsoft.pipeline.load_stage` loads:
     a USD path or a bundled stage's name): the time code the scene was loaded at (``time``; None: the default time),
     shadow-casting lights (where each emits, :func:`emission`, with their UsdLux shadow controls,
@@ -66,7 +66,10 @@ def plan(scene, techniques: list[str] | None = None, *, width: int | None = None
     conform policy and data window; see :meth:`Framing.describe`), the load's warnings and notes
     (``notes``: subdivision surfaces read as their cage, or refined; ``subdiv_level``), and per
     technique the passes (with their kinds) or why it is not applicable to a light, and what it
-    renders of each cylinder light (``cylinder_lights``: its :attr:`~wsoft.techniques.Technique.cylinder_model`)."""
+    renders of each cylinder light (``cylinder_lights``: its :attr:`~wsoft.techniques.Technique.cylinder_model`).
+    ``auto``: the parameters of technique ``auto`` (``budget_ms`` or ``target_error``) when
+    ``techniques`` names it; ``auto`` in the plan then holds per light its choice's record
+    (:meth:`wsoft.auto.choose.Choice.record`: features, candidates' predictions, choice, runner-up)."""
     from wsoft.techniques import TECHNIQUES
 
     if not isinstance(scene, Scene):
@@ -97,8 +100,11 @@ def plan(scene, techniques: list[str] | None = None, *, width: int | None = None
     if not scene.lights:
         return out
     for name in techniques or sorted(TECHNIQUES):
-        built = build_graph(scene, name, width=width, height=height, camera=camera, light=light, device="cpu", strict=False)
+        built = build_graph(scene, (name, auto or {}) if name == "auto" else name, width=width, height=height, camera=camera, light=light,
+                            device="cpu", strict=False)
         label = built.labels[0]
+        if name == "auto":
+            out["auto"] = {lb: c["auto"] for lb, c in built.ctx.counters["techniques"].get(label, {}).items() if "auto" in c}
         if built.instancing["mode"] == "flattened":
             why = built.instancing["needs"][0][1]
             too_big = too_big_to_flatten(scene)
@@ -113,7 +119,7 @@ def plan(scene, techniques: list[str] | None = None, *, width: int | None = None
             skipped = {l.path for l, _ in built.skipped[label]}
             cyl = [l.path for l in scene.lights if l.kind == LIGHT_CYLINDER and l.path not in skipped
                    and (light is None or getattr(light, "path", light) in (l.path, l.name))]
-            if cyl and TECHNIQUES[name].cylinder_model:
+            if cyl and name in TECHNIQUES and TECHNIQUES[name].cylinder_model:
                 out.setdefault("cylinder_lights", {})[name] = [{"light": c, "model": TECHNIQUES[name].cylinder_model} for c in cyl]
             out.setdefault("pass_kinds", {}).update({p.name: p.kind for p in built.ctx.graph.schedule([built.channels[label]])})
     return out
