@@ -535,6 +535,8 @@ def cmd_compare(args) -> int:
     names = list(dict.fromkeys(args.technique or ["hard"]))
     scene_file = _check_args(args, names)
     techs = _technique_sets(names, args.set)
+    auto = _auto_args(args, "auto" if "auto" in names else None)
+    techs = [(n, {**p, **auto}) if n == "auto" else (n, p) for n, p in techs]
     if args.frames is not None:
         return _compare_frames(args, techs, scene_file)
     import wsoft
@@ -545,9 +547,11 @@ def cmd_compare(args) -> int:
 
     scene = load_stage(scene_file, time=args.time, render_settings=args.render_settings, instancing=args.instancing,
                        subdiv_level=args.subdiv_level)
-    with CompileNotice(args.device, names + ["reference"]), PassProgress("compare") as progress:
+    with CompileNotice(args.device, None if "auto" in names else names + ["reference"]), PassProgress("compare") as progress:
         fs = wsoft.compare(scene, techs, samples=args.samples, width=args.width, height=args.height, camera=args.camera, light=args.light,
                            device=args.device, progress=progress)
+    for light, c in fs["auto"].stats["counters"]["techniques"].get("auto", {}).items() if "auto" in fs else ():
+        print(_auto_line(light, c["auto"]))
     os.makedirs(args.out_dir, exist_ok=True)
     stem = os.path.splitext(os.path.basename(scene.path))[0]
     written = []
@@ -747,6 +751,24 @@ def _sweeps() -> dict:
     return SWEEPS
 
 
+def cmd_calibrate(args) -> int:
+    from wsoft.auto.calibrate import calibrate
+    from wsoft.errors import ParameterError
+    from wsoft.parallel import resolve_device
+
+    if args.quick and args.rows:
+        raise ParameterError("calibrate: --quick or --rows, one of the two")
+    for path, what in ((args.rows, "--rows"), (args.features, "--features")):
+        if path and not os.path.isfile(path):
+            raise ParameterError(f"{what} {path}: no such file")
+    check_device(args.device)
+    if args.out:
+        check_output(args.out, "--out")
+    dest, what = calibrate(rows=args.rows, features=args.features, quick=args.quick, device=resolve_device(args.device), out=args.out)
+    print(f"wrote {dest}: {what}")
+    return 0
+
+
 def cmd_bench(args) -> int:
     from wsoft.bench.harness import run_sweep, sweep_name
 
@@ -920,7 +942,7 @@ def parser() -> argparse.ArgumentParser:
     from wsoft.techniques import NAMES  # the names only: the technique modules import Warp
 
     techniques = sorted(NAMES)
-    one_of = "one of: " + ", ".join(techniques)
+    one_of = "one of: " + ", ".join(techniques) + ", or auto (with --budget-ms or --target-error)"
     fmt = _Help
     ap = argparse.ArgumentParser(prog="wsoft", description="Soft-shadow techniques in Warp on USD stages.",
                                  epilog="first steps: wsoft scenes; wsoft compare box_plane -t pcss -t hard (into out/); "
@@ -961,6 +983,7 @@ def parser() -> argparse.ArgumentParser:
                        "and OUT_DIR/<stage>-compare.md (times and errors against the reference: MAE of V, ꟻLIP of the shaded image).")
     c.add_argument("scene", help=_SCENE_HELP)
     c.add_argument("--technique", "-t", action="append", metavar="TECHNIQUE", help="a technique (repeatable; default: hard); " + one_of)
+    auto_options(c)
     c.add_argument("--set", action="append", metavar="[TECHNIQUE.]KEY=VALUE", help="a parameter (TECHNIQUE.KEY with several techniques)")
     c.add_argument("--samples", type=int, default=256, help="reference light samples per pixel")
     c.add_argument("--width", type=int, help="image width in pixels (default: 640, or the render settings' resolution)")
@@ -1028,6 +1051,18 @@ def parser() -> argparse.ArgumentParser:
     b.add_argument("--scenes", help="folder of the scenes (default: the stages installed with wsoft)")
     b.add_argument("--fresh", action="store_true", help="discard earlier rows instead of resuming")
     b.set_defaults(fn=cmd_bench)
+
+    k = sub.add_parser("calibrate", help="rebuild --technique auto's model from your own sweep rows, or scale it by a quick measurement",
+                       formatter_class=fmt, description="From sweep rows (--rows: wsoft bench pareto's on this machine; their features "
+                       "computed, or read from --features, wsoft bench auto's rows): both predictors compared scene by scene held out, "
+                       "each quantity by the closer, fitted to every frame. --quick: no sweep, the model's times scaled by measured "
+                       "over predicted times of a few settings on a small bundled frame.")
+    k.add_argument("--rows", metavar="JSONL", help="a pareto sweep's rows (reports/pareto.jsonl)")
+    k.add_argument("--features", metavar="JSONL", help="their features (reports/auto.jsonl; default: computed)")
+    k.add_argument("--quick", action="store_true", help="scale the model's times by a quick measurement instead")
+    k.add_argument("--device", help="the device to calibrate for (default: the default device)")
+    k.add_argument("--out", metavar="JSON", help="where to write the model (default: the package's model of the device kind)")
+    k.set_defaults(fn=cmd_calibrate)
 
     w = sub.add_parser("warmup", help="compile every technique's kernels once (Warp's kernel cache), so later runs start at once",
                        formatter_class=fmt)
