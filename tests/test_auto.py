@@ -47,6 +47,24 @@ def test_a_wrong_version_is_a_one_line_error(tmp_path, box):
     assert not (tmp_path / "a.exr").exists()
 
 
+def test_a_device_kind_without_a_model_uses_the_cpu_model_scaled_by_a_measured_calibration(monkeypatch):
+    from wsoft.auto import calibrate
+
+    m, note = load_model(device="cuda:0")
+    assert m.device_kind == "cpu" and "no auto model for device kind 'cuda'" in note and "quick calibration" in note
+    monkeypatch.setattr(calibrate, "QUICK_SIZE", (48, 36))
+    monkeypatch.setattr(calibrate, "_SCALES", {})
+    scale = calibrate.quick_scale(m, "cpu")  # measured here on the CPU: render time over the model's prediction
+    assert 0.01 < scale < 100.0 and calibrate._SCALES  # measured once, then reused
+    assert m.scaled(scale).predict(light_features_stub(), 'hard{"shadow_map_size": 1024}')[0] == pytest.approx(
+        scale * m.predict(light_features_stub(), 'hard{"shadow_map_size": 1024}')[0])
+
+
+def light_features_stub() -> dict:
+    return {"triangles": 4.0, "triangles_in_view": 4.0, "instances": 0.0, "cutout_triangles": 0.0, "pixels": 3072.0, "covered_pixels": 2800.0,
+            "light_size": 0.7, "light_distance": 3.0, "shadowed_fraction": 0.02, "penumbra_px": 3.0, "depth_ratio": 1.5}
+
+
 def test_pick_is_deterministic_and_breaks_ties_by_name():
     preds = {"b": (10.0, 0.1), "a": (10.0, 0.1), "c": (5.0, 0.3), "d": (50.0, 0.01)}
     assert pick(preds, budget_ms=20) == ("a", "b", "")

@@ -169,10 +169,20 @@ def _auto_class():
         def __init__(self, params):
             super().__init__(params)
             self.choices: dict[str, Choice] = {}
-            self._model = None
+            self._models: dict[str, tuple] = {}  # device -> (model, note)
+            self._plain = None
+
+        def _known(self):
+            """The model unscaled (which settings it knows, for :meth:`supports`)."""
+            if self._plain is None:
+                from wsoft.auto.model import load_model
+
+                self._plain = load_model(self.params.model or None)[0]
+            return self._plain
 
         def model(self, device: str):
-            if self._model is None:
+            """The model for ``device`` (scaled by a quick calibration where it is another kind's, with an :class:`AutoWarning`)."""
+            if device not in self._models:
                 from wsoft.auto.model import load_model
 
                 m, note = load_model(self.params.model or None, device=device)
@@ -180,21 +190,22 @@ def _auto_class():
                     from wsoft.auto.calibrate import quick_scale
 
                     m = m.scaled(quick_scale(m, device))
-                    warnings.warn(f"auto: {note} (x {m.scale:.3g})", AutoWarning, stacklevel=2)
-                self._model, self._note = m, note
-            return self._model
+                    note = f"{note} (x {m.scale:.3g})"
+                    warnings.warn(f"auto: {note}", AutoWarning, stacklevel=2)
+                self._models[device] = (m, note)
+            return self._models[device][0]
 
         def supports(self, scene, light) -> str | None:
             from wsoft.techniques import TECHNIQUES, create
 
-            names = sorted({s["technique"] for s in self.model("cpu").settings().values()} & set(TECHNIQUES))
+            names = sorted({s["technique"] for s in self._known().settings().values()} & set(TECHNIQUES))
             why = [create(n).supports(scene, light) for n in names]
             return None if any(w is None for w in why) else f"no technique of the auto model supports it ({'; '.join(sorted(set(filter(None, why))))})"
 
         def choose(self, scene, light, *, width, height, camera, device) -> "Choice":
             share = self.params.budget_ms / max(getattr(self, "light_count", 1), 1)
             c = choose(scene, light, budget_ms=share or None, target_error=self.params.target_error or None,
-                       model=self.model(device), model_note=getattr(self, "_note", ""), width=width, height=height, camera=camera, device=device)
+                       model=self.model(device), model_note=self._models[device][1], width=width, height=height, camera=camera, device=device)
             self.choices[light.path] = c
             return c
 
