@@ -300,6 +300,8 @@ def _auto_args(args, technique) -> dict:
         raise ParameterError(f"--{next(iter(given)).replace('_', '-').replace('model', 'auto-model')} goes with --technique auto")
     if technique == "auto" and "budget_ms" not in given and "target_error" not in given:
         raise ParameterError("--technique auto needs --budget-ms MS or --target-error MAE")
+    if technique == "auto":
+        import wsoft.auto  # noqa: F401  (registers technique auto with the pipeline)
     return given
 
 

@@ -31,9 +31,7 @@ def frame_features(rows: list[dict], device: str = "cpu") -> list[dict]:
     out, scenes = [], {}
     for r in rows:
         if r["scene"] not in scenes:
-            from wsoft.bench.harness import scene_file
-
-            scenes[r["scene"]] = load_stage(scene_file(r["scene"]))
+            scenes[r["scene"]] = load_stage(r["scene"])  # a bundled stage's name, or a path
         f = light_features(scenes[r["scene"]], r["light"], width=r["width"], height=r["height"], device=device)
         out.append({"scene": r["scene"], "light": r["light"], "features": f})
     return out
@@ -57,13 +55,13 @@ def model_from_rows(rows: list[dict], features: list[dict], *, device_kind: str 
 
 def _timed(scene, technique: str, params: dict, w: int, h: int, light: str, device: str, runs: int = 3) -> float:
     """The median of ``runs`` render times (ms) after a warm-up render."""
-    import wsoft
+    from wsoft.pipeline import render
 
-    wsoft.render(scene, technique, width=w, height=h, light=light, device=device, **params)
+    render(scene, technique, width=w, height=h, light=light, device=device, **params)
     ts = []
     for _ in range(runs):
         t0 = time.perf_counter()
-        wsoft.render(scene, technique, width=w, height=h, light=light, device=device, **params)
+        render(scene, technique, width=w, height=h, light=light, device=device, **params)
         ts.append(1e3 * (time.perf_counter() - t0))
     return statistics.median(ts)
 
@@ -120,11 +118,23 @@ def quick_scale(model, device: str) -> float:
     return _SCALES[key]
 
 
+def read_rows(path: Path) -> list[dict]:
+    """The rows of a sweep's JSON-lines file (a line that is not JSON, such as a partial last one, is left out)."""
+    import json
+
+    out = []
+    for line in Path(path).read_text().splitlines():
+        try:
+            out.append(json.loads(line))
+        except ValueError:
+            continue
+    return out
+
+
 def calibrate(*, rows: str | None = None, features: str | None = None, quick: bool = False, device: str = "cpu", out: str | None = None) -> tuple[Path, str]:
     """Write a model (see the module's docstring) to ``out`` (default the package's for the device's
     kind); (its path, a line saying what was done)."""
     from wsoft.auto.model import device_kind, load_model, model_path
-    from wsoft.bench.harness import read_rows
     from wsoft.errors import ParameterError
 
     kind = device_kind(device)

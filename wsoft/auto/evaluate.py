@@ -9,8 +9,7 @@ from __future__ import annotations
 import math
 import statistics
 
-from wsoft.auto.choose import pick
-from wsoft.auto.model import MARGIN, METHODS, fit, training_frames
+from wsoft.auto.model import MARGIN, METHODS, fit, pick, setting_text, training_frames
 
 BUDGET_FACTORS = (1.2, 2.0, 5.0)  # budgets: the frame's fastest measured setting's time times these
 TARGETS = (0.1, 0.05, 0.02)  # error targets
@@ -72,8 +71,6 @@ def cases(held: list[dict], margin: float = MARGIN) -> list[dict]:
 
 
 def setting_of(frame: dict, key: str) -> str:
-    from wsoft.auto.choose import setting_text
-
     s = frame["settings"][key]
     return setting_text(s["technique"], s["params"])
 

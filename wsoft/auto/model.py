@@ -254,3 +254,37 @@ def load_model(path=None, device: str = "cpu") -> tuple[Model, str]:
     if p.is_file():
         return Model.load(p), ""
     return Model.load(model_path("cpu")), f"no auto model for device kind {kind!r}: the CPU model is used, its times scaled by a quick calibration"
+
+
+def setting_text(technique: str, params: dict) -> str:
+    """``pcss(filter_samples=100, shadow_map_size=2048)``."""
+    return technique + ("(" + ", ".join(f"{k}={v}" for k, v in sorted(params.items())) + ")" if params else "")
+
+
+def pick(preds: dict[str, tuple], *, budget_ms: float | None = None, target_error: float | None = None) -> tuple[str, str | None, str]:
+    """(choice, runner-up or None, warning or '') among ``preds`` (key -> predicted (ms, error), or
+    (ms, error, ms bound, error bound) as :meth:`~wsoft.auto.model.Model.bounds` gives: a budget is
+    compared with the time bound, a target with the error bound), ordered deterministically (ties
+    broken by the key)."""
+    preds = {k: (v[2], v[3]) if len(v) == 4 else (v[0], v[1]) for k, v in preds.items()}
+    if (budget_ms is None) == (target_error is None):
+        raise ParameterError("auto: give a time budget (budget_ms / --budget-ms) or an error target (target_error / --target-error), one of the two")
+    if not preds:
+        raise ParameterError("auto: no candidate setting for this light")
+    if budget_ms is not None:
+        ok = sorted((k for k, (t, _) in preds.items() if t <= budget_ms), key=lambda k: (preds[k][1], preds[k][0], k))
+        if ok:
+            return ok[0], (ok[1] if len(ok) > 1 else None), ""
+        order = sorted(preds, key=lambda k: (preds[k][0], k))
+        t = preds[order[0]][0]
+        return order[0], (order[1] if len(order) > 1 else None), (
+            f"budget {budget_ms:g} ms is below every candidate's predicted time (its bound: the prediction and its spread): the cheapest, "
+            f"rendered, is bounded at {t:.1f} ms, {t - budget_ms:.1f} ms ({100 * (t / budget_ms - 1):.0f}%) over it")
+    ok = sorted((k for k, (_, e) in preds.items() if e <= target_error), key=lambda k: (preds[k][0], preds[k][1], k))
+    if ok:
+        return ok[0], (ok[1] if len(ok) > 1 else None), ""
+    order = sorted(preds, key=lambda k: (preds[k][1], preds[k][0], k))
+    e = preds[order[0]][1]
+    return order[0], (order[1] if len(order) > 1 else None), (
+        f"error target {target_error:g} is below every candidate's predicted error (its bound): the most accurate, rendered, is "
+        f"bounded at {e:.4f}")

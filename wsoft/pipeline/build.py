@@ -22,6 +22,13 @@ from wsoft.raster.shade import shade as shade_samples
 from wsoft.scene.types import LIGHT_SPHERE, Light, Scene
 
 
+CHOOSERS: dict = {}
+"""Name -> factory (its parameters -> a Technique instance) of techniques chosen per light by a
+package above the pipeline: ``wsoft.auto`` registers ``auto`` when imported. Such an instance has
+``technique_for(ctx, light)`` -> (the chosen technique instance, a record with ``record()``): the
+light's passes are the chosen one's, and the record goes into the frame's counters (``auto``)."""
+
+
 def technique_labels(techs: list) -> list[str]:
     """A label per technique instance: its name when it is the only one of its kind, else the name
     with the parameters that differ from the defaults, ``pcss(filter_samples=100)``."""
@@ -56,10 +63,10 @@ def as_techniques(technique, params: dict) -> list:
             return t
         if isinstance(t, tuple) and len(t) == 2:
             t, p = t
-        if t == "auto":  # per light, the setting predicted to meet a budget or a target (wsoft.auto)
-            from wsoft.auto.choose import auto_technique
-
-            return auto_technique(p)
+        if isinstance(t, str) and t in CHOOSERS:  # a technique chosen per light by a package above (wsoft.auto)
+            return CHOOSERS[t](p)
+        if t == "auto":
+            raise ParameterError("technique 'auto' is wsoft.auto's: import wsoft.auto first (wsoft.render and the command line do)")
         if isinstance(t, str):
             return create(t, p)
         raise ParameterError(f"not a technique: {t!r}")
