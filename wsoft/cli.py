@@ -42,6 +42,12 @@ class _Help(argparse.HelpFormatter):
             h += (" " if h else "") + "(default: %(default)s)"
         return h
 
+    def _split_lines(self, text, width):
+        """Lines broken at spaces only: a name such as ``usd-pipeline`` stays whole."""
+        import textwrap
+
+        return textwrap.wrap(self._whitespace_matcher.sub(" ", text).strip(), width, break_on_hyphens=False)
+
 
 def check_output(path: str | None, what: str, *, folder: bool = False) -> None:
     """Fail before any rendering when ``path`` cannot be written: it names a folder (or, for
