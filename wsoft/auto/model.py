@@ -188,6 +188,8 @@ class Model:
         return float(self.data.get("margin", MARGIN))
 
     def _nearest(self, x: dict, key: str, q: str) -> float:
+        if self.data["frames"] and "values" not in self.data["frames"][0]:
+            raise ParameterError("this auto model keeps no training frames' values (its method is log-linear): refit it to predict by nearest scenes")
         z = self._z(x, NEAREST_X)
         cands = [(float(np.sum((np.array(f["z"]) - z) ** 2)), f["values"][key][0 if q == "time" else 1])
                  for f in self.data["frames"] if key in f["values"]]
@@ -227,10 +229,12 @@ def fit(frames: list[dict], *, device_kind: str = "cpu", method: dict | None = N
             dof = max(len(have) - Z.shape[1], 1)
             entry[f"{q}_spread"] = round(max(float(np.sqrt(np.sum((Z @ coef - y) ** 2) / dof)), 0.1), 6)
         data["settings"][key] = entry
+    nearest = "nearest" in data["method"].values()  # the frames' values only where a predictor reads them
     for f in frames:
-        data["frames"].append({"scene": f["scene"], "light": f["light"], "z": [round(float(v), 6) for v in m._z(f["x"], NEAREST_X)],
-                               "values": {k: [round(math.log(max(s["ms"], ERROR_FLOOR)), 4), round(math.log(max(s["error"], ERROR_FLOOR)), 4)]
-                                          for k, s in f["settings"].items()}})
+        data["frames"].append({"scene": f["scene"], "light": f["light"], "z": [round(float(v), 6) for v in m._z(f["x"], NEAREST_X)]})
+        if nearest:
+            data["frames"][-1]["values"] = {k: [round(math.log(max(s["ms"], ERROR_FLOOR)), 4), round(math.log(max(s["error"], ERROR_FLOOR)), 4)]
+                                            for k, s in f["settings"].items()}
     return m
 
 
