@@ -170,3 +170,18 @@ def test_the_command_line_plans_and_renders_auto(tmp_path):
     for bad in (["-t", "hard", "--budget-ms", "40"], ["-t", "auto"], ["-t", "auto", "--budget-ms", "40", "--target-error", "0.1"]):
         r = wsoft_cli("render", scene_path("box_plane.usda"), *bad, "--out", str(tmp_path / "b.exr"))
         assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, (bad, r.stderr)
+
+
+def test_calibrate_quick_writes_a_scaled_model_and_bad_arguments_are_one_line(tmp_path, monkeypatch):
+    from wsoft.auto import calibrate
+
+    monkeypatch.setattr(calibrate, "QUICK_SIZE", (48, 36))
+    out = tmp_path / "quick.json"
+    r = wsoft_cli("calibrate", "--quick", "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    m = Model.load(out)
+    assert m.scale > 0 and m.scale != 1.0 and m.data["source"]["quick_calibration"]["size"] == [48, 36]
+    assert f"times scaled by {m.scale:.3g}" in r.stdout
+    for bad in ([], ["--rows", str(tmp_path / "none.jsonl")], ["--quick", "--rows", str(out)]):
+        r = wsoft_cli("calibrate", *bad)
+        assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, (bad, r.stderr)
