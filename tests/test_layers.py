@@ -24,6 +24,7 @@ LAYERS = [
     ("accel", ("wsoft.accel",)),
     ("techniques", ("wsoft.techniques",)),
     ("pipeline", ("wsoft.pipeline",)),
+    ("auto", ("wsoft.auto",)),  # --technique auto: registers itself with the pipeline (wsoft.pipeline.build.CHOOSERS)
     ("metrics", ("wsoft.metrics",)),
     ("baking", ("wsoft.baking",)),
     ("cli/bench", ("wsoft.cli", "wsoft.__main__", "wsoft.bench", "wsoft")),
@@ -84,7 +85,7 @@ def test_every_module_has_a_layer():
 
 
 def test_imports_point_down():
-    """core -> stages -> scene -> light space -> raster -> accel -> techniques -> pipeline -> metrics -> baking -> cli/bench."""
+    """core -> stages -> scene -> light space -> raster -> accel -> techniques -> pipeline -> auto -> metrics -> baking -> cli/bench."""
     bad = []
     for path in sources():
         me = module_name(path)

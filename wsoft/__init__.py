@@ -60,6 +60,8 @@ _LAZY = {
 def __getattr__(name: str):
     """The lazy names above, and the subpackages (``wsoft.techniques.get_technique``) at first use."""
     if name in _LAZY:
+        if _LAZY[name].startswith(("wsoft.pipeline", "wsoft.metrics", "wsoft.baking")):
+            importlib.import_module("wsoft.auto")  # registers technique "auto" with the pipeline
         value = getattr(importlib.import_module(_LAZY[name]), name)
         globals()[name] = value
         return value

@@ -42,6 +42,12 @@ class _Help(argparse.HelpFormatter):
             h += (" " if h else "") + "(default: %(default)s)"
         return h
 
+    def _split_lines(self, text, width):
+        """Lines broken at spaces only: a name such as ``usd-pipeline`` stays whole."""
+        import textwrap
+
+        return textwrap.wrap(self._whitespace_matcher.sub(" ", text).strip(), width, break_on_hyphens=False)
+
 
 def check_output(path: str | None, what: str, *, folder: bool = False) -> None:
     """Fail before any rendering when ``path`` cannot be written: it names a folder (or, for
@@ -241,7 +247,7 @@ def _check_args(args, techniques: list[str]) -> str:
     scene); the stage's file."""
     from wsoft.techniques import check_names
 
-    check_names(techniques)
+    check_names([t for t in techniques if t != "auto"])  # auto: wsoft.auto chooses among the registered ones
     check_device(getattr(args, "device", None))
     return scene_arg(args.scene)
 
@@ -257,6 +263,7 @@ def cmd_render(args) -> int:
     if args.png and os.path.splitext(args.png)[1].lower() != ".png":
         raise ParameterError(f"--png {args.png}: the shaded image is written as PNG; give a .png name")
     params = _parse_sets(args.set)
+    params.update(_auto_args(args, args.technique))
     if args.frames is not None:
         return _render_frames(args, scene_file, params)
     import wsoft
@@ -265,13 +272,15 @@ def cmd_render(args) -> int:
     scene = load_stage(scene_file, time=args.time, render_settings=args.render_settings, instancing=args.instancing,
                        subdiv_level=args.subdiv_level)
     out, why = output_of(scene, args.out, _default_output(scene_file, args.technique))
-    with CompileNotice(args.device, [args.technique]), PassProgress(args.technique) as progress:
+    with CompileNotice(args.device, None if args.technique == "auto" else [args.technique]), PassProgress(args.technique) as progress:
         frame = wsoft.render(
             scene, args.technique, width=args.width, height=args.height, camera=args.camera, light=args.light,
             device=args.device, pixel_samples=args.pixel_samples, progress=progress, **params,
         )
     for w in frame.stats["warnings"]:  # the stage's, then the passes'
         print(f"warning: {w}", file=sys.stderr)
+    for light, c in frame.stats["counters"]["techniques"].get("auto", {}).items() if args.technique == "auto" else ():
+        print(_auto_line(light, c["auto"]))
     print_notes(frame.stats["notes"])
     write_frame(frame, out)
     if args.png:
@@ -285,6 +294,30 @@ def cmd_render(args) -> int:
           f"{st['timings_ms']['total']:.1f} ms{_compile_note(st['timings_ms']['compile'])}, passes: {', '.join(st['passes'])}")
     print(f"wrote {out}{why}" + (f", {args.png}" if args.png else "") + (f", {args.stats}" if args.stats else ""))
     return 0
+
+
+def _auto_args(args, technique) -> dict:
+    """``--budget-ms``, ``--target-error``, ``--auto-model`` as ``auto``'s parameters (an error with another technique)."""
+    from wsoft.errors import ParameterError
+
+    given = {k: v for k, v in (("budget_ms", getattr(args, "budget_ms", None)), ("target_error", getattr(args, "target_error", None)),
+                                ("model", getattr(args, "auto_model", None))) if v is not None}
+    if given and technique != "auto":
+        raise ParameterError(f"--{next(iter(given)).replace('_', '-').replace('model', 'auto-model')} goes with --technique auto")
+    if technique == "auto" and "budget_ms" not in given and "target_error" not in given:
+        raise ParameterError("--technique auto needs --budget-ms MS or --target-error MAE")
+    if technique == "auto":
+        import wsoft.auto  # noqa: F401  (registers technique auto with the pipeline)
+    return given
+
+
+def _auto_line(light: str, a: dict) -> str:
+    """``auto: Light: pcss(...) (predicted 12.0 ms, penumbra MAE 0.031; runner-up ...)``."""
+    c, r = a["choice"], a["runner_up"]
+    goal = f"budget {a['goal']['budget_ms']:g} ms" if "budget_ms" in a["goal"] else f"target error {a['goal']['target_error']:g}"
+    return (f"auto ({goal}): {light}: {c['setting']} (predicted {c['predicted_ms']:.1f} ms, error {c['predicted_error']:.4f})"
+            + (f"; runner-up {r['setting']} ({r['predicted_ms']:.1f} ms, {r['predicted_error']:.4f})" if r else "")
+            + f"; of {len(a['candidates'])} candidates")
 
 
 def _frames_args(args) -> None:
@@ -368,7 +401,8 @@ def cmd_plan(args) -> int:
 
     scene = load_stage(scene_file, time=args.time, render_settings=args.render_settings, instancing=args.instancing,
                        subdiv_level=args.subdiv_level)
-    p = wsoft.plan(scene, techs, light=args.light, camera=args.camera)
+    auto = _auto_args(args, "auto" if techs and "auto" in techs else None)
+    p = wsoft.plan(scene, techs, light=args.light, camera=args.camera, auto=auto or None)
     if args.json:
         print(json.dumps(p, indent=2))
         return 0
@@ -432,7 +466,24 @@ def cmd_plan(args) -> int:
     for name, models in p.get("cylinder_lights", {}).items():
         for m in models:
             print(f"{name}: cylinder light {m['light']}: {m['model']}")
+    for light, a in p.get("auto", {}).items():
+        print_auto_plan(light, a)
     return 0
+
+
+def print_auto_plan(light: str, a: dict) -> None:
+    """``wsoft plan --technique auto``: a light's features, every candidate's predictions, the choice and the runner-up."""
+    print(_auto_line(light, a))
+    m = a["model"]
+    print(f"  model: {m['path']} ({m['device_kind']}; time by {m['method']['time']}, error by {m['method']['error']}"
+          + (f"; times x {m['scale']:.3g}" if m["scale"] != 1.0 else "") + ")" + (f"; {m['note']}" if m["note"] else ""))
+    print("  features: " + ", ".join(f"{k} {v:.4g}" for k, v in a["features"].items()))
+    if a["warning"]:
+        print(f"  warning: {a['warning']}")
+    print(f"  {'candidate':<52} {'pred. ms':>9} {'ms bound':>9} {'pred. error':>11} {'error bound':>11}")
+    for c in a["candidates"]:
+        mark = " <- choice" if c["setting"] == a["choice"]["setting"] else " <- runner-up" if a["runner_up"] and c["setting"] == a["runner_up"]["setting"] else ""
+        print(f"  {c['setting']:<52} {c['predicted_ms']:>9.1f} {c['ms_bound']:>9.1f} {c['predicted_error']:>11.4f} {c['error_bound']:>11.4f}{mark}")
 
 
 def cmd_techniques(args) -> int:
@@ -494,6 +545,8 @@ def cmd_compare(args) -> int:
     names = list(dict.fromkeys(args.technique or ["hard"]))
     scene_file = _check_args(args, names)
     techs = _technique_sets(names, args.set)
+    auto = _auto_args(args, "auto" if "auto" in names else None)
+    techs = [(n, {**p, **auto}) if n == "auto" else (n, p) for n, p in techs]
     if args.frames is not None:
         return _compare_frames(args, techs, scene_file)
     import wsoft
@@ -504,9 +557,11 @@ def cmd_compare(args) -> int:
 
     scene = load_stage(scene_file, time=args.time, render_settings=args.render_settings, instancing=args.instancing,
                        subdiv_level=args.subdiv_level)
-    with CompileNotice(args.device, names + ["reference"]), PassProgress("compare") as progress:
+    with CompileNotice(args.device, None if "auto" in names else names + ["reference"]), PassProgress("compare") as progress:
         fs = wsoft.compare(scene, techs, samples=args.samples, width=args.width, height=args.height, camera=args.camera, light=args.light,
                            device=args.device, progress=progress)
+    for light, c in fs["auto"].stats["counters"]["techniques"].get("auto", {}).items() if "auto" in fs else ():
+        print(_auto_line(light, c["auto"]))
     os.makedirs(args.out_dir, exist_ok=True)
     stem = os.path.splitext(os.path.basename(scene.path))[0]
     written = []
@@ -698,8 +753,36 @@ def cmd_bake(args) -> int:
     return 0
 
 
+def _sweeps() -> dict:
+    """The harness's sweeps, with ``auto`` (``wsoft.bench.auto``: ``--technique auto`` on scenes held out of its fit)."""
+    from wsoft.bench.harness import SWEEPS
+
+    SWEEPS.setdefault("auto", "wsoft.bench.auto")
+    return SWEEPS
+
+
+def cmd_calibrate(args) -> int:
+    from wsoft.auto.calibrate import calibrate
+    from wsoft.errors import ParameterError
+    from wsoft.parallel import resolve_device
+
+    if args.quick and args.rows:
+        raise ParameterError("calibrate: --quick or --rows, one of the two")
+    for path, what in ((args.rows, "--rows"), (args.features, "--features")):
+        if path and not os.path.isfile(path):
+            raise ParameterError(f"{what} {path}: no such file")
+    check_device(args.device)
+    if args.out:
+        check_output(args.out, "--out")
+    dest, what = calibrate(rows=args.rows, features=args.features, quick=args.quick, device=resolve_device(args.device), out=args.out)
+    print(f"wrote {dest}: {what}")
+    return 0
+
+
 def cmd_bench(args) -> int:
     from wsoft.bench.harness import run_sweep, sweep_name
+
+    _sweeps()
 
     name = sweep_name(args.sweep)
     for d in args.device or []:
@@ -857,13 +940,23 @@ def _one_line_warnings() -> None:
     warnings.showwarning = show
 
 
+def auto_options(p) -> None:
+    """``--technique auto``'s options: a time budget or an error target, and the model file."""
+    p.add_argument("--budget-ms", type=float, metavar="MS", help="with --technique auto: per light, the lowest predicted error whose "
+                   "predicted time fits MS (split evenly between the lights)")
+    p.add_argument("--target-error", type=float, metavar="MAE", help="with --technique auto: per light, the fastest setting predicted "
+                   "to reach penumbra MAE")
+    p.add_argument("--auto-model", metavar="JSON", help="with --technique auto: the model file (default: the package's for the device "
+                   "kind; see wsoft calibrate)")
+
+
 def parser() -> argparse.ArgumentParser:
     """The command line's parser (every subcommand; Warp and USD not imported)."""
-    from wsoft.bench.harness import SWEEPS
+    SWEEPS = _sweeps()
     from wsoft.techniques import NAMES  # the names only: the technique modules import Warp
 
     techniques = sorted(NAMES)
-    one_of = "one of: " + ", ".join(techniques)
+    one_of = "one of: " + ", ".join(techniques) + ", or auto (with --budget-ms or --target-error)"
     fmt = _Help
     ap = argparse.ArgumentParser(prog="wsoft", description="Soft-shadow techniques in Warp on USD stages.",
                                  epilog="first steps: wsoft scenes; wsoft compare box_plane -t pcss -t hard (into out/); "
@@ -875,6 +968,7 @@ def parser() -> argparse.ArgumentParser:
     r.add_argument("scene", help=_SCENE_HELP)
     r.add_argument("--technique", "-t", required=True, metavar="TECHNIQUE", help=one_of)
     r.add_argument("--set", action="append", metavar="KEY=VALUE", help="technique parameter (repeatable)")
+    auto_options(r)
     r.add_argument("--width", type=int, help="image width in pixels (default: 640, or the render settings' resolution; "
                    "--width alone keeps their aspect)")
     r.add_argument("--height", type=int, help="image height in pixels (default: 480, or the render settings' resolution)")
@@ -903,6 +997,7 @@ def parser() -> argparse.ArgumentParser:
                        "and OUT_DIR/<stage>-compare.md (times and errors against the reference: MAE of V, ꟻLIP of the shaded image).")
     c.add_argument("scene", help=_SCENE_HELP)
     c.add_argument("--technique", "-t", action="append", metavar="TECHNIQUE", help="a technique (repeatable; default: hard); " + one_of)
+    auto_options(c)
     c.add_argument("--set", action="append", metavar="[TECHNIQUE.]KEY=VALUE", help="a parameter (TECHNIQUE.KEY with several techniques)")
     c.add_argument("--samples", type=int, default=256, help="reference light samples per pixel")
     c.add_argument("--width", type=int, help="image width in pixels (default: 640, or the render settings' resolution)")
@@ -929,6 +1024,7 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--instancing", choices=("auto", "keep", "flatten"), default="auto", help=_INST_HELP)
     p.add_argument("--time", type=float, help=_TIME_HELP)
     p.add_argument("--json", action="store_true", help="the plan as JSON")
+    auto_options(p)
     subdiv_option(p)
     p.set_defaults(fn=cmd_plan)
 
@@ -978,6 +1074,18 @@ def parser() -> argparse.ArgumentParser:
     b.add_argument("--cache-dir", metavar="DIR", help="the references' cache, a folder every worker sees (default: $WSOFT_CACHE_DIR, "
                    "else ~/.cache/wsoft)")
     b.set_defaults(fn=cmd_bench)
+
+    k = sub.add_parser("calibrate", help="rebuild --technique auto's model from your own sweep rows, or scale it by a quick measurement",
+                       formatter_class=fmt, description="From sweep rows (--rows: wsoft bench pareto's on this machine; their features "
+                       "computed, or read from --features, wsoft bench auto's rows): both predictors compared scene by scene held out, "
+                       "each quantity by the closer, fitted to every frame. --quick: no sweep, the model's times scaled by measured "
+                       "over predicted times of a few settings on a small bundled frame.")
+    k.add_argument("--rows", metavar="JSONL", help="a pareto sweep's rows (reports/pareto.jsonl)")
+    k.add_argument("--features", metavar="JSONL", help="their features (reports/auto.jsonl; default: computed)")
+    k.add_argument("--quick", action="store_true", help="scale the model's times by a quick measurement instead")
+    k.add_argument("--device", help="the device to calibrate for (default: the default device)")
+    k.add_argument("--out", metavar="JSON", help="where to write the model (default: the package's model of the device kind)")
+    k.set_defaults(fn=cmd_calibrate)
 
     w = sub.add_parser("warmup", help="compile every technique's kernels once (Warp's kernel cache), so later runs start at once",
                        formatter_class=fmt)

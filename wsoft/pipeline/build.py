@@ -23,6 +23,13 @@ from wsoft.raster.shade import shade as shade_samples
 from wsoft.scene.types import LIGHT_SPHERE, Light, Scene
 
 
+CHOOSERS: dict = {}
+"""Name -> factory (its parameters -> a Technique instance) of techniques chosen per light by a
+package above the pipeline: ``wsoft.auto`` registers ``auto`` when imported. Such an instance has
+``technique_for(ctx, light)`` -> (the chosen technique instance, a record with ``record()``): the
+light's passes are the chosen one's, and the record goes into the frame's counters (``auto``)."""
+
+
 def technique_labels(techs: list) -> list[str]:
     """A label per technique instance: its name when it is the only one of its kind, else the name
     with the parameters that differ from the defaults, ``pcss(filter_samples=100)``."""
@@ -56,7 +63,11 @@ def as_techniques(technique, params: dict) -> list:
                 raise ParameterError("parameters go to the technique's create(), not render()")
             return t
         if isinstance(t, tuple) and len(t) == 2:
-            return create(t[0], t[1])
+            t, p = t
+        if isinstance(t, str) and t in CHOOSERS:  # a technique chosen per light by a package above (wsoft.auto)
+            return CHOOSERS[t](p)
+        if t == "auto":
+            raise ParameterError("technique 'auto' is wsoft.auto's: import wsoft.auto first (wsoft.render and the command line do)")
         if isinstance(t, str):
             return create(t, p)
         raise ParameterError(f"not a technique: {t!r}")
@@ -134,6 +145,8 @@ def build_graph(scene: Scene, technique, *, width: int | None = None, height: in
             built.lights[label] = []
             continue
         built.lights[label] = mine
+        if hasattr(tech, "technique_for"):  # auto: its budget is split between the lights it renders
+            tech.light_count = len(mine)
         built.visibility[label] = [visibility_of(ctx, tctx, l) for l in mine]
         built.channels[label] = _add_resolve(ctx, tech, label, mine, built.visibility[label], single=len(techs) == 1)
     return built
@@ -164,11 +177,17 @@ def visibility_of(ctx: RenderContext, tctx: TechniqueContext, light: Light) -> K
     every other technique is capped by its front fraction; receivers behind a one-sided light are
     counted and warned about (:meth:`~wsoft.pipeline.context.RenderContext.light_behind`)."""
     tech = tctx.tech
+    if hasattr(tech, "technique_for"):  # auto: the light's passes are those of the setting chosen for it
+        tech, choice = tech.technique_for(ctx, light)
+        tctx = ctx.technique(tech, tctx.label_)
+        tctx.counters(light)["auto"] = choice.record()
     faces = ctx.cube_faces(light, getattr(tech.params, "cube", None))
     if faces:  # a cube map: the technique's passes on each face, each receiver's visibility from its own face
         vk = ctx.select_cube_faces(tctx, light, faces, [tech.add_passes(tctx, f) for f in faces])
     else:
         vk = tech.add_passes(tctx, light)
+    if tctx.ctx.graph.producers.get(vk) and tctx.counters(light).get("auto", {}).get("warning"):
+        ctx.warn(ctx.graph.producers[vk], tctx.counters(light)["auto"]["warning"])
     if tech.distance_caveat and light.distance_limited:
         ctx.warn(ctx.graph.producers[vk], distance_caveat_warning(tech, light))
     if tech.ellipsoid_caveat and light.kind == LIGHT_SPHERE and light.elliptical:

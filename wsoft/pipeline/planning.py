@@ -58,7 +58,7 @@ def emission(scene: Scene, light: Light) -> dict:
 
 
 def plan(scene, techniques: list[str] | None = None, *, width: int | None = None, height: int | None = None, light=None,
-         camera=None) -> dict:
+         camera=None, auto: dict | None = None) -> dict:
     """What would run on ``scene`` (a :class:`Scene`, or what :func:`wsoft.pipeline.load_stage` loads:
     a USD path or a bundled stage's name): the time code the scene was loaded at (``time``; None: the default time),
     shadow-casting lights (where each emits, :func:`emission`, with their UsdLux shadow controls,
@@ -67,9 +67,12 @@ def plan(scene, techniques: list[str] | None = None, *, width: int | None = None
     conform policy and data window; see :meth:`Framing.describe`), the load's warnings and notes
     (``notes``: subdivision surfaces read as their cage, or refined; ``subdiv_level``), and per
     technique the passes (with their kinds) or why it is not applicable to a light, and what it
-    renders of each cylinder light (``cylinder_lights``: its :attr:`~wsoft.techniques.Technique.cylinder_model`), and
+    renders of each cylinder light (``cylinder_lights``: its :attr:`~wsoft.techniques.Technique.cylinder_model`);
     for each sphere, point or cylinder light whether the shadow-map techniques draw it as one frustum or
-    a cube map, and why (``light_views``, :class:`~wsoft.lightspace.cube.CubeDecision`)."""
+    a cube map, and why (``light_views``, :class:`~wsoft.lightspace.cube.CubeDecision`).
+    ``auto``: the parameters of technique ``auto`` (``budget_ms`` or ``target_error``) when
+    ``techniques`` names it; ``auto`` in the plan then holds per light its choice's record
+    (:meth:`wsoft.auto.choose.Choice.record`: features, candidates' predictions, choice, runner-up)."""
     from wsoft.techniques import TECHNIQUES
 
     if not isinstance(scene, Scene):
@@ -100,11 +103,14 @@ def plan(scene, techniques: list[str] | None = None, *, width: int | None = None
     if not scene.lights:
         return out
     for name in techniques or sorted(TECHNIQUES):
-        built = build_graph(scene, name, width=width, height=height, camera=camera, light=light, device="cpu", strict=False)
+        built = build_graph(scene, (name, auto or {}) if name == "auto" else name, width=width, height=height, camera=camera, light=light,
+                            device="cpu", strict=False)
         if "light_views" not in out:  # which lights get a cube map, and why (the same for every technique with cube=auto)
             out["light_views"] = {l.path: built.ctx.cube_decision(l).why("auto") for l in scene.lights
                                   if l.kind in CUBE_KINDS and (light is None or getattr(light, "path", light) in (l.path, l.name))}
         label = built.labels[0]
+        if name == "auto":
+            out["auto"] = {lb: c["auto"] for lb, c in built.ctx.counters["techniques"].get(label, {}).items() if "auto" in c}
         if built.instancing["mode"] == "flattened":
             why = built.instancing["needs"][0][1]
             too_big = too_big_to_flatten(scene)
@@ -119,7 +125,7 @@ def plan(scene, techniques: list[str] | None = None, *, width: int | None = None
             skipped = {l.path for l, _ in built.skipped[label]}
             cyl = [l.path for l in scene.lights if l.kind == LIGHT_CYLINDER and l.path not in skipped
                    and (light is None or getattr(light, "path", light) in (l.path, l.name))]
-            if cyl and TECHNIQUES[name].cylinder_model:
+            if cyl and name in TECHNIQUES and TECHNIQUES[name].cylinder_model:
                 out.setdefault("cylinder_lights", {})[name] = [{"light": c, "model": TECHNIQUES[name].cylinder_model} for c in cyl]
             out.setdefault("pass_kinds", {}).update({p.name: p.kind for p in built.ctx.graph.schedule([built.channels[label]])})
     return out

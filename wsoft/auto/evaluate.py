@@ -1,0 +1,231 @@
+"""Leave-one-scene-out evidence for ``--technique auto``: per bundled scene, the model is fitted
+without it (:func:`wsoft.auto.model.fit`) and chooses on that scene's frames (:func:`wsoft.auto.choose.pick`)
+among the settings the sweep measured there; the choice's time and error are the measured ones
+of the same rows, compared with the best fixed setting of those rows. ``wsoft bench auto`` writes
+it into ``reports/auto.md``; ``wsoft calibrate`` picks each quantity's predictor by it."""
+
+from __future__ import annotations
+
+import math
+import statistics
+
+from wsoft.auto.model import MARGIN, METHODS, fit, pick, setting_text, training_frames
+
+BUDGET_FACTORS = (1.2, 2.0, 5.0)  # budgets: the frame's fastest measured setting's time times these
+TARGETS = (0.1, 0.05, 0.02)  # error targets
+BUDGET_SLACK = 1.1  # a choice is within budget when its measured time is at most the budget times this
+TABLE_BUDGETS = (100.0, 500.0)
+TABLE_TARGET = 0.02
+GOALS = {"error_regret": 0.01, "within_budget": 0.9, "time_regret": 0.25}
+
+
+def _median(xs):
+    return statistics.median(xs) if xs else float("nan")
+
+
+def held_out(frames: list[dict], method: dict) -> list[dict]:
+    """Per frame, the predictions of the model fitted without its scene: ``{"frame": f, "preds": {key: (ms, error)}}``."""
+    out = []
+    for s in sorted({f["scene"] for f in frames}):
+        train = [f for f in frames if f["scene"] != s]
+        m = fit(train, method=method)
+        known = m.data["settings"]
+        for f in frames:
+            if f["scene"] == s:
+                p = {k: m.predict(f["features"], k) for k in f["settings"] if k in known}
+                out.append({"frame": f, "preds": p, "spread": {k: (known[k]["time_spread"], known[k]["error_spread"]) for k in p}})
+    return out
+
+
+def cases(held: list[dict], margin: float = MARGIN) -> list[dict]:
+    """Every (frame, goal) of the evidence: the choice (its predicted and measured time and error)
+    and the best fixed setting measured on the frame for the same goal."""
+    out = []
+    for h in held:
+        f, preds = h["frame"], h["preds"]
+        bounds = {k: (t, e, t * math.exp(margin * h["spread"][k][0]), e * math.exp(margin * h["spread"][k][1])) for k, (t, e) in preds.items()}
+        if not preds:
+            continue
+        meas = {k: (s["ms"], s["error"]) for k, s in f["settings"].items() if k in preds}
+        fastest = min(t for t, _ in meas.values())
+        goals = [("budget", f"fastest x {x:g}", fastest * x) for x in BUDGET_FACTORS] + [("target", f"error {e:g}", e) for e in TARGETS]
+        goals += [("table_budget", f"{b:g} ms", b) for b in TABLE_BUDGETS] + [("table_target", f"error {TABLE_TARGET:g}", TABLE_TARGET)]
+        for kind, name, v in goals:
+            budget = kind.endswith("budget")
+            key, _, warning = pick(bounds, budget_ms=v if budget else None, target_error=None if budget else v)
+            t, e = meas[key]
+            c = {"scene": f["scene"], "light": f["light"], "metric": f["metric"], "kind": kind, "goal": name, "value": v, "choice": key,
+                 "setting": setting_of(f, key), "pred_ms": preds[key][0], "pred_error": preds[key][1], "ms": t, "error": e, "warned": bool(warning)}
+            if budget:
+                within = [k for k, (tt, _) in meas.items() if tt <= v]
+                best = min(within, key=lambda k: (meas[k][1], meas[k][0], k)) if within else min(meas, key=lambda k: (meas[k][0], k))
+                c.update(best=setting_of(f, best), best_ms=meas[best][0], best_error=meas[best][1], error_regret=e - meas[best][1],
+                         within=t <= v * BUDGET_SLACK)
+            else:
+                reach = [k for k, (_, ee) in meas.items() if ee <= v]
+                best = min(reach, key=lambda k: (meas[k][0], k)) if reach else None
+                c.update(best=setting_of(f, best) if best else None, best_ms=meas[best][0] if best else None,
+                         best_error=meas[best][1] if best else None, time_regret=(t / meas[best][0] - 1.0) if best else None, reached=e <= v)
+            out.append(c)
+    return out
+
+
+def setting_of(frame: dict, key: str) -> str:
+    s = frame["settings"][key]
+    return setting_text(s["technique"], s["params"])
+
+
+def prediction_error(held: list[dict]) -> dict:
+    """Median |log(predicted / measured)| of time and error over every held-out setting, and the
+    fraction of settings whose predicted time is within a factor 1.5 of the measured."""
+    lt, le = [], []
+    for h in held:
+        for k, (pt, pe) in h["preds"].items():
+            s = h["frame"]["settings"][k]
+            lt.append(abs(math.log(pt / s["ms"])))
+            le.append(abs(math.log(max(pe, 1e-4) / max(s["error"], 1e-4))))
+    return {"time_log": _median(lt), "error_log": _median(le), "time_within_1.5": sum(x <= math.log(1.5) for x in lt) / max(len(lt), 1), "n": len(lt)}
+
+
+def summary(cs: list[dict]) -> dict:
+    b = [c for c in cs if c["kind"] == "budget"]
+    t = [c for c in cs if c["kind"] == "target"]
+    tr = [c["time_regret"] for c in t if c["time_regret"] is not None]
+    return {"budget_cases": len(b), "within_budget": sum(c["within"] for c in b) / max(len(b), 1),
+            "error_regret_median": _median([c["error_regret"] for c in b]),
+            "error_regret_p90": _quantile([c["error_regret"] for c in b], 0.9),
+            "budget_warned": sum(c["warned"] for c in b), "target_cases": len(t), "target_reachable": len(tr),
+            "time_regret_median": _median(tr), "time_regret_p90": _quantile(tr, 0.9),
+            "target_missed": sum(not c["reached"] for c in t if c["best"] is not None),
+            "target_warned": sum(c["warned"] for c in t)}
+
+
+def _quantile(xs, q):
+    if not xs:
+        return float("nan")
+    xs = sorted(xs)
+    return xs[min(len(xs) - 1, int(round(q * (len(xs) - 1))))]
+
+
+def compare_methods(frames: list[dict]) -> dict:
+    """Per predictor pair (time, error), the held-out predictions' accuracy and the choices' summary."""
+    out = {}
+    for mt in METHODS:
+        for me in METHODS:
+            method = {"time": mt, "error": me}
+            held = held_out(frames, method)
+            cs = cases(held)
+            out[(mt, me)] = {"method": method, "prediction": prediction_error(held), "summary": summary(cs), "cases": cs, "held": held}
+    return out
+
+
+def best_method(results: dict) -> dict:
+    """Per quantity, the predictor whose held-out predictions are closer (median |log ratio|, the other quantity's predictor log-linear)."""
+    t = min(("loglinear", "nearest"), key=lambda m: results[(m, "loglinear")]["prediction"]["time_log"])
+    e = min(("loglinear", "nearest"), key=lambda m: results[("loglinear", m)]["prediction"]["error_log"])
+    return {"time": t, "error": e}
+
+
+def report_lines(pareto_rows: list[dict], feature_rows: list[dict], ctx: dict) -> list[str]:
+    frames = training_frames(pareto_rows, feature_rows)
+    if not frames:
+        return ["No pareto rows with features: run `wsoft bench pareto` first (its rows are what the model learns from)."]
+    results = compare_methods(frames)
+    method = best_method(results)
+    chosen = results[(method["time"], method["error"])]
+    cs, s = chosen["cases"], chosen["summary"]
+    scenes = sorted({f["scene"] for f in frames})
+    L = [f"Training data: the {len(frames)} frames of `pareto.jsonl` ({len(scenes)} scenes; every technique's swept settings, "
+         f"{sum(len(f['settings']) for f in frames)} (setting, frame) pairs) joined with each frame's features (this sweep's rows: "
+         "computed before rendering, `wsoft.auto.features`). Every number below is **leave-one-scene-out**: the model is fitted "
+         "without the scene it chooses for. A choice is one of the swept settings, so its *measured* time and error are the "
+         "pareto rows' own (nothing is rendered again); the best fixed setting is the best of the same rows. Error: penumbra MAE "
+         "(the MAE over all covered pixels for a point light, whose reference has no penumbra, as in pareto.md).", "",
+         f"Predictors: time by **{method['time']}**, error by **{method['error']}** (each the one with the smaller held-out "
+         "prediction error below; `wsoft calibrate` picks the same way).", ""]
+    L += ["## What auto picks, per scene (held out of the fit)", "",
+          f"| scene | light | at {TABLE_BUDGETS[0]:g} ms | at {TABLE_BUDGETS[1]:g} ms | for error {TABLE_TARGET:g} |", "|---|---|---|---|---|"]
+    for f in frames:
+        cells = []
+        for kind, v in (("table_budget", TABLE_BUDGETS[0]), ("table_budget", TABLE_BUDGETS[1]), ("table_target", TABLE_TARGET)):
+            c = next(c for c in cs if c["scene"] == f["scene"] and c["light"] == f["light"] and c["kind"] == kind and c["value"] == v)
+            cells.append(f"{c['setting']}: {c['ms']:.0f} ms, {c['error']:.4f}" + (" (warned)" if c["warned"] else ""))
+        L.append(f"| {f['scene']} | {f['light'].split('/')[-1]}{'' if f['metric'] == 'mae_penumbra' else ' (all pixels)'} | " + " | ".join(cells) + " |")
+    L += ["", "Cells: the chosen setting, its measured frame time and error. `(warned)`: no candidate was predicted to fit "
+          "(the cheapest, or the most accurate, was chosen with a warning).", ""]
+    met = lambda ok: "**met**" if ok else "**not met**"  # noqa: E731
+    L += ["## Targets", "", "| target | measured | |", "|---|---|---|",
+          f"| within the budget (measured ≤ budget × {BUDGET_SLACK:g}) in ≥ {GOALS['within_budget']:.0%} of cases | "
+          f"{s['within_budget']:.1%} of {s['budget_cases']} | {met(s['within_budget'] >= GOALS['within_budget'])} |",
+          f"| median error regret ≤ {GOALS['error_regret']:g} | {s['error_regret_median']:.4f} (90th percentile {s['error_regret_p90']:.4f}) | "
+          f"{met(s['error_regret_median'] <= GOALS['error_regret'])} |",
+          f"| median time regret ≤ {GOALS['time_regret']:.0%} | {s['time_regret_median']:.1%} (90th percentile {s['time_regret_p90']:.1%}; "
+          f"{s['target_reachable']} of {s['target_cases']} target cases some setting reaches) | {met(s['time_regret_median'] <= GOALS['time_regret'])} |",
+          "", f"Budgets: the frame's fastest measured setting × {', × '.join(f'{x:g}' for x in BUDGET_FACTORS)}; error regret: the choice's "
+          "measured error minus the lowest measured error within the budget. Targets: error "
+          f"{', '.join(f'{e:g}' for e in TARGETS)}; time regret: the choice's measured time over the fastest setting measured to reach "
+          f"the target, minus 1 (cases no setting reaches are left out). The target was missed (measured error above it) in "
+          f"{s['target_missed']} of {s['target_reachable']} reachable cases; {s['budget_warned']} budget and {s['target_warned']} target "
+          "cases warned that no candidate was predicted to serve them.", ""]
+    L += ["## Predictors compared (leave-one-scene-out)", "",
+          "| time by | error by | time: median abs log ratio | predicted time within ×1.5 | error: median abs log ratio | within budget | median error regret | median time regret |",
+          "|---|---|---|---|---|---|---|---|"]
+    for (mt, me), r in results.items():
+        p, ss = r["prediction"], r["summary"]
+        L.append(f"| {mt} | {me} | {p['time_log']:.3f} (×{math.exp(p['time_log']):.2f}) | {p['time_within_1.5']:.0%} | "
+                 f"{p['error_log']:.3f} (×{math.exp(p['error_log']):.2f}) | {ss['within_budget']:.1%} | {ss['error_regret_median']:.4f} | "
+                 f"{ss['time_regret_median']:.1%} |")
+    L += ["", f"Over every (setting, held-out frame) pair ({chosen['prediction']['n']}); log-linear: per setting, ridge ({'λ'} = 1) on "
+          "standardised features; nearest: mean of the 3 nearest training frames in feature space. The choices use the margin below "
+          f"({MARGIN:g}).", ""]
+    L += ["## The margin: budget kept against error given up", "",
+          "The chooser compares a budget with each setting's time *bound*, its predicted time × exp(margin × the spread of its "
+          "log-time residuals in the fit), and a target with the same bound of its error. A larger margin keeps more frames within "
+          "the budget and gives up accuracy; the model ships with margin "
+          f"{MARGIN:g}. Same held-out predictions as above (time by {method['time']}, error by {method['error']}):", "",
+          "| margin | within budget | median error regret | median time regret | targets missed |", "|---|---|---|---|---|"]
+    both = []
+    for z in (0.0, 0.5, 1.0, 1.5):
+        ss = summary(cases(chosen["held"], z))
+        L.append(f"| {z:g} | {ss['within_budget']:.1%} | {ss['error_regret_median']:.4f} | {ss['time_regret_median']:.1%} | "
+                 f"{ss['target_missed']} of {ss['target_reachable']} |")
+        if ss["within_budget"] >= GOALS["within_budget"] and ss["error_regret_median"] <= GOALS["error_regret"]:
+            both.append(z)
+    L += ["", (f"Margins meeting both the budget and the error-regret targets: {', '.join(f'{z:g}' for z in both)}." if both else
+               f"No margin of these meets both the budget target and the error-regret target on these {len(frames)} frames (held-out "
+               f"time predictions are within ×{math.exp(chosen['prediction']['time_log']):.2f} of the measured at the median)."), ""]
+    L += ["Per goal (margin as shipped):", "", "| goal | cases | within budget / target reached | median error regret | median time regret |",
+          "|---|---|---|---|---|"]
+    for goal in dict.fromkeys(c["goal"] for c in cs if c["kind"] in ("budget", "target")):
+        g = [c for c in cs if c["goal"] == goal and c["kind"] in ("budget", "target")]
+        if g[0]["kind"] == "budget":
+            L.append(f"| budget: {goal} | {len(g)} | {sum(c['within'] for c in g)} | {_median([c['error_regret'] for c in g]):.4f} | - |")
+        else:
+            tr = [c["time_regret"] for c in g if c["time_regret"] is not None]
+            L.append(f"| target: {goal} | {len(g)} | {sum(c['reached'] for c in g)} | - | {_median(tr):.1%} |")
+    L.append("")
+    L += ["## The features of each frame", "", "Computed before any technique renders (`wsoft.auto.features.light_features`: a "
+          "96-sample-wide G-buffer and a 256² soft depth map of the light); the rows of this sweep.", "",
+          "| scene | light | triangles in the light's view | covered pixels | cutout triangles | light size | light distance | shadowed | "
+          "penumbra px | receivers' depth ratio | ms to compute |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+    ms = {(r["scene"], r["light"]): r.get("features_ms") for r in feature_rows}
+    for f in frames:
+        x = f["features"]
+        L.append(f"| {f['scene']} | {f['light'].split('/')[-1]} | {x['triangles_in_view']:.0f} | {x['covered_pixels']:.0f} | "
+                 f"{x['cutout_triangles']:.0f} | {x['light_size']:.3g} | {x['light_distance']:.3g} | {x['shadowed_fraction']:.3f} | "
+                 f"{x['penumbra_px']:.3g} | {x['depth_ratio']:.3g} | {ms.get((f['scene'], f['light'])) or '-'} |")
+    L += ["", "The feature times include the first upload of the scene (its BVH), which a render then reuses. The rows of "
+          "`temporal.jsonl` (sequences, 256x192) and `modern.jsonl` (modern techniques' strips) are not in the fit: their frames are "
+          "other scenes or other measurements (flicker over a sequence, per-strip error) than pareto's single frames.", ""]
+    L += ["## Every choice (held out)", "", "| scene | light | goal | choice | predicted ms | measured ms | predicted error | measured error | best fixed | its ms | its error | regret |",
+          "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for c in cs:
+        if c["kind"] not in ("budget", "target"):
+            continue
+        reg = f"{c['error_regret']:+.4f}" if c["kind"] == "budget" else ("-" if c["time_regret"] is None else f"{c['time_regret']:+.0%}")
+        flag = "" if (c["within"] if c["kind"] == "budget" else (c["reached"] or c["best"] is None)) else " ✗"
+        L.append(f"| {c['scene']} | {c['light'].split('/')[-1]} | {c['goal']} ({c['value']:.4g}) | {c['setting']}{flag} | {c['pred_ms']:.0f} | {c['ms']:.0f} | "
+                 f"{c['pred_error']:.4f} | {c['error']:.4f} | {c['best'] or '-'} | " + ("-" if c["best_ms"] is None else f"{c['best_ms']:.0f}") + " | "
+                 + ("-" if c["best_error"] is None else f"{c['best_error']:.4f}") + f" | {reg} |")
+    L += ["", "✗: over the budget × 1.1, or above the target, measured."]
+    return L
