@@ -71,7 +71,7 @@ def test_reference_is_cached(tiny):
 def test_unknown_sweep(tiny):
     import wsoft
 
-    with pytest.raises(wsoft.ParameterError, match="unknown sweep .nope.; sweeps: adversarial, distributed, essm, essm-table1, essm-table2, filtered, foundation"):
+    with pytest.raises(wsoft.ParameterError, match="unknown sweep .nope.; sweeps: adversarial, auto, cube, distributed, essm, essm-table1, essm-table2, filtered, foundation"):
         harness.run_sweep("nope", out_dir=str(tiny[0]))
 
 

@@ -754,10 +754,9 @@ def cmd_bake(args) -> int:
 
 
 def _sweeps() -> dict:
-    """The harness's sweeps, with ``auto`` (``wsoft.bench.auto``: ``--technique auto`` on scenes held out of its fit)."""
+    """The harness's sweeps (:data:`wsoft.bench.harness.SWEEPS`)."""
     from wsoft.bench.harness import SWEEPS
 
-    SWEEPS.setdefault("auto", "wsoft.bench.auto")
     return SWEEPS
 
 
