@@ -68,12 +68,13 @@ def settings(scene, light, map_size: int, quick: bool) -> list[tuple[str, dict]]
     """(technique, params): the modern techniques and the baselines that support ``light``, at
     their quality settings (quick: the first two) and ``map_size`` for their maps; the reference at
     :data:`REFERENCE_SAMPLES`."""
-    from wsoft.techniques import TECHNIQUES, create
+    from wsoft.pipeline.build import refusal
+    from wsoft.techniques import TECHNIQUES
 
     out = []
     for name in [t for t in MODERN + BASELINES if t in TECHNIQUES]:
         cls = TECHNIQUES[name]
-        if create(name).supports(scene, light) is not None:
+        if refusal(name, scene, light) is not None:
             continue
         qs = cls.quality_settings()
         if quick:

@@ -62,12 +62,13 @@ def cases(quick: bool, devices: list[str]) -> list[dict]:
 def settings(scene, light, sizes: list[int], quick: bool) -> list[tuple[str, dict]]:
     """(technique, params) of every registered technique that supports ``light``, over its quality
     settings and the map sizes; the reference over its sample counts."""
-    from wsoft.techniques import TECHNIQUES, create
+    from wsoft.pipeline.build import refusal
+    from wsoft.techniques import TECHNIQUES
 
     out = []
     for name in sorted(TECHNIQUES):
         cls = TECHNIQUES[name]
-        if create(name).supports(scene, light) is not None:
+        if refusal(name, scene, light) is not None:
             continue
         qs = cls.quality_settings()
         if quick:

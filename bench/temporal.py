@@ -65,12 +65,13 @@ def settings(scene, light, map_size: int, quick: bool) -> list[tuple[str, dict]]
     history, and the reference at :data:`REFERENCE_SAMPLES` (quick: the first two)."""
     import dataclasses
 
-    from wsoft.techniques import TECHNIQUES, create
+    from wsoft.pipeline.build import refusal
+    from wsoft.techniques import TECHNIQUES
 
     out = []
     for name in sorted(TECHNIQUES):
         cls = TECHNIQUES[name]
-        if create(name).supports(scene, light) is not None:
+        if refusal(name, scene, light) is not None:
             continue
         if name == "reference":
             out += [(name, {"samples": n}) for n in (REFERENCE_SAMPLES[:2] if quick else REFERENCE_SAMPLES)]

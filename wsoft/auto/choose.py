@@ -45,9 +45,12 @@ class Choice:
                 "warning": self.warning, "model": self.model, "candidates": self.candidates}
 
 
-def candidates(model, scene, light) -> dict[str, dict]:
-    """The model's settings whose technique is registered and supports ``light`` (key -> technique, params)."""
-    from wsoft.techniques import TECHNIQUES, create
+def candidates(model, scene, light, *, width: int | None = None, height: int | None = None, camera=None) -> dict[str, dict]:
+    """The model's settings whose technique is registered and renders ``light`` in this frame
+    (:func:`~wsoft.pipeline.build.refusal`: it supports the light, and needs no cube map it cannot
+    use) (key -> technique, params)."""
+    from wsoft.pipeline.build import refusal
+    from wsoft.techniques import TECHNIQUES
 
     out, ok = {}, {}
     for key, s in model.settings().items():
@@ -55,7 +58,7 @@ def candidates(model, scene, light) -> dict[str, dict]:
         if name not in TECHNIQUES:
             continue
         if name not in ok:
-            ok[name] = create(name).supports(scene, light) is None
+            ok[name] = refusal(name, scene, light, width=width, height=height, camera=camera) is None
         if ok[name]:
             try:
                 TECHNIQUES[name].make_params(s["params"])
@@ -81,7 +84,7 @@ def choose(scene, light, *, budget_ms: float | None = None, target_error: float 
         light = scene.find_light(str(light))
     if features is None:
         features = light_features(scene, light, width=width, height=height, camera=camera, device=device)
-    cands = candidates(model, scene, light)
+    cands = candidates(model, scene, light, width=width, height=height, camera=camera)
     if not cands:
         raise ParameterError(f"auto: no setting of the model ({getattr(model, 'path', 'given')}) supports light {light.path}")
     preds = {k: model.bounds(features, k) for k in cands}

@@ -170,6 +170,24 @@ def supported_lights(tech, scene: Scene, lights: list[Light], ctx: RenderContext
     return mine, skipped
 
 
+def refusal(technique, scene: Scene, light: Light, *, width: int | None = None, height: int | None = None, camera=None) -> str | None:
+    """Why ``technique`` (a name, or (name, params)) renders nothing of ``light`` in a frame of
+    ``scene`` (``width``, ``height``, ``camera`` as :func:`build_graph` takes them): its
+    :meth:`~wsoft.techniques.Technique.supports`, or, for a technique with a
+    :attr:`~wsoft.techniques.Technique.cube_refusal`, a light whose receivers in that frame need a
+    cube map (decided as :func:`build_graph` decides it); None when it renders the light. What the
+    sweeps ask before they put a technique in a frame's graph."""
+    from wsoft.techniques import create
+
+    name, params = technique if isinstance(technique, tuple) else (technique, {})
+    tech = create(name, params)
+    why = tech.supports(scene, light)
+    if why is not None or not tech.cube_refusal:
+        return why
+    built = build_graph(scene, (name, params), width=width, height=height, camera=camera, light=light.path, strict=False)
+    return {l.path: w for l, w in built.skipped[built.labels[0]]}.get(light.path)
+
+
 def visibility_of(ctx: RenderContext, tctx: TechniqueContext, light: Light) -> Key:
     """Register a technique's passes for ``light``; the key of its per-sample visibility, capped by
     the receiver's horizon (a point sees only the light in front of its tangent plane, and nothing
