@@ -380,6 +380,21 @@ def receiver_plane_range(lv: ViewGPU, xp: wp.vec2, qp: float, gx: float, gy: flo
 
 
 @wp.func
+def receiver_plane_at(lv: ViewGPU, ok: bool, xp: wp.vec2, qp: float, gx: float, gy: float, t: wp.vec2, fallback: float) -> float:
+    """The depth of a plane (:func:`receiver_plane_affine`: ``ok``, ``xp``, ``qp``, ``gx``,
+    ``gy``) at texel coordinates ``t``; ``fallback`` where it is not ok or passes behind a
+    perspective view's origin there."""
+    if not ok:
+        return fallback
+    q = qp + gx * (t[0] - xp[0]) + gy * (t[1] - xp[1])
+    if lv.persp != 0:
+        if q <= 0.0:
+            return fallback
+        return 1.0 / q
+    return q
+
+
+@wp.func
 def receiver_plane_depth_or(lv: ViewGPU, pv: wp.vec3, nv: wp.vec3, m: wp.vec2, fallback: float) -> float:
     """:func:`receiver_plane_depth`, or ``fallback`` where the ray misses the plane."""
     z = receiver_plane_depth(lv, pv, nv, m)
