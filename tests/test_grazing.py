@@ -36,13 +36,41 @@ def test_stage_holds_the_band(floor, device):
         assert sel.sum() > 300 and dark == 0.0
 
 
-@pytest.mark.parametrize("technique", ["hard", "pcf", "pcss"])
+@pytest.mark.parametrize("technique", ["hard", "pcf", "pcss", "essm"])
 def test_grazing_floor_stays_lit(floor, device, technique):
     f = wsoft.render(floor, technique, device=device, **KW)
     sel, dark = _band(f)
     assert sel.sum() > 1500 and dark <= 0.005
-    beyond, dark_beyond = _band(f, 88.0, 90.0)  # out to the map's edge
-    assert beyond.sum() > 300 and dark_beyond <= 0.005
+    if technique != "essm":  # essm darkens 13-28% beyond 88 degrees (a known limit, tests/test_grazing.py's numbers in docs/techniques.md)
+        beyond, dark_beyond = _band(f, 88.0, 90.0)  # out to the map's edge
+        assert beyond.sum() > 300 and dark_beyond <= 0.005
+
+
+def test_essm_without_its_rounding_and_slope_terms_darkens_the_band(device):
+    """The paper's reading (no half unit of rounding, no slope term) darkens the grazing floor."""
+    scene = wsoft.load_scene(grazing_floor(point=True))
+    f = wsoft.render(scene, "essm", device=device, round_up=False, plane_slope_bias=0.0, **KW)
+    assert _band(f)[1] > 0.2
+
+
+@pytest.mark.parametrize("size", [256, 1024])
+@pytest.mark.parametrize("technique,paper", [("essm", {"round_up": False}), ("vssm", {"receiver_plane": False, "direct_small": False})])
+def test_sphere_lit_top_stays_lit(tmp_path, device, technique, paper, size):
+    """A closed sphere under a rect light (the adversarial corpus's ``sphere``): its top, facing the
+    whole light, is lit; the paper's reading shadows it (min V 0.73 essm; vssm 0.83 at 256², 0.01
+    at 1024²: sub-kernels compared against the centre's depth, and a float32 SAT's rounding on
+    boxes of a few texels)."""
+    from wsoft.bench.adversarial import H, W
+    from wsoft.stages.adversarial import b_sphere, far_side_dark
+
+    scene = wsoft.load_scene(b_sphere(str(tmp_path)))
+
+    def check(**params):
+        f = wsoft.render(scene, technique, width=int(W), height=int(H), device=device, shadow_map_size=size, **params)
+        return far_side_dark({k: f[k] for k in ("V", "N.X", "N.Y", "N.Z", "P.X", "P.Y", "P.Z", "A")})
+
+    assert check() is None
+    assert "lit top is shadowed" in (check(**paper) or "")
 
 
 def test_plane_without_its_slope_term_stripes(device):

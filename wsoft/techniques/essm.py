@@ -53,6 +53,7 @@ from wsoft.lightspace.view import (
     ViewGPU,
     map_coords,
     normalised_depth,
+    plane_depth_step,
     receiver_plane_depth_or,
     texel_of,
     view_dir,
@@ -85,6 +86,7 @@ class ESSMParams(LightViewParams):
     bias: float = param(0.0, "depth bias on the normalised depth [0, 1]; 0: ln(1 + epsilon) / (2c), so that a lit planar kernel (e^{c bias}) stays below 1 + epsilon", range=(0.0, 0.5))
     min_radius: float = param(0.5, "smallest penumbra half-width in texels", range=(0.01, 4096.0))
     max_radius: float = param(512.0, "largest search and penumbra half-width in texels", range=(0.01, 4096.0))
+    plane_slope_bias: float = param(0.25, "texels of the receiver's tangent-plane depth step per texel taken off its depth (the map's own error at grazing angles)", range=(0.0, 16.0))
     round_up: bool = param(True, "integer SATs: count the half unit of rounding of e^{cz} in the receiver's favour (off: the paper's reading, which self-shadows receivers near the nearest caster)")
 
     def __post_init__(self):
@@ -133,6 +135,7 @@ class ESSMConsts:
     aniso: int
     min_r: float
     max_r: float
+    slope: float  # texels of the receiver plane's depth step taken off its depth
 
 
 @wp.kernel
@@ -322,9 +325,10 @@ def essm_shade(
     if not mapped:
         return
     d_lin = pv[2]
-    dn = normalised_depth(d_lin, q.zmin, q.zrange) - q.bias
-    # the receiver's tangent plane in normalised depth per texel (receiver-plane depth)
     nv = view_dir(lv, gb.nrm[i])
+    # nearer by a fraction of the plane's depth step per texel: the map's own error at grazing angles
+    dn = normalised_depth(d_lin - q.slope * plane_depth_step(lv, pv, nv, d_lin), q.zmin, q.zrange) - q.bias
+    # the receiver's tangent plane in normalised depth per texel (receiver-plane depth)
     m0 = map_coords(lv, pv)
     tu = 1.0 / lv.scale[0]
     tv = 1.0 / lv.scale[1]
@@ -526,6 +530,7 @@ def consts_for(b: Basis, sat: SAT, p) -> ESSMConsts:
     q.zmin = b.zmin
     q.zrange = b.zmax - b.zmin
     q.bias = effective_bias(p, b.c)
+    q.slope = p.plane_slope_bias
     q.eps = p.epsilon
     q.nsub = p.subdivision
     q.always = int(p.subdivide == "always")

@@ -28,7 +28,7 @@ from wsoft.accel.pyramid import effective_depth_range
 from wsoft.accel.sat import DIRECT_TEXELS, Moments, box_area, build_sat, check_sat_params, direct_box, mean_pyramid, sat_box
 from wsoft.lightspace.light import CYLINDER_KERNEL, LightKernel, light_kernel, spread_texels
 from wsoft.lightspace.moments import chebyshev_bound, moments_variance
-from wsoft.lightspace.view import ViewGPU, normalised_depth, receiver_plane_affine, receiver_plane_at, view_dir
+from wsoft.lightspace.view import ViewGPU, normalised_depth, plane_depth_step, receiver_plane_affine, receiver_plane_at, view_dir
 from wsoft.params import LightViewParams, check_ranges
 from wsoft.parallel import launch_chunked
 from wsoft.raster.gbuffer import GBufferGPU, gb_mapped_receiver
@@ -48,6 +48,7 @@ class VSSMParams(LightViewParams):
     min_radius: float = param(0.5, "smallest penumbra half-width in texels", range=(0.01, 4096.0))
     max_radius: float = param(512.0, "largest search and penumbra half-width in texels", range=(0.01, 4096.0))
     direct_small: bool = param(True, "float32 SAT: boxes of at most 4 texels per side summed from the moments themselves (the table's rounding exceeds the bias there)")
+    plane_slope_bias: float = param(0.25, "texels of the receiver's tangent-plane depth step per texel taken off its depth (the map's own error at grazing angles)", range=(0.0, 16.0))
     receiver_plane: bool = param(True, "sub-kernels compare against the receiver's tangent plane at their centres (off: the receiver's own depth, the paper's reading)")
 
     def __post_init__(self):
@@ -70,6 +71,7 @@ class VSSMConsts:
     max_r: float
     plane: int
     direct: int
+    slope: float
 
 
 @wp.struct
@@ -77,6 +79,8 @@ class ReceiverPlane:
     """The receiver's tangent plane over the map's texels (:func:`receiver_plane_affine`)."""
 
     ok: int
+    pv: wp.vec3
+    nv: wp.vec3
     xp: wp.vec2
     qp: float
     gx: float
@@ -141,7 +145,7 @@ def plane_depth(q: VSSMConsts, lv: ViewGPU, pl: ReceiverPlane, u: float, v: floa
     z = receiver_plane_at(lv, True, pl.xp, pl.qp, pl.gx, pl.gy, wp.vec2(u, v), -1.0)
     if z < 0.0:
         return d
-    return normalised_depth(z, q.zmin, q.zrange) - q.bias
+    return normalised_depth(z - q.slope * plane_depth_step(lv, pl.pv, pl.nv, z), q.zmin, q.zrange) - q.bias
 
 
 @wp.func
@@ -189,11 +193,14 @@ def vssm_shade(
     if not mapped:
         return
     d_lin = pv[2]
-    d = normalised_depth(d_lin, q.zmin, q.zrange) - q.bias
+    nv = view_dir(lv, gb.nrm[i])
+    d = normalised_depth(d_lin - q.slope * plane_depth_step(lv, pv, nv, d_lin), q.zmin, q.zrange) - q.bias
     pl = ReceiverPlane()
     pl.ok = 0
+    pl.pv = pv
+    pl.nv = nv
     if q.plane != 0:
-        ok, xp, qp, gx, gy = receiver_plane_affine(lv, pv, view_dir(lv, gb.nrm[i]))
+        ok, xp, qp, gx, gy = receiver_plane_affine(lv, pv, nv)
         pl.ok = int(ok)
         pl.xp = xp
         pl.qp = qp
@@ -267,6 +274,7 @@ class VSSM(Technique):
             q.bias, q.nsub, q.min_var, q.bleed = p.bias, p.subdivision, p.min_variance, p.bleed
             q.min_r, q.max_r = p.min_radius, p.max_radius
             q.plane = int(p.receiver_plane)
+            q.slope = p.plane_slope_bias
             q.direct = int(p.direct_small and sat.storage == "float32")
             vis = wp.empty(gb.count, dtype=float, device=ctx.device)
             looks = wp.empty(gb.count, dtype=wp.int32, device=ctx.device)
