@@ -35,6 +35,12 @@ Optimal exponent (§7): c = R / (z_max − z_min) in depth units, i.e. R on the 
 where R is the largest exponent the storage holds: μ ln 2 for integer storage (the basis spans
 e^R = 2^μ, so e^{c z_min} is still one integer unit) and, for a float32 SAT (not in the paper),
 24 ln 2 − 2 ln N from its 24-bit mantissa (:func:`optimal_exponent`). ``c`` overrides it.
+
+Not from the paper (each a parameter): ``round_up`` counts an integer SAT's half unit of rounding
+of e^{cz} in the receiver's favour (a receiver near the nearest caster, where e^{c z_min} is one
+unit, otherwise reads up to a third of its light as occluded: a closed sphere's lit top at min V
+0.73); ``plane_slope_bias`` takes the receiver's depth that many texels of its tangent plane's
+depth step nearer, against the map's own error at grazing angles (docs/techniques.md).
 """
 
 from __future__ import annotations
