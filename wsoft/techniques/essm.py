@@ -225,11 +225,12 @@ def esm_box(q: ESSMConsts, data: wp.array3d(dtype=Any), u0: float, u1: float, v0
     ecd = wp.exp(-q.c * wp.float64(dn))
     e = (sat_box(data, 0, q.n, q.tile, u0, u1, v0, v1) * q.unit / wa) * q.a0 + q.b0
     # outside the map: lit at depth 1 -> e^{c}; the ESM of that part is e^{c(1-d)} >= 1
-    s64 = (ecd * (e + q.e_round) * wa + (fa - wa) * wp.exp(q.c * (wp.float64(1.0) - wp.float64(dn)))) / fa
+    s64 = (ecd * e * wa + (fa - wa) * wp.exp(q.c * (wp.float64(1.0) - wp.float64(dn)))) / fa
     flag = 0.0
     if s64 > wp.float64(1.0 + q.eps):
         flag = 1.0
-    s = float(wp.min(s64, wp.float64(1.0)))
+    # the storage's rounding counted as lit in the value, not in the non-planarity test
+    s = float(wp.min(s64 + ecd * q.e_round * wa / fa, wp.float64(1.0)))
     bw = float(0.0)
     if want_z != 0:
         ze = (sat_box(data, 1, q.n, q.tile, u0, u1, v0, v1) * q.unit / wa) * q.a1
