@@ -66,8 +66,8 @@ def test_receiver_plane_bias_removes_acne_on_wide_kernels(device):
     add_camera(st, "/World/Cam", (0, -0.01, 8), (0, 0, 0), focal=14)
     scene = wsoft.load_scene(st)
     kw = dict(width=64, height=64, device=device, radius=8.0, taps=25)
-    plane = wsoft.render(scene, "pcf", receiver_plane=True, **kw)
-    flat = wsoft.render(scene, "pcf", receiver_plane=False, slope_bias=0.0, **kw)
+    plane = wsoft.render(scene, "pcf", receiver_bias="plane", **kw)
+    flat = wsoft.render(scene, "pcf", receiver_bias="centre", slope_bias=0.0, **kw)
     cov = plane["A"] > 0
     assert cov.mean() > 0.5
     assert np.all(plane.V[cov] == 1.0)  # nothing casts a shadow here

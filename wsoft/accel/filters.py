@@ -13,7 +13,12 @@ import numpy as np
 import warp as wp
 
 from wsoft.lightspace.samples import SamplePattern, to_light_coords
-from wsoft.lightspace.view import ViewGPU, depth_at, receiver_plane_depth_or, texel_center, within_distance
+from wsoft.lightspace.view import ViewGPU, depth_at, receiver_tap_depth, texel_center, within_distance
+
+# a filter's depth bias, by name (its kernels' mode is the index): the receiver's tangent plane at
+# each tap (receiver_tap_depth), the receiver moved along its normal (normal_offset), or its own
+# depth with a slope-scaled bias (receiver_bias)
+RECEIVER_BIASES = ("plane", "normal", "centre")
 
 TAP_SEED = 7  # the Poisson taps' seed (deterministic patterns)
 
@@ -51,11 +56,14 @@ def pcf_visibility(
     ntaps: int,
     bias: float,
     use_plane: int,
+    plane_slope: float,
     dmax: float,
 ) -> float:
     """Fraction of ``taps`` (offsets ``half`` x pattern around ``m0``, window units) where the
     receiver (view-space point ``pv``, normal ``nv``) is lit. With ``use_plane`` the receiver's
-    depth at a tap is its tangent plane's at the tap's texel centre. ``dmax >= 0``
+    depth at a tap is its tangent plane's at the tap's texel centre, less ``plane_slope`` times
+    the plane's depth step per texel (:func:`~wsoft.lightspace.view.receiver_tap_depth`);
+    otherwise ``pv``'s own depth. ``bias`` is subtracted either way. ``dmax >= 0``
     (``inputs:shadow:distance``): a tap's caster counts only within ``dmax`` of the receiver (the
     caster's point on the tap texel's ray, :func:`~wsoft.lightspace.view.caster_distance`)."""
     lit = float(0.0)
@@ -64,8 +72,8 @@ def pcf_visibility(
         m = wp.vec2(m0[0] + o[0] * half[0], m0[1] + o[1] * half[1])
         c = texel_center(lv, m)
         zr = pv[2]
-        if use_plane != 0 and c[2] > 0.0:
-            zr = receiver_plane_depth_or(lv, pv, nv, wp.vec2(c[0], c[1]), pv[2])
+        if use_plane != 0:
+            zr = receiver_tap_depth(lv, pv, nv, m, plane_slope)
         d = depth_at(lv, depth, m)
         if zr - bias <= d:
             lit += 1.0

@@ -381,6 +381,21 @@ def receiver_plane_range(lv: ViewGPU, xp: wp.vec2, qp: float, gx: float, gy: flo
 
 
 @wp.func
+def receiver_plane_at(lv: ViewGPU, ok: bool, xp: wp.vec2, qp: float, gx: float, gy: float, t: wp.vec2, fallback: float) -> float:
+    """The depth of a plane (:func:`receiver_plane_affine`: ``ok``, ``xp``, ``qp``, ``gx``,
+    ``gy``) at texel coordinates ``t``; ``fallback`` where it is not ok or passes behind a
+    perspective view's origin there."""
+    if not ok:
+        return fallback
+    q = qp + gx * (t[0] - xp[0]) + gy * (t[1] - xp[1])
+    if lv.persp != 0:
+        if q <= 0.0:
+            return fallback
+        return 1.0 / q
+    return q
+
+
+@wp.func
 def receiver_plane_depth_or(lv: ViewGPU, pv: wp.vec3, nv: wp.vec3, m: wp.vec2, fallback: float) -> float:
     """:func:`receiver_plane_depth`, or ``fallback`` where the ray misses the plane."""
     z = receiver_plane_depth(lv, pv, nv, m)
@@ -398,6 +413,56 @@ def light_facing(lv: ViewGPU, pv: wp.vec3, nv: wp.vec3) -> wp.vec3:
     if wp.dot(nv, to_light) < 0.0:
         return -nv
     return nv
+
+
+@wp.func
+def plane_depth_step(lv: ViewGPU, pv: wp.vec3, nv: wp.vec3, z: float) -> float:
+    """How much the depth of the receiver's tangent plane (point ``pv``, normal ``nv``, view space)
+    changes across one texel (|dz/dx| + |dz/dy|, texel coordinates) where it lies at depth ``z``,
+    at most that of a plane at tan 10 to the view's rays (edge-on planes do not run to infinity)."""
+    tx = 1.0 / lv.scale[0]
+    ty = 1.0 / lv.scale[1]
+    cap = 10.0 * wp.max(tx, ty)
+    if lv.persp != 0:
+        cap = cap * z
+        npv = wp.dot(nv, pv)
+        if wp.abs(npv) < 1.0e-12:
+            return cap
+        # q = 1/z is affine over window coordinates: dq/dm = nv.xy / (nv . pv), dz = -z^2 dq
+        return wp.min(z * z * (wp.abs(nv[0]) * tx + wp.abs(nv[1]) * ty) / wp.abs(npv), cap)
+    if wp.abs(nv[2]) < 1.0e-12:
+        return cap
+    return wp.min((wp.abs(nv[0]) * tx + wp.abs(nv[1]) * ty) / wp.abs(nv[2]), cap)
+
+
+@wp.func
+def receiver_tap_depth(lv: ViewGPU, pv: wp.vec3, nv: wp.vec3, m: wp.vec2, slope_texels: float) -> float:
+    """The depth a filter tap at window coordinates ``m`` compares the receiver (view-space point
+    ``pv``, normal ``nv``) at, the receiver-plane depth bias: its tangent plane's depth at the
+    centre of the tap's texel (where the map was sampled), nearer by ``slope_texels`` times the
+    plane's depth step per texel there (:func:`plane_depth_step`). The step covers the map's own
+    error, which grows with it: a plane seen at a grazing angle changes depth fast across a texel,
+    and a float32 rasterizer interpolating 1/z from corners clipped near the light misplaces it by
+    a small fraction of a texel. ``pv``'s own depth where the tap is off the map or its ray misses
+    the plane."""
+    c = texel_center(lv, m)
+    if c[2] == 0.0:
+        return pv[2]
+    z = receiver_plane_depth(lv, pv, nv, wp.vec2(c[0], c[1]))
+    if z <= MISS:
+        return pv[2]
+    return z - slope_texels * plane_depth_step(lv, pv, nv, z)
+
+
+@wp.func
+def normal_offset(lv: ViewGPU, pv: wp.vec3, nv: wp.vec3, texels: float) -> wp.vec3:
+    """The receiver (view-space point ``pv``, normal ``nv``) moved toward the light along its
+    light-facing normal by ``texels`` times a texel's world size at its depth (the normal-offset
+    bias)."""
+    t = wp.max(1.0 / lv.scale[0], 1.0 / lv.scale[1])
+    if lv.persp != 0:
+        t = t * wp.abs(pv[2])
+    return pv + light_facing(lv, pv, nv) * (texels * t)
 
 
 @wp.func

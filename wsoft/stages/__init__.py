@@ -21,6 +21,9 @@ The rest of the package, by idea:
   :mod:`~wsoft.stages.ssm_cases`, :mod:`~wsoft.stages.moment_cases` — stages of known failures and
   paper cases (``moment_cases.stacked_plates``: light bleeding under stacked occluders);
   :mod:`~wsoft.stages.omni_cases` — a point light at the centre of a closed box (cube-map cases);
+  :mod:`~wsoft.stages.cube_cases` — a ring of posts whose shadows cross cube-face edges, receivers
+  spread out to a chosen angle off a light's axis (``wsoft bench cube``);
+  :mod:`~wsoft.stages.grazing` — a floor seen at grazing incidence from a point-like light (acne);
   :mod:`~wsoft.stages.pipeline` — the USD pipeline stages (render settings, shadowLink).
 * :mod:`~wsoft.stages.scenes` — the generators of the bundled stages;
   ``python -m wsoft.stages.bundled`` (:mod:`~wsoft.stages.bundled`) regenerates them.

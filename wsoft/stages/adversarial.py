@@ -996,8 +996,6 @@ def judge(case: Case, technique: str, res: Result, frame_of: Callable[[str], dic
 
 # known defects the corpus shows: (case, technique) -> what the defect is and where it lies
 KNOWN: dict[tuple[str, str], str] = {
-    ("sphere", "essm"): "self-shadowing on a curved receiver's lit top (min V 0.75 at 256² and 1024² maps): ESSM fidelity",
-    ("sphere", "vssm"): "self-shadowing on a curved receiver's lit top (min V 0.83 at 256², 0.17 at 1024²): VSSM's filtered estimate",
     ("room_ceiling", "essm"): "the walls' feet lit (mean V 0.068, at 256² and 1024²): the receivers lie hidden under the ceiling, past the "
                               "effective depth range the map's pyramid gives (depth_range=bounds: 0.023; a range reaching the farthest "
                               "receiver: 0.022, but greece's MAE 0.0425 -> 0.0472)",

@@ -35,6 +35,12 @@ Optimal exponent (§7): c = R / (z_max − z_min) in depth units, i.e. R on the 
 where R is the largest exponent the storage holds: μ ln 2 for integer storage (the basis spans
 e^R = 2^μ, so e^{c z_min} is still one integer unit) and, for a float32 SAT (not in the paper),
 24 ln 2 − 2 ln N from its 24-bit mantissa (:func:`optimal_exponent`). ``c`` overrides it.
+
+Not from the paper (each a parameter): ``round_up`` counts an integer SAT's half unit of rounding
+of e^{cz} in the receiver's favour (a receiver near the nearest caster, where e^{c z_min} is one
+unit, otherwise reads up to a third of its light as occluded: a closed sphere's lit top at min V
+0.73); ``plane_slope_bias`` takes the receiver's depth that many texels of its tangent plane's
+depth step nearer, against the map's own error at grazing angles (docs/techniques.md).
 """
 
 from __future__ import annotations
@@ -53,6 +59,7 @@ from wsoft.lightspace.view import (
     ViewGPU,
     map_coords,
     normalised_depth,
+    plane_depth_step,
     receiver_plane_depth_or,
     texel_of,
     view_dir,
@@ -85,6 +92,8 @@ class ESSMParams(LightViewParams):
     bias: float = param(0.0, "depth bias on the normalised depth [0, 1]; 0: ln(1 + epsilon) / (2c), so that a lit planar kernel (e^{c bias}) stays below 1 + epsilon", range=(0.0, 0.5))
     min_radius: float = param(0.5, "smallest penumbra half-width in texels", range=(0.01, 4096.0))
     max_radius: float = param(512.0, "largest search and penumbra half-width in texels", range=(0.01, 4096.0))
+    plane_slope_bias: float = param(0.25, "texels of the receiver's tangent-plane depth step per texel taken off its depth (the map's own error at grazing angles)", range=(0.0, 16.0))
+    round_up: bool = param(True, "integer SATs: count the half unit of rounding of e^{cz} in the receiver's favour (off: the paper's reading, which self-shadows receivers near the nearest caster)")
 
     def __post_init__(self):
         check_ranges(self)
@@ -119,6 +128,7 @@ class ESSMConsts:
     c: wp.float64  # exponent on the normalised depth
     a0: wp.float64  # e^{cz} = mean(ch0) * a0 + b0
     b0: wp.float64
+    e_round: wp.float64  # the most a box mean of e^{cz} can be off by through the storage's rounding (counted as lit)
     a1: wp.float64  # z e^{cz} = mean(ch1) * a1
     zmin: float
     zrange: float
@@ -131,6 +141,7 @@ class ESSMConsts:
     aniso: int
     min_r: float
     max_r: float
+    slope: float  # texels of the receiver plane's depth step taken off its depth
 
 
 @wp.kernel
@@ -218,7 +229,8 @@ def esm_box(q: ESSMConsts, data: wp.array3d(dtype=Any), u0: float, u1: float, v0
     flag = 0.0
     if s64 > wp.float64(1.0 + q.eps):
         flag = 1.0
-    s = float(wp.min(s64, wp.float64(1.0)))
+    # the storage's rounding counted as lit in the value, not in the non-planarity test
+    s = float(wp.min(s64 + ecd * q.e_round * wa / fa, wp.float64(1.0)))
     bw = float(0.0)
     if want_z != 0:
         ze = (sat_box(data, 1, q.n, q.tile, u0, u1, v0, v1) * q.unit / wa) * q.a1
@@ -320,9 +332,10 @@ def essm_shade(
     if not mapped:
         return
     d_lin = pv[2]
-    dn = normalised_depth(d_lin, q.zmin, q.zrange) - q.bias
-    # the receiver's tangent plane in normalised depth per texel (receiver-plane depth)
     nv = view_dir(lv, gb.nrm[i])
+    # nearer by a fraction of the plane's depth step per texel: the map's own error at grazing angles
+    dn = normalised_depth(d_lin - q.slope * plane_depth_step(lv, pv, nv, d_lin), q.zmin, q.zrange) - q.bias
+    # the receiver's tangent plane in normalised depth per texel (receiver-plane depth)
     m0 = map_coords(lv, pv)
     tu = 1.0 / lv.scale[0]
     tv = 1.0 / lv.scale[1]
@@ -515,9 +528,16 @@ def consts_for(b: Basis, sat: SAT, p) -> ESSMConsts:
         q.a0 = wp.float64(1.0)
         q.b0 = wp.float64(0.0)
         q.a1 = wp.float64(1.0)
+    # integer storage rounds each texel's (e^{cz} - 1) / (e^c - 1) to 2^-mu: a box mean is off by at
+    # most half a unit, (e^c - 1) 2^-mu / 2 in e^{cz}, about 1/2 at the optimal c, where e^{c z_min}
+    # is 1: a receiver near the nearest caster (e^{cd} near 1) reads up to a third of its light
+    # as occluded. Counting it in the receiver's favour keeps it lit; farther receivers
+    # (e^{cd} >> 1) hardly change.
+    q.e_round = wp.float64(0.5 * sat.unit * math.expm1(b.c) if (b.normalised and p.round_up) else 0.0)
     q.zmin = b.zmin
     q.zrange = b.zmax - b.zmin
     q.bias = effective_bias(p, b.c)
+    q.slope = p.plane_slope_bias
     q.eps = p.epsilon
     q.nsub = p.subdivision
     q.always = int(p.subdivide == "always")

@@ -2,10 +2,22 @@
 
 Each G-buffer sample is compared against the depth map at ``taps`` points of a square kernel of
 ``radius`` texels (a disk for the Poisson pattern) around its projection; the visibility is the
-fraction of taps where the sample is not behind the stored depth. With ``receiver_plane`` the
-sample's depth at each tap is that of its tangent plane at the tap's texel centre (the
-receiver-plane depth bias), so wide kernels do not shadow sloped receivers; otherwise a
-slope-scaled bias as in ``hard`` is used.
+fraction of taps where the sample is not behind the stored depth. The depth bias
+(``receiver_bias``):
+
+* ``plane`` (the default): the sample's depth at each tap is that of its tangent plane at the
+  tap's texel centre, nearer by ``plane_slope_bias`` times the plane's depth step per texel there
+  (receiver-plane depth bias, :func:`~wsoft.lightspace.view.receiver_tap_depth`), so wide kernels
+  do not shadow sloped receivers, and grazing ones (80-88 degrees from the light, where the map's
+  own depth is off by a fraction of a texel's step) stay lit;
+* ``normal``: the sample moved toward the light along its normal by ``normal_offset`` texels
+  (times the kernel's half-width plus one), its own depth compared at every tap (normal offset);
+* ``centre``: the sample's own depth at every tap, with a slope-scaled bias as in ``hard``.
+
+``plane`` is the default by measurement (``wsoft.stages.grazing``, tests/test_grazing.py):
+``normal`` needs an offset that grows with the kernel to keep a grazing plane lit, and that
+offset lifts contact shadows off their casters; ``centre`` shadows wide kernels' sloped
+receivers.
 
 UsdLux shadow controls: the map holds only the light's casters (``collection:shadowLink``); with
 a finite ``inputs:shadow:distance`` a tap's caster counts only when its point (the tap texel's
@@ -21,9 +33,9 @@ from dataclasses import dataclass
 
 import warp as wp
 
-from wsoft.accel.filters import pcf_visibility, taps_on
+from wsoft.accel.filters import RECEIVER_BIASES, pcf_visibility, taps_on
 from wsoft.lightspace.light import LightGPU, receiver_bias
-from wsoft.lightspace.view import ViewGPU, map_coords, texel_size, view_dir
+from wsoft.lightspace.view import ViewGPU, map_coords, normal_offset, texel_size, view_dir
 from wsoft.parallel import launch_chunked
 from wsoft.raster.gbuffer import GBufferGPU, gb_receiver
 from wsoft.params import LightViewParams, check_ranges
@@ -37,12 +49,15 @@ class PCFParams(LightViewParams):
     taps: int = param(16, "depth comparisons per sample (a perfect square for the grid pattern)", range=(1, 1024))
     pattern: str = param("grid", "tap pattern: grid (square kernel) or poisson (disk kernel)")
     bias: float = param(1e-4, "constant depth bias as a fraction of the frame's extent (receivers in view and the light)", range=(0.0, 0.1))
-    receiver_plane: bool = param(True, "compare against the receiver's tangent plane at each tap (receiver-plane bias)")
-    slope_bias: float = param(1.5, "slope-scaled bias in texels, used when receiver_plane is off", range=(0.0, 64.0))
+    receiver_bias: str = param("plane", "depth bias: plane (the receiver's tangent plane at each tap), normal (normal offset) or centre (slope-scaled, as hard)")
+    plane_slope_bias: float = param(0.25, "receiver_bias=plane: texels of the tangent plane's depth step per texel taken off at each tap", range=(0.0, 16.0))
+    normal_offset: float = param(1.0, "receiver_bias=normal: the offset along the normal in texels, times the kernel's half-width plus one", range=(0.0, 64.0))
+    slope_bias: float = param(1.5, "receiver_bias=centre: slope-scaled bias in texels", range=(0.0, 64.0))
 
     def __post_init__(self):
         check_ranges(self)
         check(self.pattern in ("grid", "poisson"), f"pattern {self.pattern!r} is not grid or poisson")
+        check(self.receiver_bias in RECEIVER_BIASES, f"receiver_bias {self.receiver_bias!r} is not one of {', '.join(RECEIVER_BIASES)}")
         check(self.pattern != "grid" or math.isqrt(self.taps) ** 2 == self.taps, f"the grid pattern needs a square tap count, not {self.taps}")
 
 
@@ -58,7 +73,9 @@ def shade_pcf(
     disk: int,
     radius: float,
     bias: float,
-    use_plane: int,
+    mode: int,
+    plane_slope: float,
+    offset_texels: float,
     slope_texels: float,
     dmax: float,
     # outputs
@@ -71,11 +88,14 @@ def shade_pcf(
         return
     p = gb.pos[i]
     pv = wp.vec3(r[0], r[1], r[2])
+    nv = view_dir(lv, gb.nrm[i])
     b = bias
-    if use_plane == 0:
+    if mode == 1:  # normal offset
+        pv = normal_offset(lv, pv, nv, offset_texels * (radius + 1.0))
+    elif mode == 2:  # the centre's depth, slope-scaled
         b = receiver_bias(lv, L, p, gb.nrm[i], pv[2], bias, slope_texels)
     half = texel_size(lv) * radius
-    vis[i] = pcf_visibility(lv, depth, pv, view_dir(lv, gb.nrm[i]), map_coords(lv, pv), half, disk, taps, ntaps, b, use_plane, dmax)
+    vis[i] = pcf_visibility(lv, depth, pv, nv, map_coords(lv, pv), half, disk, taps, ntaps, b, int(mode == 0), plane_slope, dmax)
 
 
 class PCF(Technique):
@@ -115,7 +135,8 @@ class PCF(Technique):
             launch_chunked(
                 shade_pcf, gb.count,
                 inputs=[dm.view.gpu(), L, dm.depth, gb.gpu(), taps.array, taps.count, int(p.pattern == "poisson"),
-                        p.radius, bias, int(p.receiver_plane), p.slope_bias, light.shadow_distance],
+                        p.radius, bias, RECEIVER_BIASES.index(p.receiver_bias), p.plane_slope_bias, p.normal_offset, p.slope_bias,
+                        light.shadow_distance],
                 outputs=[vis], device=ctx.device, min_chunk=256,
             )
             return {out: ctx.visibility(vis)}

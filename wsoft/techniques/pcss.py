@@ -3,7 +3,10 @@
 1. Blocker search: ``blocker_samples`` taps over the region in which any caster could cover
    part of the light, from the nearest caster depth in the map to the receiver (a rectangle for
    a rect light, a disk for disk, sphere and distant lights); taps nearer than the receiver's
-   plane are blockers, and their depths are averaged.
+   plane (:func:`~wsoft.lightspace.view.receiver_tap_depth`: the plane's depth at the tap's
+   texel centre, nearer by ``plane_slope_bias`` times its depth step per texel, so a receiver at
+   80-88 degrees from the light finds no blocker in itself) are blockers, and their depths are
+   averaged.
 2. Penumbra: the region over which a blocker at the average depth covers the light — for a
    local light of half-extent w, w (1/z_blocker - 1/z_receiver) in the map's tangent units; for
    a distant light of cone half-angle a, (z_receiver - z_blocker) tan a.
@@ -38,7 +41,7 @@ from wsoft.lightspace.view import (
     ViewGPU,
     depth_at,
     map_coords,
-    receiver_plane_depth_or,
+    receiver_tap_depth,
     texel_center,
     texel_size,
     view_dir,
@@ -57,6 +60,7 @@ class PCSSParams(LightViewParams):
     filter_samples: int = param(36, "taps of the percentage-closer filter", range=(1, 4096))
     pattern: str = param("grid", "tap pattern: grid (perfect-square counts) or poisson")
     bias: float = param(1e-4, "constant depth bias as a fraction of the frame's extent (receivers in view and the light)", range=(0.0, 0.1))
+    plane_slope_bias: float = param(0.25, "texels of the receiver's tangent-plane depth step per texel taken off at each tap (search and filter)", range=(0.0, 16.0))
     min_radius: float = param(1.0, "smallest filter half-width in texels", range=(0.0, 512.0))
     max_radius: float = param(256.0, "largest blocker-search and filter half-width in texels", range=(0.0, 4096.0))
 
@@ -88,6 +92,7 @@ def shade_pcss(
     nf: int,
     z_caster_min: float,
     bias: float,
+    plane_slope: float,
     min_radius: float,
     max_radius: float,
     dmax: float,
@@ -113,9 +118,7 @@ def shade_pcss(
         m = wp.vec2(m0[0] + o[0] * search[0], m0[1] + o[1] * search[1])
         d = depth_at(lv, depth, m)
         c = texel_center(lv, m)
-        zr = pv[2]
-        if c[2] > 0.0:
-            zr = receiver_plane_depth_or(lv, pv, nv, wp.vec2(c[0], c[1]), pv[2])
+        zr = receiver_tap_depth(lv, pv, nv, m, plane_slope)
         if d < zr - bias:
             if dmax < 0.0 or within_distance(lv, pv, wp.vec2(c[0], c[1]), d, dmax):
                 total += d
@@ -127,7 +130,7 @@ def shade_pcss(
     blockers[i] = z_avg
     # 2. penumbra from the average blocker depth; 3. PCF over it, shaped like the light
     pen = clamp_half(lv, spread(lv, k, z_avg, pv[2]), min_radius, max_radius)
-    vis[i] = pcf_visibility(lv, depth, pv, nv, m0, pen, k.disk, ftaps, nf, bias, 1, dmax)
+    vis[i] = pcf_visibility(lv, depth, pv, nv, m0, pen, k.disk, ftaps, nf, bias, 1, plane_slope, dmax)
 
 
 class PCSS(Technique):
@@ -168,7 +171,7 @@ class PCSS(Technique):
             launch_chunked(
                 shade_pcss, gb.count,
                 inputs=[dm.view.gpu(), light_kernel(light, dm.view), dm.depth, gb.gpu(), bt.array, bt.count, ft.array, ft.count,
-                        z_min, bias, p.min_radius, p.max_radius, light.shadow_distance],
+                        z_min, bias, p.plane_slope_bias, p.min_radius, p.max_radius, light.shadow_distance],
                 outputs=[vis, blk], device=ctx.device, min_chunk=256,
             )
             ctx.counters(light)["samples_with_blockers"] = int(np.count_nonzero(blk.numpy()))
