@@ -75,11 +75,13 @@ def test_sphere_lit_top_stays_lit(tmp_path, device, technique, paper, size):
 
 def test_plane_without_its_slope_term_stripes(device):
     """The interesting case happens: the tangent plane alone (no slope term) darkens the floor
-    near 88 degrees, where the map's depth is off by a fraction of a texel's step."""
+    near 88 degrees, where the map's depth is off by a fraction of a texel's step (in one frustum,
+    cube=never, whose floor triangles are clipped near the light; a cube map's faces see the floor
+    with no such stripes at these angles)."""
     scene = wsoft.load_scene(grazing_floor())
-    f = wsoft.render(scene, "pcf", device=device, plane_slope_bias=0.0, **KW)
+    f = wsoft.render(scene, "pcf", device=device, plane_slope_bias=0.0, cube="never", **KW)
     assert _band(f, 86.0, 88.0)[1] > 0.02
-    centre = wsoft.render(scene, "pcf", device=device, receiver_bias="centre", **KW)
+    centre = wsoft.render(scene, "pcf", device=device, receiver_bias="centre", cube="never", **KW)
     assert _band(centre, 88.0, 90.0)[1] > 0.1  # the centre's depth with a slope-scaled bias: worse still
 
 

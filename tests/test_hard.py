@@ -54,7 +54,7 @@ def test_conservative_parameter_runs_conservative_pass(device):
 
 def test_unknown_parameter_lists_known():
     scene = wsoft.load_scene(scene_path("box_plane.usda"))
-    with pytest.raises(wsoft.ParameterError, match="shadow_map_size, bias, slope_bias, conservative"):
+    with pytest.raises(wsoft.ParameterError, match="shadow_map_size, bias, slope_bias, receiver_bias, plane_slope_bias, conservative"):
         wsoft.render(scene, "hard", width=8, height=8, device="cpu", sample=4)
     with pytest.raises(wsoft.ParameterError, match="techniques: " + ", ".join(sorted(TECHNIQUES))):
         wsoft.render(scene, "nope", width=8, height=8, device="cpu")

@@ -2,7 +2,13 @@
 
 A depth map is rasterized from the light's centre (alpha-tested when the scene has
 cutouts); each G-buffer sample is lit when its light-space depth, less a bias, is not
-behind the stored depth of its texel. The result is binary and matches the reference
+behind the stored depth of its texel. The bias (``receiver_bias``): ``plane`` (the default)
+compares the receiver's tangent plane at the texel's centre, where the map was sampled, nearer by
+``plane_slope_bias`` times the plane's depth step per texel
+(:func:`~wsoft.lightspace.view.receiver_tap_depth`, as ``pcf``'s taps), which holds at grazing
+incidence (a floor 88-90 degrees off a lamp's rays); ``centre`` compares the receiver's own depth
+less ``slope_bias`` texels times the tangent of its incidence, capped at 10 (beyond 84 degrees
+such a floor stripes). The result is binary and matches the reference
 with one sample at the light's centre.
 
 UsdLux shadow controls: the map holds only the light's casters (``collection:shadowLink``); with
@@ -24,7 +30,7 @@ from dataclasses import dataclass
 import warp as wp
 
 from wsoft.lightspace.light import LightGPU, receiver_bias
-from wsoft.lightspace.view import ViewGPU, within_distance
+from wsoft.lightspace.view import ViewGPU, light_facing, receiver_tap_depth, view_dir, within_distance
 from wsoft.parallel import launch_chunked
 from wsoft.raster.gbuffer import GBufferGPU, gb_mapped_receiver
 from wsoft.params import LightViewParams, check_ranges
@@ -35,7 +41,11 @@ from wsoft.techniques.base import PassSpec, Technique, Tolerance, param
 class HardParams(LightViewParams):
     shadow_map_size: int = param(1024, "texels per side of the light depth map", range=(256, 8192))
     bias: float = param(1e-4, "constant depth bias as a fraction of the frame's extent (receivers in view and the light)", range=(0.0, 0.1))
-    slope_bias: float = param(1.5, "slope-scaled depth bias in texels (times tan of the incidence angle, capped at 10)", range=(0.0, 64.0))
+    slope_bias: float = param(1.5, "receiver_bias=centre: slope-scaled depth bias in texels (times tan of the incidence angle, capped at 10)",
+                              range=(0.0, 64.0))
+    receiver_bias: str = param("plane", "depth bias: plane (the receiver's tangent plane at the texel's centre) or centre (its own depth, "
+                                        "slope-scaled)", choices=("plane", "centre"))
+    plane_slope_bias: float = param(0.25, "receiver_bias=plane: texels of the tangent plane's depth step per texel taken off", range=(0.0, 16.0))
     conservative: bool = param(False, "conservative rasterization: every texel a triangle touches")
 
     def __post_init__(self):
@@ -51,6 +61,8 @@ def shade_hard(
     gb: GBufferGPU,
     bias: float,
     slope_texels: float,
+    use_plane: int,
+    plane_slope: float,
     dmax: float,
     # outputs
     vis: wp.array[float],
@@ -62,9 +74,11 @@ def shade_hard(
         return
     x = int(wp.floor(t[0]))
     y = int(wp.floor(t[1]))
-    b = receiver_bias(lv, L, gb.pos[i], gb.nrm[i], v[2], bias, slope_texels)
+    zr = v[2] - receiver_bias(lv, L, gb.pos[i], gb.nrm[i], v[2], bias, slope_texels)
+    if use_plane != 0:
+        zr = receiver_tap_depth(lv, v, light_facing(lv, v, view_dir(lv, gb.nrm[i])), m, plane_slope) - bias
     d = depth[y, x]
-    blocked = v[2] - b > d
+    blocked = zr > d
     if blocked and dmax >= 0.0:  # inputs:shadow:distance: a caster farther from the receiver does not count
         blocked = within_distance(lv, v, m, d, dmax)
     vis[i] = wp.where(blocked, 0.0, 1.0)
@@ -99,7 +113,8 @@ class Hard(Technique):
             gb, dm = res[gbuf], res[depth]
             bias = p.bias * dm.view.extent
             vis = wp.empty(gb.count, dtype=float, device=ctx.device)
-            launch_chunked(shade_hard, gb.count, inputs=[dm.view.gpu(), L, dm.depth, gb.gpu(), bias, p.slope_bias, light.shadow_distance],
+            launch_chunked(shade_hard, gb.count, inputs=[dm.view.gpu(), L, dm.depth, gb.gpu(), bias, p.slope_bias,
+                                                          int(p.receiver_bias == "plane"), p.plane_slope_bias, light.shadow_distance],
                            outputs=[vis], device=ctx.device)
             return {out: ctx.visibility(vis)}
 
