@@ -33,6 +33,7 @@ def frames():
     """(scene name, technique name, parameters) of every golden frame, in a fixed order."""
     from wsoft import usd_scenes
     from wsoft.pipeline import load_stage
+    from wsoft.pipeline.build import refusal
     from wsoft.pipeline.loading import too_big_to_flatten
     from wsoft.techniques import TECHNIQUES, bundled_names, create
 
@@ -41,7 +42,7 @@ def frames():
         for name in bundled_names():
             params = golden_params(TECHNIQUES[name])
             tech = create(name, params)
-            if not any(tech.supports(scene, light) is None for light in scene.lights):
+            if not any(refusal((name, params), scene, light, width=WIDTH, height=HEIGHT) is None for light in scene.lights):
                 continue
             if scene.instanced and tech.instancing_why() and too_big_to_flatten(scene):
                 continue

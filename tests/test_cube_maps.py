@@ -196,7 +196,7 @@ def test_receiver_at_the_lights_centre_warns_and_stays_finite(tmp_path):
 
 
 def test_decision_threshold_and_modes(tmp_path):
-    """Receivers within 60 degrees of one axis: one frustum; all around: a cube map of the faces that hold
+    """Receivers within 75 degrees of one axis: one frustum; all around: a cube map of the faces that hold
     receivers; cube=never keeps one frustum (and its warning), cube=always draws a cube anyway."""
     from wsoft.scene.types import LIGHT_SPHERE, Light
 

@@ -83,7 +83,7 @@ class LightViewParams:
                                 "texels up to 19 % coarser) or sequence (the stable view fitted once to the receivers of every frame "
                                 "of a sequence)", choices=VIEWS)
     cube: str = param("auto", "cube map of a sphere, point or cylinder light (wsoft.lightspace.cube): auto (where its receivers lie more "
-                              "than 60 degrees off one axis), always, or never (one frustum; receivers beyond it left lit, with a warning)",
+                              "than 75 degrees off one axis), always, or never (one frustum; receivers beyond it left lit, with a warning)",
                       choices=CUBE_MODES)
 
 
