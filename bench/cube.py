@@ -319,7 +319,9 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
     if spreads:
         L += ["## Where one frustum stops sufficing", "",
               "A sphere light over a field of posts, receivers seen out to θ off its axis (`wsoft.stages.cube_cases.spread_stage`): "
-              "penumbra MAE and frame ms with one frustum (cube=never) and with a cube map (cube=always).", ""]
+              "penumbra MAE and frame ms with one frustum (cube=never) and with a cube map (cube=always). `cube=auto` draws a cube map "
+              f"beyond {CUBE_THRESHOLD_DEG:g}° (the grey line): short of the ±80° cap of one frustum's window, past the spread where "
+              "one frustum stops being as accurate as the cube for every technique here.", ""]
         head = " | ".join(f"{t} frustum | {t} cube" for t in SPREAD_TECHS)
         L += [f"| θ | {head} |", "|---:|" + "---:|" * (2 * len(SPREAD_TECHS))]
         for r in sorted(spreads, key=lambda r: r["angle"]):
