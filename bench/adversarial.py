@@ -141,7 +141,9 @@ def run_case(case: dict, ctx: dict) -> dict:
             rows.append({"case": c.name, "technique": t, "expect": c.expect, "rc": res.rc, "problems": [here(x) for x in problems],
                          "error": here(res.error), "warnings": [here(w) for w in warned],
                          "mean_V": float(v.mean()) if v.size else None, "silent_hazard": c.silent_hazard, "note": c.note,
-                         "known": KNOWN.get((c.name, t), "")})
+                         "known": KNOWN.get((c.name, t), ""),
+                         "cube_faces": any("cube_faces" in v for v in ((res.stats or {}).get("counters", {}).get("techniques", {})
+                                                                       .get(t, {}).values()))})
     return {"results": rows}
 
 
@@ -191,14 +193,14 @@ def report(rows: list[dict], md, ctx: dict) -> None:
     lamp = [by.get(("lamp_sphere", t)) for t in techs]
     lines += ["", "## A light inside a closed mesh", "",
               "A rect light inside a closed box emits through one hemisphere, which a single frustum holds: every technique "
-              "gives full shadow (`lamp_rect`). A sphere light inside the box shines all around: a single-frustum map opened "
-              "at most 80° off its axis cannot hold the ground beyond, so shadow-map techniques leave those receivers lit "
-              "and say so in a warning naming the light (`lamp_sphere`); they would need a cube map, which wsoft does not "
-              "build. The reference traces rays and is right everywhere.", "",
-              "| technique | lamp_rect mean V | lamp_sphere mean V | lamp_sphere warning |", "|---|---:|---:|---|"]
+              "gives full shadow (`lamp_rect`). A sphere light inside the box shines all around: no single frustum holds the "
+              "ground beyond, so the shadow-map techniques draw a cube map (`wsoft.lightspace.cube`: six faces with guard "
+              "bands) and every receiver lies in one of its faces (`lamp_sphere`); `izb`, whose grid is one frustum, refuses "
+              "the light (`-`). The reference traces rays and is right everywhere.", "",
+              "| technique | lamp_rect mean V | lamp_sphere mean V | lamp_sphere views |", "|---|---:|---:|---|"]
     for t, r in zip(techs, lamp):
         rr = by.get(("lamp_rect", t))
-        w = "yes" if r and any("cube map" in x for x in r["warnings"]) else "no"
+        views = "-" if r is None else ("cube map" if r.get("cube_faces") else "rays or its own structures")
         lines.append(f"| {t} | {rr['mean_V'] if rr and rr['mean_V'] is not None else float('nan'):.3f} | "
-                     f"{r['mean_V'] if r and r['mean_V'] is not None else float('nan'):.3f} | {w} |")
+                     f"{r['mean_V'] if r and r['mean_V'] is not None else float('nan'):.3f} | {views} |")
     md.write_text("\n".join(lines) + "\n")
