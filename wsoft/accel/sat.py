@@ -246,14 +246,18 @@ def sat_tile_box(data: wp.array3d(dtype=Any), k: int, y0: int, x0: int, t: int,
 
 
 @wp.func
+def clip_to_map(n: int, u0: float, u1: float, v0: float, v1: float) -> wp.vec4:
+    """The texel-space box [u0, u1] x [v0, v1] clipped to an ``n`` x ``n`` map: (u0, u1, v0, v1)."""
+    return wp.vec4(wp.clamp(u0, 0.0, float(n)), wp.clamp(u1, 0.0, float(n)), wp.clamp(v0, 0.0, float(n)), wp.clamp(v1, 0.0, float(n)))
+
+
+@wp.func
 def sat_box(data: wp.array3d(dtype=Any), k: int, n: int, t: int, u0: float, u1: float, v0: float, v1: float) -> wp.float64:
     """Integral of channel ``k`` over the texel-space box [u0, u1] x [v0, v1] (texel i covers
     [i, i+1)), clipped to the map, in storage units (integer units for uint32 storage).
     ``n``: map size; ``t``: tile size (``n`` for a full SAT)."""
-    a0 = wp.clamp(u0, 0.0, float(n))
-    a1 = wp.clamp(u1, 0.0, float(n))
-    b0 = wp.clamp(v0, 0.0, float(n))
-    b1 = wp.clamp(v1, 0.0, float(n))
+    c = clip_to_map(n, u0, u1, v0, v1)
+    a0, a1, b0, b1 = c[0], c[1], c[2], c[3]
     s = wp.float64(0.0)
     if a1 <= a0 or b1 <= b0:
         return s
@@ -281,10 +285,8 @@ def direct_box(basis: wp.array3d[float], k: int, n: int, u0: float, u1: float, v
     :func:`sat_box` gives, without a float32 table's rounding (four corner sums of up to n^2 values,
     each off by about 2^-24 of itself: on a box of a few texels that error is larger than a depth
     bias). For boxes of at most :data:`DIRECT_TEXELS` per side (its cost grows with the area)."""
-    a0 = wp.clamp(u0, 0.0, float(n))
-    a1 = wp.clamp(u1, 0.0, float(n))
-    b0 = wp.clamp(v0, 0.0, float(n))
-    b1 = wp.clamp(v1, 0.0, float(n))
+    c = clip_to_map(n, u0, u1, v0, v1)
+    a0, a1, b0, b1 = c[0], c[1], c[2], c[3]
     s = wp.float64(0.0)
     if a1 <= a0 or b1 <= b0:
         return s
