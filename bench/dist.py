@@ -12,7 +12,8 @@ resumes from ``<sweep>.jsonl`` like an in-process sweep (nothing lost, nothing w
   for a CUDA device), held by the workers that may time (``dask worker --resources MACHINE=1``; in
   the embedded cluster the first worker alone, unless ``--resources`` gives every worker its own).
   Error-only work (the references a sweep module lists with ``references(case)``) needs none and
-  runs on every worker in parallel. Each row records its worker's host, device, threads and load
+  runs on every worker in parallel, all of it before the first timed job, so that no timed job
+  shares its machine's cores with error-only work. Each row records its worker's host, device, threads and load
   (``machine``, ``worker``); reports group times by host and never put two hosts in one ratio.
 * A job whose worker dies is run again on another (Dask reschedules it); one that killed two
   workers is recorded as failed with its error (``distributed.scheduler.allowed-failures`` = 1), as
@@ -302,7 +303,8 @@ def _drive(sweep, module, todo, ctx, jsonl, *, cluster, scheduler, scenes, cache
             if not ws:
                 how = f"dask worker {scheduler} --resources {r}=1" if scheduler else f"wsoft bench ... --resources {r}=1"
                 raise ParameterError(f"no Dask worker declares the resource {r} that timed jobs need (give one it: {how})")
-        # error-only jobs: the references, each once, before the timed jobs
+        # error-only jobs: the references, each once, all of them before the first timed job (on a shared host
+        # they would take cores from it)
         refs: dict[str, object] = {}
         ref_futures = []
         references = getattr(mod, "references", None)
@@ -331,6 +333,8 @@ def _drive(sweep, module, todo, ctx, jsonl, *, cluster, scheduler, scenes, cache
         running = as_completed(ref_futures)
 
         def submit_more() -> None:
+            if any(not rf.done() for rf in ref_futures):  # a timed job never shares a machine with error-only work
+                return
             workers = client.scheduler_info(n_workers=-1)["workers"].values()
             for r, queue in pending.items():
                 slots = max(1, int(sum(w.get("resources", {}).get(r, 0) for w in workers)))
@@ -350,6 +354,7 @@ def _drive(sweep, module, todo, ctx, jsonl, *, cluster, scheduler, scenes, cache
             if f.key not in futures:  # a reference: the driver keeps it in its own cache too
                 if f.status == "finished":
                     _store_reference(f.result())
+                submit_more()
                 continue
             _, case, dep_keys, _ = futures.pop(f.key)
             bar.update(1)
