@@ -11,6 +11,10 @@ Three kinds of row, each against a ray-traced reference on the same pixels:
 * ``seam``: the ring of posts of :func:`~wsoft.stages.cube_cases.ring_stage`, whose penumbrae cross
   face edges, with each technique's guard band and with none
   (:data:`~wsoft.lightspace.cube.GUARD_OVERRIDE` = 0): error near edges against error elsewhere.
+* ``paraboloid``: the frames of ``frame`` again, for the techniques that take ``omni`` (``hard``,
+  ``pcf``): the cube map against a dual-paraboloid map (:mod:`wsoft.lightspace.paraboloid`) at the
+  same size per side and at about the cube's texel count: error, the error within a kernel's width
+  of the paraboloids' equator beside elsewhere, the depth passes' and the frame's time.
 * ``spread``: a sphere light over a field of posts seen out to a half-angle θ off its axis
   (:func:`~wsoft.stages.cube_cases.spread_stage`), one frustum against a cube map: where the cube
   starts to win, which sets :data:`~wsoft.lightspace.cube.CUBE_THRESHOLD_DEG`.
@@ -60,6 +64,7 @@ def cases(quick: bool, devices: list[str]) -> list[dict]:
             for l in load(name).lights:
                 if l.kind in CUBE_KINDS:
                     out.append({"kind": "frame", "scene": name, "file": name, "light": l.path, "device": dev, **common})
+                    out.append({"kind": "paraboloid", "scene": name, "file": name, "light": l.path, "device": dev, **common})
         out.append({"kind": "seam", "scene": "cube_ring", "device": dev, **common, "width": 3 * h // 2, "height": 3 * h // 2})
         for a in QUICK_SPREAD if quick else SPREAD_ANGLES:
             out.append({"kind": "spread", "scene": f"cube_spread_{a:g}", "angle": a, "device": dev, **common, "width": h, "height": h})
@@ -123,7 +128,7 @@ def _depth_ms(stats: dict, light_label: str) -> float:
 
 
 def run_case(case: dict, ctx: dict) -> dict:
-    return {"frame": _frame, "seam": _seam_row, "spread": _spread}[case["kind"]](case)
+    return {"frame": _frame, "seam": _seam_row, "spread": _spread, "paraboloid": _paraboloid}[case["kind"]](case)
 
 
 def _entries(case: dict, file: str, light_path: str, techs: list[tuple[str, dict]], extra=None):
@@ -167,6 +172,69 @@ def _frame(case: dict) -> dict:
     return {"scene": case["scene"], "light": L.path, "light_kind": L.kind_name, "device": case["device"], "width": case["width"],
             "height": case["height"], "ground_truth_samples": case["ground_truth"], "map": case["map"], "entries": entries,
             "penumbra_pixels": int(pen.sum()), "fit_cube": {k: v for k, v in decision.items() if k.startswith("fit_cube")}}
+
+
+PARABOLOID_TECHS = ("hard", "pcf")
+
+
+def equator_texels(light, pos: np.ndarray, size: int, radius: float) -> np.ndarray:
+    """Per pixel, how many texels of a dual-paraboloid map of ``size`` (window half-width
+    ``radius``) its direction from the light's centre lies from the equator (inf on background)."""
+    from wsoft.lightspace.cube import cube_frame
+    from wsoft.lightspace.view import to_frame
+
+    q = to_frame(pos.reshape(-1, 3), np.asarray(light.position, np.float64), cube_frame(light))
+    n = np.linalg.norm(q, axis=1)
+    q = q / np.maximum(n, 1e-300)[:, None]
+    r = np.hypot(q[:, 0], q[:, 1]) / (1.0 + np.abs(q[:, 2]))
+    out = np.abs(1.0 - r) * size / (2.0 * radius)
+    out[n == 0.0] = np.inf
+    return out.reshape(pos.shape[:-1])
+
+
+def paraboloid_sizes(size: int) -> tuple[int, int]:
+    """The dual-paraboloid maps measured beside a cube map of ``size``: the same size per side, and
+    about six faces' texel count in two hemispheres (``size √3``, on a multiple of 64)."""
+    return size, int(64 * round(size * math.sqrt(3.0) / 64))
+
+
+def _paraboloid(case: dict) -> dict:
+    from wsoft.lightspace.paraboloid import guard_texels_for, window_radius
+    from wsoft.techniques import create
+
+    scene = load(case["file"])
+    L = scene.find_light(case["light"])
+    label = scene.light_label(L)
+    techs = []
+    for t in PARABOLOID_TECHS:
+        techs.append((t, {"shadow_map_size": case["map"], "cube": "auto", "omni": "cube"}))
+        for size in paraboloid_sizes(case["map"]):
+            techs.append((t, {"shadow_map_size": size, "cube": "auto", "omni": "paraboloid"}))
+    ref, fs = _entries(case, case["file"], L.path, techs)
+    cov = ref["A"] > 0
+    pen = cov & (ref["V"] > 0.02) & (ref["V"] < 0.98)
+    P = _positions(fs)
+    entries = []
+    for (t, params), (lab, fr) in zip(techs, fs.items()):
+        st = fr.stats
+        c = st["counters"]["techniques"].get(lab, {}).get(label, {})
+        dp = params["omni"] == "paraboloid" and bool(c.get("paraboloid_hemispheres"))
+        seam = None
+        if dp:
+            g = guard_texels_for(create(t, params).params.radius if t == "pcf" else 0.0)
+            near = equator_texels(L, P, params["shadow_map_size"], window_radius(g, params["shadow_map_size"])) <= max(EDGE_TEXELS, g)
+            seam = _seam(fr.V, ref["V"], near, pen)
+        t_ms = st["timings_ms"]
+        depth_ms = (sum(v for k, v in t_ms.items() if k.startswith(f"paraboloid[{label}]")) if dp else _depth_ms(st, label))
+        entries.append({"technique": t, "params": params, "frame_ms": t_ms["total"], "frame_ms_runs": st["timings_ms_runs"],
+                        "error": st["error"], "outside": outside_fraction(st["warnings"]),
+                        "views": (f"dual-paraboloid, {len(c['paraboloid_hemispheres'])} hemispheres" if dp
+                                  else f"cube map, {len(c['cube_faces'])} faces" if c.get("cube_faces") else "one frustum"),
+                        "texels": c.get("paraboloid_texels") or c.get("cube_texels") or params["shadow_map_size"] ** 2,
+                        "depth_ms": float(depth_ms), "seam": seam, "warnings": [w for w in st["warnings"] if w not in scene.warnings]})
+    return {"scene": case["scene"], "light": L.path, "light_kind": L.kind_name, "device": case["device"], "width": case["width"],
+            "height": case["height"], "ground_truth_samples": case["ground_truth"], "map": case["map"], "entries": entries,
+            "penumbra_pixels": int(pen.sum())}
 
 
 def _seam_row(case: dict) -> dict:
@@ -287,19 +355,24 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
                      f"{100 * e['outside']:.1f}% | {len(e['cube_faces']) or 1} | {e['cube_texels'] or r['map'] ** 2:,} | {e['depth_ms']:.1f} | "
                      f"{e['frame_ms']:.1f} | {seam} |")
         L.append("")
-    dp = [(r, e) for r in frames for e in r["entries"] if e["cube_faces"] and len(e["cube_faces"]) > 2]
-    if dp:
-        L += ["## Dual-paraboloid maps: the most they could save", "",
-              "A dual-paraboloid map draws two views where the cube draws up to six. The passes run once per face (the depth maps and "
-              "each technique's per-face passes) bound what it could save: at most their time times (1 - 2 / faces), if a paraboloid "
-              "view cost no more than a cube face (it costs more: a paraboloid projection bends straight edges, so triangles must be "
-              "tessellated before they are rasterized, and its texels vary 4x in solid angle across a hemisphere, as a 60° frustum's do).", "",
-              "| frame | technique | faces | per-face passes ms | frame ms | at most saved |", "|---|---|---:|---:|---:|---:|"]
-        for r, e in dp:
-            n = len(e["cube_faces"])
-            bound = e["face_ms"] * (1.0 - 2.0 / n)
-            L.append(f"| {r['scene']}/{r['light'].split('/')[-1]} | {e['technique']} | {n} | {e['face_ms']:.1f} | {e['frame_ms']:.1f} | "
-                     f"{bound:.1f} ms ({100 * bound / e['frame_ms']:.0f}%) |")
+    paras = [r for r in rows if r["case"]["kind"] == "paraboloid"]
+    if paras:
+        L += ["## Dual-paraboloid maps against the cube", "",
+              "`omni=paraboloid` (`hard`, `pcf`; `wsoft.lightspace.paraboloid`): where the cube map is called for, two hemispherical "
+              "parabolic maps of distances from the light's centre, drawn by one BVH ray per texel (a paraboloid bends triangles' edges, "
+              "which a rasterizer draws straight), with a guard band past the equator of the kernel's width. Measured at the cube's size "
+              "per side and at about the cube's texel count (size √3). Equator: penumbra MAE on pixels within the kernel's width (at "
+              f"least {EDGE_TEXELS:g} texels) of the paraboloids' equator, and elsewhere. Depth ms: the cube's depth passes or the "
+              "paraboloid's traced map.", "",
+              "| frame | technique | views | size | texels | penumbra MAE | MAE | equator: MAE near / elsewhere | depth ms | frame ms |",
+              "|---|---|---|---:|---:|---:|---:|---|---:|---:|"]
+        for r in paras:
+            for e in r["entries"]:
+                s_ = e["seam"]
+                eq = "" if not s_ else f"{s_['mae_edge']:.4f} / {s_['mae_elsewhere']:.4f} ({s_['edge_pixels']} px)"
+                L.append(f"| {r['scene']}/{r['light'].split('/')[-1]} | {e['technique']} | {e['views']} | {e['params']['shadow_map_size']} | "
+                         f"{e['texels']:,} | {e['error']['mae_penumbra']:.4f} | {e['error']['mae']:.4f} | {eq} | {e['depth_ms']:.1f} | "
+                         f"{e['frame_ms']:.1f} |")
         L.append("")
     if seams:
         r = seams[0]

@@ -230,3 +230,77 @@ def test_plan_says_which_lights_get_a_cube_map(tmp_path):
     assert p["light_views"]["/World/Light"].startswith("cube map, ")
     assert any("cube_select" in x for x in p["techniques"]["hard"])
     assert "cube map" in p["not_applicable"]["izb"][0]["reason"]
+
+
+# -- dual-paraboloid maps (omni=paraboloid) -----------------------------------------------------------
+
+
+@pytest.mark.parametrize("corner", [(1, 1, 1), (-1, -1, -1)])
+def test_dual_paraboloid_hard_equals_the_exact_answer_on_every_wall(tmp_path, corner):
+    """``hard`` with ``omni=paraboloid`` in the closed box: the reference's one-sample answer on all six
+    walls (the two cameras), from the hemispheres that hold receivers, no warning."""
+    from wsoft.lightspace.paraboloid import window_radius
+
+    c = np.array(corner, float)
+    path = _closed_box(tmp_path, "box", tuple(-0.3 * c), tuple(1.9 * c))
+    hard = wsoft.render(path, "hard", width=64, height=64, shadow_map_size=512, cube="always", omni="paraboloid")
+    ref = wsoft.render(path, "reference", width=64, height=64, samples=1, jitter=False)
+    cov = hard["A"] > 0
+    assert 0.05 < ref.V[cov].mean() < 0.98
+    assert _disagree(hard.V, ref.V, cov) < 0.01
+    c_ = hard.stats["counters"]["techniques"]["hard"]["Light"]
+    assert "cube_faces" not in c_ and c_["paraboloid_texels"] == len(c_["paraboloid_hemispheres"]) * 512 * 512
+    p = next(v for k, v in hard.stats["counters"]["passes"].items() if k.startswith("paraboloid["))
+    assert sum(p["receivers_per_hemisphere"].values()) == int(cov.sum())
+    assert p["window_radius"] == pytest.approx(window_radius(2.0, 512))
+    assert not hard.stats["warnings"]
+
+
+def test_dual_paraboloid_pcf_across_the_equator(tmp_path):
+    """``pcf`` on a dual-paraboloid map of a sphere light in the closed box, the paraboloids' axis along
+    z and then turned 60 degrees: close to the reference, and the two answers differ on pixels near
+    either equator no more than elsewhere (the guard band past the equator)."""
+    from pxr import Gf, UsdGeom
+
+    def turned(st):
+        UsdGeom.XformCommonAPI(st.GetPrimAtPath("/World/Light")).SetRotate(Gf.Vec3f(60.0, 0.0, 0.0))
+
+    kw = dict(width=64, height=64, shadow_map_size=256, cube="always", omni="paraboloid")
+    a = _closed_box(tmp_path, "eq0", (-0.3, -0.3, -0.3), (1.9, 1.9, 1.9), light="sphere")
+    b = _closed_box(tmp_path, "eq60", (-0.3, -0.3, -0.3), (1.9, 1.9, 1.9), light="sphere", extra=turned)
+    fa, fb = wsoft.render(a, "pcf", **kw), wsoft.render(b, "pcf", **kw)
+    ref = wsoft.render(a, "reference", width=64, height=64, samples=64)
+    cov = fa["A"] > 0
+    assert np.isfinite(fa.V).all() and float(np.abs(fa.V[cov] - ref.V[cov]).mean()) < 0.08
+    P = np.stack([fa["P.X"], fa["P.Y"], fa["P.Z"]], -1)
+    t = np.radians(60.0)
+    axis_b = np.array([0.0, -np.sin(t), np.cos(t)])  # the turned light's z axis
+    n = np.linalg.norm(P, axis=-1)
+
+    def near_equator(axis):
+        return np.abs(P @ axis) < 0.08 * n
+
+    near = cov & (near_equator(np.array([0.0, 0.0, 1.0])) | near_equator(axis_b))
+    assert near.sum() > 50 and (cov & ~near).sum() > 50
+    d = np.abs(fa.V - fb.V)
+    assert float(d[near].mean()) <= 1.5 * float(d[cov & ~near].mean()) + 0.01
+
+
+def test_dual_paraboloid_bad_inputs_and_the_light_centre(tmp_path):
+    """``omni`` takes cube or paraboloid; a technique without it rejects the key; a receiver at the
+    light's centre gives one warning line and finite V."""
+    from wsoft.errors import ParameterError
+
+    def wall(st):
+        _square(st, "/World/Through", (0.0, 0.0, 0.0), 1.0, "y")
+
+    path = _closed_box(tmp_path, "at_light_dp", (0.0, -1.5, 0.0), (0.0, 0.0, 0.0), extra=wall)
+    with pytest.raises(ParameterError, match="omni"):
+        wsoft.render(path, "hard", width=8, height=8, omni="sphere")
+    with pytest.raises(ParameterError, match="omni"):
+        wsoft.render(path, "pcss", width=8, height=8, omni="paraboloid")
+    f = wsoft.render(path, "pcf", width=33, height=33, shadow_map_size=256, omni="paraboloid")
+    assert np.isfinite(f.V).all()
+    hits = [w for w in f.stats["warnings"] if "at its centre" in w]
+    assert len(hits) == 1 and "/World/Light" in hits[0] and "\n" not in hits[0]
+    assert "paraboloid_hemispheres" in f.stats["counters"]["techniques"]["pcf"]["Light"]

@@ -200,7 +200,9 @@ def visibility_of(ctx: RenderContext, tctx: TechniqueContext, light: Light) -> K
         tctx = ctx.technique(tech, tctx.label_)
         tctx.counters(light)["auto"] = choice.record()
     faces = ctx.cube_faces(light, getattr(tech.params, "cube", None))
-    if faces:  # a cube map: the technique's passes on each face, each receiver's visibility from its own face
+    if faces and getattr(tech.params, "omni", "cube") == "paraboloid":  # a dual-paraboloid map in the cube map's place
+        vk = tech.add_paraboloid_passes(tctx, light)
+    elif faces:  # a cube map: the technique's passes on each face, each receiver's visibility from its own face
         vk = ctx.select_cube_faces(tctx, light, faces, [tech.add_passes(tctx, f) for f in faces])
     else:
         vk = tech.add_passes(tctx, light)

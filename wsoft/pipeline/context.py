@@ -398,6 +398,36 @@ class RenderContext:
 
         return self.add(Pass(name, (sk, vk), (key,), run, kind="light_map", light=self.label(light)))
 
+    def paraboloid_depth(self, light: Light, size: int, guard: float) -> Key:
+        """Resource: a :class:`~wsoft.lightspace.paraboloid.ParaboloidMap` of ``light``, the
+        alternative to its cube map (``omni=paraboloid``): the hemispheres that own a receiver of the
+        G-buffer, ``size`` texels a side, a guard band of ``guard`` texels past the equator, drawn by
+        one ray per texel (:func:`~wsoft.raster.paraboloid.draw_paraboloid`) through the triangles
+        that cast ``light``'s shadow (alpha-tested if the scene has cutouts). Counters: the
+        hemispheres drawn, receivers per hemisphere, the guard band, texels and rays."""
+        from wsoft.lightspace.paraboloid import fit_paraboloid_view
+        from wsoft.raster.paraboloid import draw_paraboloid
+
+        sk, gk = self.scene_arrays(), self.gbuffer()
+        casting = self.scene.casting_triangles(light)
+        alpha = self.scene.has_cutouts
+        key = Key("light_depth", self.label(light), variant=f"@{size}+paraboloid+guard{guard:g}", flavour="_alpha" if alpha else "")
+        name = f"paraboloid[{self.label(light)}]@{size}+guard{guard:g}"
+
+        def run(res):
+            gb: GBuffer = res[gk]
+            prim = gb.prim.numpy()
+            view = fit_paraboloid_view(light, gb.pos.numpy()[prim >= 0], size, guard, self.scene.diagonal)
+            dm = draw_paraboloid(res[sk], view, alpha, casting)
+            c = self.pass_counters(name)
+            c.update(hemispheres=[("+z", "-z")[h] for h in view.drawn], receivers_per_hemisphere=view.receivers,
+                     guard_texels=float(guard), window_radius=view.radius, texels=view.texels, rays=dm.rays)
+            if casting is not None:
+                c["casting_triangles"] = int(len(casting))
+            return {key: dm}
+
+        return self.add(Pass(name, (sk, gk), (key,), run, kind="light_map", light=self.label(light)))
+
     def front_fraction(self, light: Light, centre: bool = False) -> Key:
         """Resource: per G-buffer sample, the fraction of ``light`` in front of the receiver's tangent
         plane (:mod:`wsoft.raster.horizon`), shared by every technique (``centre``: whether the

@@ -223,6 +223,46 @@ class Technique:
         so a kernel crossing an edge reads the neighbouring directions from the face's own map."""
         return 2.0
 
+    def add_paraboloid_passes(self, ctx, light):
+        """The passes for ``light`` on a dual-paraboloid map instead of a cube map
+        (:mod:`wsoft.lightspace.paraboloid`): a technique whose ``Params`` has ``omni`` implements it
+        (most through :meth:`paraboloid_shadow`)."""
+        raise DeclarationError(f"technique {self.name!r} has no dual-paraboloid map passes")
+
+    def paraboloid_shadow(self, ctx, light, *, size: int, pattern: str, taps: int, radius: float, bias: float, plane_slope: float):
+        """The shadow pass of a depth-comparing technique on ``light``'s dual-paraboloid map
+        (:meth:`~wsoft.pipeline.context.RenderContext.paraboloid_depth`, ``size`` texels a side, a
+        guard band of the kernel): per receiver, the fraction of ``taps`` (``pattern``: grid or
+        poisson) within ``radius`` texels lit, each against the receiver's tangent plane along the tap
+        texel's direction less ``plane_slope`` of its step per texel and ``bias`` (a fraction of the
+        frame's extent); ``taps`` 1 with ``radius`` 0 is the classic shadow map's one texel.
+        Counters: ``paraboloid_hemispheres``, ``paraboloid_texels``; a receiver at the light's centre
+        gets V = 1 and a warning."""
+        import warp as wp
+
+        from wsoft.accel.filters import taps_on
+        from wsoft.lightspace.paraboloid import HEMISPHERES, guard_texels_for, paraboloid_visibility
+
+        gbuf = ctx.gbuffer()
+        depth = ctx.ctx.paraboloid_depth(light, size, guard_texels_for(radius))
+        out = ctx.visibility_key(light)
+        name = ctx.pass_name(f"{self.name}_paraboloid", light)
+
+        def run(res):
+            gb, dm = res[gbuf], res[depth]
+            tp = taps_on(ctx.device, pattern, taps) if taps > 1 else None
+            arr = tp.array if tp is not None else wp.array([[0.5, 0.5]], dtype=wp.vec2, device=ctx.device)
+            vis, at_light = paraboloid_visibility(dm, gb, arr, tp.count if tp is not None else 1, pattern == "poisson", radius, bias,
+                                                  plane_slope, light.shadow_distance, ctx.device)
+            c = ctx.counters(light)
+            c["paraboloid_hemispheres"] = [HEMISPHERES[h] for h in dm.view.drawn]
+            c["paraboloid_texels"] = dm.view.texels
+            if at_light:
+                ctx.ctx.warn(name, f"light {light.path}: {at_light} visible samples lie at its centre (no direction to it): V = 1 there")
+            return {out: ctx.visibility(vis)}
+
+        return ctx.add_pass(name, inputs=(gbuf, depth), outputs=(out,), run=run, stage="shadow", light=light)
+
     def bake_support(self) -> str | None:
         """``None`` when the technique answers for any points given their positions and normals,
         so that it can bake visibility into a stage (:mod:`wsoft.baking`: its G-buffer holds mesh

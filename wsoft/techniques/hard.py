@@ -33,6 +33,7 @@ from wsoft.lightspace.light import LightGPU, receiver_bias
 from wsoft.lightspace.view import ViewGPU, light_facing, receiver_tap_depth, view_dir, within_distance
 from wsoft.parallel import launch_chunked
 from wsoft.raster.gbuffer import GBufferGPU, gb_mapped_receiver
+from wsoft.lightspace.paraboloid import OMNI_MAPS
 from wsoft.params import LightViewParams, check_ranges
 from wsoft.techniques.base import PassSpec, Technique, Tolerance, param
 
@@ -48,6 +49,9 @@ class HardParams(LightViewParams):
     plane_slope_bias: float = param(0.25, "receiver_bias=plane: texels of the tangent plane's depth step per texel taken off", range=(0.0, 16.0))
     conservative: bool = param(False, "conservative rasterization: every texel a triangle touches")
 
+    omni: str = param("cube", "where a light's receivers call for more than one frustum (cube=auto or always): cube (six 90-degree faces) "
+                              "or paraboloid (two hemispheres, drawn by one ray per texel; the receiver-plane bias; "
+                              "wsoft.lightspace.paraboloid)", choices=OMNI_MAPS)
     def __post_init__(self):
         check_ranges(self)
 
@@ -101,6 +105,15 @@ class Hard(Technique):
     tolerance = Tolerance(mae=0.009, mae_penumbra=0.36)
     horizon = "centre"  # binary: dark where the light's centre is behind the receiver's plane
     cylinder_model = "the shadow of its centre (its size plays no part), in a light view that looks at the receivers as a sphere light's does"
+
+    def instancing_why(self) -> str:
+        return "a dual-paraboloid map traces the flattened triangle soup" if self.params.omni == "paraboloid" else self.instancing_refusal
+
+    def add_paraboloid_passes(self, ctx, light):
+        """The light's dual-paraboloid map (``omni=paraboloid``): one texel per receiver, its tangent plane's distance along the texel's direction."""
+        p = self.params
+        return self.paraboloid_shadow(ctx, light, size=p.shadow_map_size, pattern="grid", taps=1, radius=0.0, bias=p.bias,
+                                      plane_slope=p.plane_slope_bias)
 
     def add_passes(self, ctx, light):
         p = self.params

@@ -38,6 +38,7 @@ from wsoft.lightspace.light import LightGPU, receiver_bias
 from wsoft.lightspace.view import ViewGPU, map_coords, normal_offset, texel_size, view_dir
 from wsoft.parallel import launch_chunked
 from wsoft.raster.gbuffer import GBufferGPU, gb_receiver
+from wsoft.lightspace.paraboloid import OMNI_MAPS
 from wsoft.params import LightViewParams, check_ranges
 from wsoft.techniques.base import PassSpec, Quality, Technique, Tolerance, check, param
 
@@ -54,6 +55,9 @@ class PCFParams(LightViewParams):
     normal_offset: float = param(1.0, "receiver_bias=normal: the offset along the normal in texels, times the kernel's half-width plus one", range=(0.0, 64.0))
     slope_bias: float = param(1.5, "receiver_bias=centre: slope-scaled bias in texels", range=(0.0, 64.0))
 
+    omni: str = param("cube", "where a light's receivers call for more than one frustum (cube=auto or always): cube (six 90-degree faces) "
+                              "or paraboloid (two hemispheres, drawn by one ray per texel; the receiver-plane bias; "
+                              "wsoft.lightspace.paraboloid)", choices=OMNI_MAPS)
     def __post_init__(self):
         check_ranges(self)
         check(self.pattern in ("grid", "poisson"), f"pattern {self.pattern!r} is not grid or poisson")
@@ -119,6 +123,15 @@ class PCF(Technique):
     def cube_guard_texels(self) -> float:
         """Its kernel's half-width and the bilinear tap's texel."""
         return float(self.params.radius) + 2.0
+
+    def instancing_why(self) -> str:
+        return "a dual-paraboloid map traces the flattened triangle soup" if self.params.omni == "paraboloid" else self.instancing_refusal
+
+    def add_paraboloid_passes(self, ctx, light):
+        """The light's dual-paraboloid map (``omni=paraboloid``): the same taps over ``radius`` texels of its hemisphere's map."""
+        p = self.params
+        return self.paraboloid_shadow(ctx, light, size=p.shadow_map_size, pattern=p.pattern, taps=p.taps, radius=p.radius, bias=p.bias,
+                                      plane_slope=p.plane_slope_bias)
 
     def add_passes(self, ctx, light):
         p = self.params
