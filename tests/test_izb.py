@@ -221,9 +221,9 @@ def test_stencil_bounds_and_vsm_differ_where_the_paper_misses():
     assert np.any(aliased & ~vsm)
 
 
-def _vsm_misses(scene, aliased, extra):
+def _vsm_misses(scene, aliased, extra, w=96, h=72):
     """(missed aliased pixels, of them certainly lit, certainly shadowed) of the vsm stencil."""
-    _, get, _ = _izb_resources(scene, {"aa": "adaptive", "stencil": "vsm", **extra})
+    _, get, _ = _izb_resources(scene, {"aa": "adaptive", "stencil": "vsm", **extra}, w, h)
     flagged = get("izb_stencil").numpy().reshape(aliased.shape).astype(bool)
     verdict = get("izb_verdict").numpy().reshape(aliased.shape)
     missed = aliased & ~flagged
@@ -235,7 +235,8 @@ def test_vsm_misses_are_shadowed_verdicts_of_the_conservative_map():
     ordinary one, and every extra miss is a "certainly shadowed" verdict: the conservative map puts
     a thin bar's depth in every texel the bar touches, so a partly lit pixel beside it reads as
     wholly behind it. Reading the shadowed bound from an inner-coverage map (``shadowed_map=inner``)
-    leaves no shadowed miss; the lit misses (the 1% threshold's) stay, and vanish at 0.1%."""
+    leaves no shadowed miss; the lit misses left (pixels whose sub-samples see a surface behind
+    their centre's) go with ``flag_mixed``, or at a 0.1% threshold."""
     from wsoft.bench.harness import load
 
     scene = load("tower")
@@ -247,8 +248,52 @@ def test_vsm_misses_are_shadowed_verdicts_of_the_conservative_map():
     inner = _vsm_misses(scene, aliased, {"shadowed_map": "inner"})
     assert cons[0] > ordinary[0] and cons[2] > 0 and ordinary[2] == 0  # the defect, and where it comes from
     assert cons[0] == cons[1] + cons[2]  # every miss is one verdict or the other
-    assert inner[2] == 0 and inner[0] == inner[1] < cons[0]
+    assert inner[2] == 0 and 0 < inner[0] == inner[1] < cons[0]
+    assert _vsm_misses(scene, aliased, {"shadowed_map": "inner", "flag_mixed": True}) == (0, 0, 0)
     assert _vsm_misses(scene, aliased, {"shadowed_map": "inner", "edge_threshold": 0.001})[0] == 0
+
+
+def _grating(gap: float):
+    """Slats 0.1 wide, ``gap`` apart, 1 above a ground plane under a point light 10 above it: in a
+    256² light map the gaps are narrower than two texels (a conservative map closes them), and on
+    a 160x120 eye view a gap's streak of light is narrower than a pixel."""
+    from wsoft.stages import add_box, add_camera, add_point_light, make_stage
+
+    st = make_stage()
+    add_box(st, "/World/Ground", (-4.0, -4.0, -0.1), (4.0, 4.0, 0.0))
+    x, k = -2.0, 0
+    while x < 2.0:
+        add_box(st, f"/World/Slat{k}", (x, -2.0, 1.0), (x + 0.1, 2.0, 1.05))
+        x, k = x + 0.1 + gap, k + 1
+    add_point_light(st, "/World/Light", (0.3, 0.2, 10.0))
+    add_camera(st, "/World/Cam", (0.0, -6.0, 5.0), (0.0, 0.0, 0.0))
+    return wsoft.load_scene(st)
+
+
+def test_vsm_misses_on_a_grating():
+    """The small case behind the VSM stencil's misses: under a grating whose gaps a conservative map
+    closes, partly lit ground pixels read "certainly shadowed" (and some fully lit ones too), while an
+    ordinary map misses almost none; the pixels whose centre is on a slat and whose sub-samples see
+    the ground are "certainly lit" from the slat's plane (the ordinary map flags them only through
+    the variance the ground seen through the gaps adds). shadowed_map=inner with flag_mixed misses none."""
+    scene = _grating(0.04)
+    w, h = 160, 120
+    ss = wsoft.render(scene, "izb", aa="supersample", width=w, height=h, device="cpu")
+    aliased = (ss.V > 0) & (ss.V < 1)
+    assert aliased.sum() > 500
+    extra = {"shadow_map_size": 256}
+    res, get, _ = _izb_resources(scene, {"aa": "adaptive", "stencil": "vsm", **extra}, w, h)
+    z = get("gbuffer").pos.numpy()[:, 2].reshape(h, w)
+    verdict = get("izb_verdict").numpy().reshape(h, w)
+    missed = aliased & ~get("izb_stencil").numpy().reshape(h, w).astype(bool)
+    as_shadowed, as_lit = missed & ((verdict & 2) != 0), missed & ((verdict & 1) != 0)
+    assert as_shadowed.sum() > 100 and np.all(z[as_shadowed] < 0.01)  # ground pixels under the closed gaps
+    assert as_lit.sum() > 50 and (z[as_lit] > 0.99).mean() > 0.9  # centres on a slat (a few on the ground beside one)
+    assert np.any((ss.V == 1) & ((verdict & 2) != 0))  # fully lit pixels "certainly shadowed" as well
+    ordinary = _vsm_misses(scene, aliased, {"stencil_raster": "ordinary", **extra}, w, h)
+    assert ordinary[2] == 0 and ordinary[0] < missed.sum() / 10
+    assert _vsm_misses(scene, aliased, {"shadowed_map": "inner", **extra}, w, h) == (as_lit.sum(), as_lit.sum(), 0)
+    assert _vsm_misses(scene, aliased, {"shadowed_map": "inner", "flag_mixed": True, **extra}, w, h) == (0, 0, 0)
 
 
 @pytest.mark.parametrize("subsamples", ["auto", "gbuffer"])
@@ -367,6 +412,8 @@ def test_subpixel_patterns():
     ({"aa": "none", "keep_centre": True}, "aa=none"),
     ({"aa": "none", "subsamples": "gbuffer"}, "aa=none"),
     ({"subsamples": "msaa"}, "subsamples"),
+    ({"flag_mixed": True}, "only stencil=vsm reads it"),
+    ({"stencil": "vsm", "flag_mixed": "often"}, "flag_mixed"),
 ])
 def test_bad_parameters_are_one_line_errors(params, message):
     with pytest.raises(ParameterError, match=message) as e:

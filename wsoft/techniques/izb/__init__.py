@@ -37,7 +37,11 @@ Steps of one light (the paper's eight, as passes):
    a partly lit pixel beside a thin occluder reads as certainly shadowed; this is why the
    conservative map misses more aliased pixels than the ordinary one (all the extra misses are
    "certainly shadowed" verdicts). ``shadowed_map=inner`` reads the shadowed bound from a VSM of
-   an inner-coverage map (an occluder counts only in texels it covers whole).
+   an inner-coverage map (an occluder counts only in texels it covers whole). Its remaining misses
+   are pixels whose centre lies on the occluder and whose sub-samples see the receiver behind it:
+   both bounds test the centre's plane only (an ordinary map flags many of them by chance, the
+   receiver seen through the occluder's gaps widening the variance); ``flag_mixed`` flags every
+   pixel next to another surface as well.
 2. ``izb_samples`` — the shadow samples: one per pixel (the G-buffer's, at the pixel centre),
    and for potential-edge pixels (``adaptive``) or every pixel (``supersample``) ``samples``
    sub-pixel samples (rotated grid 4x, or jittered 8x / 16x) at their sub-pixel offsets
@@ -111,7 +115,8 @@ STENCIL_RULES = ("cull", "listing")
 
 SHADOWED_MAPS = ("same", "inner")
 
-STENCIL_PARAMS = {"vsm": ("edge_threshold", "stencil_raster", "stencil_rule", "stencil_bias", "min_variance", "shadowed_map"),
+STENCIL_PARAMS = {"vsm": ("edge_threshold", "stencil_raster", "stencil_rule", "stencil_bias", "min_variance", "shadowed_map",
+                          "flag_mixed"),
                   "bounds": ("bounds_bias", "bounds_texels")}
 
 
@@ -152,6 +157,9 @@ class IZBParams:
                                       "the paper's) or inner (a VSM of an inner-coverage map, where an occluder counts only in texels "
                                       "it covers whole; a conservative map spreads an occluder over every texel it touches, which "
                                       "makes partly lit pixels 'certainly shadowed')")
+    flag_mixed: bool = param(False, "stencil=vsm: also flag every pixel next to another surface (a neighbour on another plane or "
+                                    "on nothing, or a cutout under its centre): the bounds test the centre's plane only, and such "
+                                    "a pixel's sub-samples may lie on a surface behind it")
 
     def __post_init__(self):
         check_ranges(self)
@@ -172,6 +180,7 @@ class IZBParams:
         check(self.stencil_rule in STENCIL_RULES, f"stencil_rule {self.stencil_rule!r} is not one of {', '.join(STENCIL_RULES)}")
         check(self.shadowed_map in SHADOWED_MAPS, f"shadowed_map {self.shadowed_map!r} is not one of {', '.join(SHADOWED_MAPS)}")
         check(isinstance(self.keep_centre, bool), f"keep_centre {self.keep_centre!r} is not true or false")
+        check(isinstance(self.flag_mixed, bool), f"flag_mixed {self.flag_mixed!r} is not true or false")
         check(not (self.aa == "none" and (self.keep_centre or self.subsamples != "auto")),
               "keep_centre and subsamples place sub-samples, and aa=none places none")
 
@@ -192,7 +201,8 @@ class IZB(Technique):
     passes = (
         PassSpec("stencil_bounds", reads=("gbuffer", "scene", "light_depth"), writes=("izb_stencil", "izb_probes"),
                  when="aa=adaptive and stencil=bounds"),
-        PassSpec("stencil_vsm", reads=("gbuffer", "light_depth"), writes=("izb_stencil", "izb_verdict"), when="aa=adaptive and stencil=vsm"),
+        PassSpec("stencil_vsm", reads=("gbuffer", "scene", "light_depth"), writes=("izb_stencil", "izb_verdict"),
+                 when="aa=adaptive and stencil=vsm"),
         PassSpec("gbuffer_ms", reads=("scene",), writes=("izb_msaa",), when="aa!=none and subsamples=gbuffer"),
         PassSpec("samples", reads=("gbuffer", "scene"), optional=("izb_stencil", "izb_probes", "izb_msaa"), writes=("izb_samples",)),
         PassSpec("grid", reads=("scene", "izb_samples"), writes=("izb_grid",)),
@@ -266,10 +276,11 @@ class IZB(Technique):
 
             def run_stencil(res):
                 edge, verdicts = vsm_stencil_pass(p, res[gbuf], res[depth], cam, may_shadow, dev, counters,
-                                                  inner=res[inner] if inner is not None else None)
+                                                  inner=res[inner] if inner is not None else None,
+                                                  cutouts=res[sk].cutouts if p.flag_mixed else None)
                 return {stencil: edge, verdict: verdicts}
 
-            ctx.add_pass(ctx.pass_name("izb_stencil", light), inputs=(gbuf, depth) + ((inner,) if inner is not None else ()),
+            ctx.add_pass(ctx.pass_name("izb_stencil", light), inputs=(gbuf, sk, depth) + ((inner,) if inner is not None else ()),
                          outputs=(stencil, verdict), run=run_stencil, stage="stencil_vsm", light=light)
 
         msaa = None

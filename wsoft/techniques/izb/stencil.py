@@ -341,10 +341,13 @@ def bounds_stencil_pass(p, gb, ds, outer, back, opened, inner, cam, L: LightGPU,
     return edge_counters(counters, edge, gb), hits
 
 
-def vsm_stencil_pass(p, gb, dm, cam, may_shadow: int, device: str, counters: dict, inner=None) -> tuple[wp.array, wp.array]:
+def vsm_stencil_pass(p, gb, dm, cam, may_shadow: int, device: str, counters: dict, inner=None,
+                     cutouts: Surfaces | None = None) -> tuple[wp.array, wp.array]:
     """The ``vsm`` stencil of one light from its depth map ``dm`` (mip-mapped moments; ``inner``:
     an inner-coverage map of the same view, whose moments the certainly-shadowed bound reads
-    instead): (the stencil, the verdicts of :func:`edge_stencil`)."""
+    instead; ``cutouts``: the scene's, to flag every pixel next to another surface as well,
+    :func:`~wsoft.techniques.izb.samples.mixed_pixels`): (the stencil, the verdicts of
+    :func:`edge_stencil`)."""
     v = dm.view
     pyr, offs = build_moments_pyramid(dm.depth, v.near, v.far, device)
     pyr_sh = pyr
@@ -361,6 +364,12 @@ def vsm_stencil_pass(p, gb, dm, cam, may_shadow: int, device: str, counters: dic
                            p.shadow_map_size, scale, p.edge_threshold, p.min_variance, p.stencil_bias,
                            int(p.stencil_rule == "listing"), may_shadow],
                    outputs=[edge, verdict], device=device)
+    if cutouts is not None:
+        mixed = wp.empty(gb.count, dtype=wp.int32, device=device)
+        launch_chunked(mixed_pixels, gb.count, inputs=[gb.gpu(), cutouts], outputs=[mixed], device=device)
+        mh = mixed.numpy() != 0
+        counters["mixed_pixels_flagged"] = int((mh & (edge.numpy() == 0)).sum())
+        edge = wp.array((edge.numpy() != 0) | mh, dtype=wp.int32, device=device)
     vh = verdict.numpy()
     counters["certainly_lit_pixels"] = int(((vh & 1) != 0).sum())
     counters["certainly_shadowed_pixels"] = int(((vh & 2) != 0).sum())
