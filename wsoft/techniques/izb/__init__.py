@@ -32,7 +32,16 @@ Steps of one light (the paper's eight, as passes):
    returns *true* when either bound is below the threshold, which read literally flags the
    certain pixels instead (``stencil_rule=listing``, kept to measure it). The VSM's bounds are
    probabilistic and its receivers are in its own map: it misses aliased pixels
-   (``reports/izb.md``).
+   (``reports/izb.md``). A conservative map serves the *lit* bound (no occluder escapes a texel
+   it touches) but not the *shadowed* one: it spreads an occluder over every texel it touches, so
+   a partly lit pixel beside a thin occluder reads as certainly shadowed; this is why the
+   conservative map misses more aliased pixels than the ordinary one (all the extra misses are
+   "certainly shadowed" verdicts). ``shadowed_map=inner`` reads the shadowed bound from a VSM of
+   an inner-coverage map (an occluder counts only in texels it covers whole). Its remaining misses
+   are pixels whose centre lies on the occluder and whose sub-samples see the receiver behind it:
+   both bounds test the centre's plane only (an ordinary map flags many of them by chance, the
+   receiver seen through the occluder's gaps widening the variance); ``flag_mixed`` flags every
+   pixel next to another surface as well.
 2. ``izb_samples`` — the shadow samples: one per pixel (the G-buffer's, at the pixel centre),
    and for potential-edge pixels (``adaptive``) or every pixel (``supersample``) ``samples``
    sub-pixel samples (rotated grid 4x, or jittered 8x / 16x) at their sub-pixel offsets
@@ -44,7 +53,13 @@ Steps of one light (the paper's eight, as passes):
    ``bounds`` stencil already cast a pixel's eye rays (probing it), their hits are taken, not cast
    again. A multi-sampled pixel's
    visibility is the mean over its sub-samples that hit a surface (its centre sample is not
-   inserted unless none did).
+   inserted unless none did; ``keep_centre``, the paper's step 4, keeps it besides them: the mean
+   over the N + 1). ``subsamples=gbuffer`` reads them from a multi-sampled eye view of every
+   pixel at the same pattern (pass ``izb_gbuffer``: the paper's source, its eye view's 4x
+   rotated-grid render), the same points ``recast`` finds. The pipeline's own multi-sampled
+   G-buffer (``pixel_samples > 1``) is refused with ``aa != none``: izb writes one visibility per
+   G-buffer sample and treats each as a pixel centre, its pattern is not the rotated grid, and it
+   has no centre sample.
 3. ``izb_grid`` — the irregular z-buffer: a light view fitted to the inserted samples
    (``grid_size`` cells per side) and a grid of lists (:mod:`wsoft.accel.izb_grid`).
 4. ``izb_light`` — occluder triangles rasterized conservatively over the grid; every sample of a
@@ -89,7 +104,7 @@ from wsoft.raster.shadow_rays import ray_epsilon
 from wsoft.scene.surfaces import without_culling
 from wsoft.scene.types import LIGHT_DISTANT, LIGHT_KIND_NAMES, LIGHT_POINT
 from wsoft.techniques.base import PassSpec, Quality, Technique, Tolerance, check, param
-from wsoft.techniques.izb.samples import SUBSAMPLES, place_samples, resolve_samples
+from wsoft.techniques.izb.samples import SUBSAMPLES, multisampled_gbuffer, place_samples, resolve_samples
 from wsoft.techniques.izb.stencil import bounds_stencil_pass, vsm_stencil_pass
 
 AA_MODES = ("none", "adaptive", "supersample")
@@ -98,7 +113,10 @@ STENCILS = ("bounds", "vsm")
 STENCIL_RASTER = ("conservative", "ordinary")
 STENCIL_RULES = ("cull", "listing")
 
-STENCIL_PARAMS = {"vsm": ("edge_threshold", "stencil_raster", "stencil_rule", "stencil_bias", "min_variance"),
+SHADOWED_MAPS = ("same", "inner")
+
+STENCIL_PARAMS = {"vsm": ("edge_threshold", "stencil_raster", "stencil_rule", "stencil_bias", "min_variance", "shadowed_map",
+                          "flag_mixed"),
                   "bounds": ("bounds_bias", "bounds_texels")}
 
 
@@ -112,9 +130,12 @@ class IZBParams:
     seed: int = param(0, "seed of the jittered pattern", range=(0, 2**31 - 1))
     subsamples: str = param("auto", "where sub-samples lie: auto (on the centre's plane, where the camera ray meets it, in pixels "
                                     "whose 8 neighbours see that plane too and whose centre is not a cutout; re-cast through the scene "
-                                    "elsewhere), recast (every sub-sample's eye ray re-cast: exact surface points everywhere) or plane "
+                                    "elsewhere), recast (every sub-sample's eye ray re-cast: exact surface points everywhere), plane "
                                     "(always on the centre's plane, as a reconstruction from depth: no scene query, wrong across "
-                                    "silhouettes)")
+                                    "silhouettes) or gbuffer (read from a multi-sampled eye-view G-buffer of every pixel at the "
+                                    "sub-pixel pattern, the paper's source: its pass izb_gbuffer renders it)")
+    keep_centre: bool = param(False, "a multi-sampled pixel keeps its centre sample besides its N sub-samples (the paper's step 4: "
+                                     "N extra samples); its visibility is the mean over the N + 1 samples that hit a surface")
     stencil: str = param("bounds", "adaptive's shadow-edge stencil: bounds (exact depth bounds from a conservative and an "
                                    "inner-coverage map, per pixel plane: certain only where the maps prove it) or vsm (the paper: "
                                    "one-tailed Chebyshev bounds of a mip-mapped variance shadow map, probabilistic)")
@@ -132,6 +153,13 @@ class IZBParams:
     stencil_bias: float = param(0.015, "stencil=vsm: depth offset (fraction of the map's depth range) an occluder must lie in front of "
                                        "a receiver; at least 10 sqrt(min_variance) for a receiver ever to be certainly lit", range=(0.0, 0.5))
     min_variance: float = param(1e-6, "stencil=vsm: the variance floor of the Chebyshev bounds (normalised depth)", range=(0.0, 0.01))
+    shadowed_map: str = param("same", "stencil=vsm: the map the certainly-shadowed bound reads: same (the one VSM both bounds read, "
+                                      "the paper's) or inner (a VSM of an inner-coverage map, where an occluder counts only in texels "
+                                      "it covers whole; a conservative map spreads an occluder over every texel it touches, which "
+                                      "makes partly lit pixels 'certainly shadowed')")
+    flag_mixed: bool = param(False, "stencil=vsm: also flag every pixel next to another surface (a neighbour on another plane or "
+                                    "on nothing, or a cutout under its centre): the bounds test the centre's plane only, and such "
+                                    "a pixel's sub-samples may lie on a surface behind it")
 
     def __post_init__(self):
         check_ranges(self)
@@ -150,6 +178,11 @@ class IZBParams:
                                  f"and this is stencil={self.stencil}")
         check(self.stencil_raster in STENCIL_RASTER, f"stencil_raster {self.stencil_raster!r} is not one of {', '.join(STENCIL_RASTER)}")
         check(self.stencil_rule in STENCIL_RULES, f"stencil_rule {self.stencil_rule!r} is not one of {', '.join(STENCIL_RULES)}")
+        check(self.shadowed_map in SHADOWED_MAPS, f"shadowed_map {self.shadowed_map!r} is not one of {', '.join(SHADOWED_MAPS)}")
+        check(isinstance(self.keep_centre, bool), f"keep_centre {self.keep_centre!r} is not true or false")
+        check(isinstance(self.flag_mixed, bool), f"flag_mixed {self.flag_mixed!r} is not true or false")
+        check(not (self.aa == "none" and (self.keep_centre or self.subsamples != "auto")),
+              "keep_centre and subsamples place sub-samples, and aa=none places none")
 
     @property
     def pattern_kind(self) -> str:
@@ -168,8 +201,10 @@ class IZB(Technique):
     passes = (
         PassSpec("stencil_bounds", reads=("gbuffer", "scene", "light_depth"), writes=("izb_stencil", "izb_probes"),
                  when="aa=adaptive and stencil=bounds"),
-        PassSpec("stencil_vsm", reads=("gbuffer", "light_depth"), writes=("izb_stencil",), when="aa=adaptive and stencil=vsm"),
-        PassSpec("samples", reads=("gbuffer", "scene"), optional=("izb_stencil", "izb_probes"), writes=("izb_samples",)),
+        PassSpec("stencil_vsm", reads=("gbuffer", "scene", "light_depth"), writes=("izb_stencil", "izb_verdict"),
+                 when="aa=adaptive and stencil=vsm"),
+        PassSpec("gbuffer_ms", reads=("scene",), writes=("izb_msaa",), when="aa!=none and subsamples=gbuffer"),
+        PassSpec("samples", reads=("gbuffer", "scene"), optional=("izb_stencil", "izb_probes", "izb_msaa"), writes=("izb_samples",)),
         PassSpec("grid", reads=("scene", "izb_samples"), writes=("izb_grid",)),
         PassSpec("light", reads=("scene", "izb_grid"), writes=("izb_blocked",)),
         PassSpec("resolve", reads=("gbuffer", "izb_samples", "izb_grid", "izb_blocked"), writes=("visibility",)),
@@ -235,30 +270,46 @@ class IZB(Technique):
                          stage="stencil_bounds", light=light)
         elif p.aa == "adaptive":
             depth = ctx.light_depth(light, size=p.shadow_map_size, conservative=p.stencil_raster == "conservative")
+            inner = ctx.light_depth(light, size=p.shadow_map_size, inner=True) if p.shadowed_map == "inner" else None
             stencil = ctx.key("izb_stencil", light)
+            verdict = ctx.key("izb_verdict", light)
 
             def run_stencil(res):
-                return {stencil: vsm_stencil_pass(p, res[gbuf], res[depth], cam, may_shadow, dev, counters)}
+                edge, verdicts = vsm_stencil_pass(p, res[gbuf], res[depth], cam, may_shadow, dev, counters,
+                                                  inner=res[inner] if inner is not None else None,
+                                                  cutouts=res[sk].cutouts if p.flag_mixed else None)
+                return {stencil: edge, verdict: verdicts}
 
-            ctx.add_pass(ctx.pass_name("izb_stencil", light), inputs=(gbuf, depth), outputs=(stencil,), run=run_stencil, stage="stencil_vsm",
-                         light=light)
+            ctx.add_pass(ctx.pass_name("izb_stencil", light), inputs=(gbuf, sk, depth) + ((inner,) if inner is not None else ()),
+                         outputs=(stencil, verdict), run=run_stencil, stage="stencil_vsm", light=light)
+
+        msaa = None
+        if p.aa != "none" and p.subsamples == "gbuffer":
+            msaa = ctx.key("izb_msaa", light)
+
+            def run_msaa(res):
+                return {msaa: multisampled_gbuffer(p, res[sk], cam, ctx.width, ctx.height, n_sub, dev)}
+
+            ctx.add_pass(ctx.pass_name("izb_gbuffer", light), inputs=(sk,), outputs=(msaa,), run=run_msaa, stage="gbuffer_ms", light=light)
 
         samples_key = ctx.key("izb_samples", light)
 
         def run_samples(res):
             gb = res[gbuf]
             smp = place_samples(p, gb, res[sk], cam, L, ray_epsilon(gb, light), dmax, n_sub, dev, counters,
-                                stencil=res[stencil] if stencil is not None else None, probes=res[probes] if probes is not None else None)
+                                stencil=res[stencil] if stencil is not None else None, probes=res[probes] if probes is not None else None,
+                                msaa=res[msaa] if msaa is not None else None)
             return {samples_key: smp}
 
-        ins = (gbuf, sk) + ((stencil,) if stencil is not None else ()) + ((probes,) if probes is not None else ())
+        ins = (gbuf, sk) + tuple(k for k in (stencil, probes, msaa) if k is not None)
         ctx.add_pass(ctx.pass_name("izb_samples", light), inputs=ins, outputs=(samples_key,), run=run_samples, stage="samples", light=light)
         grid_key = self.add_grid_pass(ctx, light, sk, samples_key, counters)
         lit_key = self.add_light_pass(ctx, light, sk, grid_key, counters)
         out = ctx.visibility_key(light)
 
         def run_resolve(res):
-            return {out: ctx.visibility(resolve_samples(res[gbuf], res[samples_key], res[grid_key].rank, res[lit_key], n_sub, dev))}
+            return {out: ctx.visibility(resolve_samples(res[gbuf], res[samples_key], res[grid_key].rank, res[lit_key], n_sub, dev,
+                                                        keep_centre=p.keep_centre))}
 
         return ctx.add_pass(ctx.pass_name("izb_resolve", light), inputs=(gbuf, samples_key, grid_key, lit_key), outputs=(out,),
                             run=run_resolve, stage="resolve", light=light)

@@ -18,7 +18,7 @@ from wsoft.raster.shadow_rays import ray_offset, ray_origin
 from wsoft.scene.surfaces import Surfaces
 from wsoft.scene.instancing import InstancesGPU
 
-SUBSAMPLES = ("auto", "recast", "plane")  # where sub-samples lie (IZBParams.subsamples), in the kernels' order
+SUBSAMPLES = ("auto", "recast", "plane", "gbuffer")  # where sub-samples lie (IZBParams.subsamples), in the kernels' order
 BACKGROUND, TEST, HORIZON = 0, 1, 2  # sample states
 
 
@@ -82,6 +82,7 @@ def centre_samples(
     eps: float,
     dmax: float,
     multi: wp.array[wp.int32],
+    keep_centre: int,
     # outputs
     origin: wp.array[wp.vec3],
     dir: wp.array[wp.vec3],
@@ -89,9 +90,11 @@ def centre_samples(
     state: wp.array[wp.int32],
     insert: wp.array[wp.int32],
 ):
-    """The G-buffer's samples (pixel centres); inserted unless their pixel is multi-sampled."""
+    """The G-buffer's samples (pixel centres); inserted unless their pixel is multi-sampled and
+    does not ``keep_centre``."""
     i = wp.tid() + offset
-    store_sample(i, gb_covered(gb, i), L, gb.pos[i], gb.nrm[i], eps, dmax, multi[i] < 0, origin, dir, tmax, state, insert)
+    store_sample(i, gb_covered(gb, i), L, gb.pos[i], gb.nrm[i], eps, dmax, multi[i] < 0 or keep_centre != 0, origin, dir, tmax, state,
+                 insert)
 
 
 @wp.kernel
@@ -114,6 +117,9 @@ def sub_samples(
     hit_pos: wp.array[wp.vec3],
     hit_nrm: wp.array[wp.vec3],
     hit_found: wp.array[wp.int32],
+    ms_pos: wp.array[wp.vec3],
+    ms_nrm: wp.array[wp.vec3],
+    ms_found: wp.array[wp.int32],
     L: LightGPU,
     eps: float,
     dmax: float,
@@ -129,9 +135,11 @@ def sub_samples(
     centre (where the camera ray meets it: no scene query) or by re-casting its eye ray through the
     scene. ``mode`` (:data:`SUBSAMPLES`): 0 auto — on the plane where the pixel sees that plane
     alone (``mixed`` 0, :func:`other_surface_near`), else re-cast; 1 recast — always; 2 plane —
-    always on the plane (re-cast only where the ray misses it). A pixel the stencil ``probed``
-    (:func:`bounds_stencil`) takes the hits its eye rays found there (the same rays, the same
-    answer). ``recast`` = 1 where re-cast here, 2 where the stencil's hit was taken."""
+    always on the plane (re-cast only where the ray misses it); 3 gbuffer — the sample of the
+    multi-sampled G-buffer (``ms_*``, :func:`trace_multisampled`) at the same point. A pixel the
+    stencil ``probed`` (:func:`bounds_stencil`) takes the hits its eye rays found there (the same
+    rays, the same answer). ``recast`` = 1 where re-cast here, 2 where the stencil's hit was
+    taken, 3 where the multi-sampled G-buffer's was."""
     k = wp.tid() + offset
     j = k / n_sub
     s = k - j * n_sub
@@ -141,7 +149,11 @@ def sub_samples(
     fx = float(xy[0]) + off[0]
     fy = float(xy[1]) + off[1]
     recast[k] = 1
-    if mode == 0 and mixed[pix] != 0 and probed[pix] != 0:
+    if mode == 3:
+        h = (xy[1] * gb.width + xy[0]) * n_sub + s
+        recast[k] = 3
+        store_sample(base + k, ms_found[h] != 0, L, ms_pos[h], ms_nrm[h], eps, dmax, True, origin, dir, tmax, state, insert)
+    elif mode == 0 and mixed[pix] != 0 and probed[pix] != 0:
         h = slot[pix] * n_sub + s
         recast[k] = 2
         store_sample(base + k, hit_found[h] != 0, L, hit_pos[h], hit_nrm[h], eps, dmax, True, origin, dir, tmax, state, insert)
@@ -205,10 +217,12 @@ def resolve_izb(
     state: wp.array[wp.int32],
     rank: wp.array[wp.int32],
     blocked: wp.array[wp.int32],
+    keep_centre: int,
     # outputs
     vis: wp.array[float],
 ):
-    """A pixel's visibility: its centre sample's, or the mean over its sub-samples that hit a surface."""
+    """A pixel's visibility: its centre sample's, or the mean over its sub-samples that hit a surface
+    (with ``keep_centre``, over those and its centre sample)."""
     i = wp.tid() + offset
     if not gb_covered(gb, i):
         vis[i] = 1.0
@@ -217,6 +231,9 @@ def resolve_izb(
     if j >= 0 and fallback[j] == 0:
         total = float(0.0)
         hits = int(0)
+        if keep_centre != 0 and state[i] != 0:
+            hits += 1
+            total += sample_visible(state[i], rank[i], blocked)
         for s in range(n_sub):
             q = base + j * n_sub + s
             st = state[q]
@@ -271,12 +288,59 @@ def mixed_pixels(
         mixed[i] = other_surface_near(gb, cut, i)
 
 
+@wp.kernel
+def trace_multisampled(
+    offset: int,
+    n_sub: int,
+    pattern: wp.array[wp.vec2],
+    mesh: wp.uint64,
+    inst: InstancesGPU,
+    cut: Surfaces,
+    has_cutouts: int,
+    cam: CameraGPU,
+    width: int,
+    height: int,
+    # outputs
+    pos: wp.array[wp.vec3],
+    nrm: wp.array[wp.vec3],
+    found: wp.array[wp.int32],
+):
+    """Sample s of pixel j (entry ``j * n_sub + s``) of a multi-sampled eye view: the camera ray
+    through the pattern's offset ``s`` in the pixel cast through the scene."""
+    k = wp.tid() + offset
+    j = k / n_sub
+    s = k - j * n_sub
+    y = j / width
+    off = pattern[s]
+    f, p, n, face, bu, bv, dist = cast_primary(mesh, cut, has_cutouts, inst, cam, width, height, float(j - y * width) + off[0],
+                                               float(y) + off[1])
+    pos[k] = p
+    nrm[k] = n
+    found[k] = f
+
+
+def multisampled_gbuffer(p, ds, cam, width: int, height: int, n_sub: int, device: str) -> dict:
+    """The eye view multi-sampled at ``p``'s sub-pixel pattern (``n_sub`` per pixel, every pixel):
+    per sample (pixel-major) its surface point, viewer-facing normal and whether it hit a surface
+    (:func:`trace_multisampled`) — the source ``subsamples=gbuffer`` reads."""
+    n = width * height * n_sub
+    out = {"pos": wp.empty(n, dtype=wp.vec3, device=device), "nrm": wp.empty(n, dtype=wp.vec3, device=device),
+           "found": wp.empty(n, dtype=wp.int32, device=device)}
+    pat = subpixel_pattern(n_sub, p.pattern_kind, p.seed)
+    launch_chunked(trace_multisampled, n,
+                   inputs=[n_sub, wp.array(pat, dtype=wp.vec2, device=device), ds.mesh.id, ds.inst, ds.cutouts, int(ds.has_cutouts), cam,
+                           width, height],
+                   outputs=[out["pos"], out["nrm"], out["found"]], device=device)
+    return out
+
+
 def place_samples(p, gb, ds, cam, L: LightGPU, eps: float, dmax: float, n_sub: int, device: str, counters: dict,
-                  stencil: wp.array | None = None, probes: dict | None = None) -> dict:
+                  stencil: wp.array | None = None, probes: dict | None = None, msaa: dict | None = None) -> dict:
     """Every shadow sample of one light: the G-buffer's, then ``n_sub`` sub-samples of each
     multi-sampled pixel (the ``stencil``'s pixels with ``aa=adaptive``, every covered pixel with
     ``supersample``); ``probes``: the bounds stencil's mixed pixels and eye-ray hits, taken instead
-    of casting those rays again. Device arrays (origin, dir, tmax, state, insert; multi, fallback)
+    of casting those rays again; ``msaa``: the multi-sampled G-buffer (:func:`multisampled_gbuffer`)
+    ``subsamples=gbuffer`` reads every sub-sample from. Device arrays (origin, dir, tmax, state, insert; multi, fallback)
     and the layout (base, pixels)."""
     n0 = gb.count
     covered = gb.prim.numpy() >= 0
@@ -298,7 +362,7 @@ def place_samples(p, gb, ds, cam, L: LightGPU, eps: float, dmax: float, n_sub: i
     multi = wp.array(multi_h, dtype=wp.int32, device=device)
     pix = wp.array(pixels if len(pixels) else np.zeros(1, np.int32), dtype=wp.int32, device=device)
     fallback = wp.zeros(max(len(pixels), 1), dtype=wp.int32, device=device)
-    launch_chunked(centre_samples, n0, inputs=[L, gb.gpu(), eps, dmax, multi], outputs=outs, device=device)
+    launch_chunked(centre_samples, n0, inputs=[L, gb.gpu(), eps, dmax, multi, int(p.keep_centre)], outputs=outs, device=device)
     if len(pixels):
         pat = subpixel_pattern(n_sub, p.pattern_kind, p.seed)
         mode = SUBSAMPLES.index(p.subsamples)
@@ -311,19 +375,24 @@ def place_samples(p, gb, ds, cam, L: LightGPU, eps: float, dmax: float, n_sub: i
             hits["mixed"] = wp.empty(n0, dtype=wp.int32, device=device)
             launch_chunked(mixed_pixels, n0, inputs=[gb.gpu(), ds.cutouts], outputs=[hits["mixed"]], device=device)
         mixed = hits["mixed"]
+        ms = msaa if msaa is not None else {"pos": hits["pos"], "nrm": hits["nrm"], "found": none1}
+        if (msaa is None) != (p.subsamples != "gbuffer"):
+            raise ValueError("subsamples=gbuffer reads the multi-sampled G-buffer, and only it")
         recast = wp.empty(len(pixels) * n_sub, dtype=wp.int32, device=device)
         launch_chunked(sub_samples, len(pixels) * n_sub,
                        inputs=[n0, n_sub, pix, wp.array(pat, dtype=wp.vec2, device=device), ds.mesh.id, ds.inst, ds.cutouts,
                                int(ds.has_cutouts), cam, gb.gpu(), mixed, mode, hits["probed"], hits["slot"], hits["pos"],
-                               hits["nrm"], hits["found"], L, eps, dmax],
+                               hits["nrm"], hits["found"], ms["pos"], ms["nrm"], ms["found"], L, eps, dmax],
                        outputs=outs + [recast], device=device)
         rc = recast.numpy()
         counters["subsamples_recast"] = int((rc == 1).sum())
         counters["subsamples_from_stencil"] = int((rc == 2).sum())
+        counters["subsamples_from_gbuffer"] = int((rc == 3).sum())
         launch_chunked(centre_fallback, len(pixels), inputs=[n0, n_sub, pix, arr["state"]], outputs=[arr["insert"], fallback], device=device)
     st = arr["state"].numpy()
     counters.setdefault("subsamples_recast", 0)
     counters.setdefault("subsamples_from_stencil", 0)
+    counters.setdefault("subsamples_from_gbuffer", 0)
     counters["multisampled_pixels"] = int(len(pixels))
     counters["extra_samples"] = int(len(pixels) * n_sub)
     counters["centre_fallbacks"] = int(fallback.numpy()[: len(pixels)].sum())
@@ -332,11 +401,12 @@ def place_samples(p, gb, ds, cam, L: LightGPU, eps: float, dmax: float, n_sub: i
     return arr
 
 
-def resolve_samples(gb, smp: dict, rank: wp.array, blocked: wp.array, n_sub: int, device: str) -> wp.array:
+def resolve_samples(gb, smp: dict, rank: wp.array, blocked: wp.array, n_sub: int, device: str, keep_centre: bool = False) -> wp.array:
     """Per G-buffer sample visibility (flat float32): its centre sample's verdict, or the mean over
-    its sub-samples that hit a surface."""
+    its sub-samples that hit a surface (``keep_centre``: and its centre sample)."""
     vis = wp.empty(gb.count, dtype=float, device=device)
     launch_chunked(resolve_izb, gb.count,
-                   inputs=[gb.gpu(), smp["multi"], smp["fallback"], smp["base"], max(n_sub, 1), smp["state"], rank, blocked],
+                   inputs=[gb.gpu(), smp["multi"], smp["fallback"], smp["base"], max(n_sub, 1), smp["state"], rank, blocked,
+                           int(keep_centre)],
                    outputs=[vis], device=device)
     return vis

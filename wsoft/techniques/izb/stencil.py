@@ -57,6 +57,7 @@ def edge_stencil(
     cam: CameraGPU,
     lv: ViewGPU,
     pyr: wp.array[wp.vec2],
+    pyr_shadowed: wp.array[wp.vec2],
     level_off: wp.array[wp.int32],
     levels: int,
     map_size: int,
@@ -68,10 +69,15 @@ def edge_stencil(
     may_shadow: int,
     # outputs
     edge: wp.array[wp.int32],
+    verdict: wp.array[wp.int32],
 ):
-    """Potential shadow-edge pixels (1), from the mip-mapped variance shadow map."""
+    """Potential shadow-edge pixels (1), from the mip-mapped variance shadow map: ``pyr`` for the
+    certainly-lit bound, ``pyr_shadowed`` for the certainly-shadowed one (the same pyramid, or one
+    of an inner-coverage map). ``verdict``: 1 certainly lit, 2 certainly shadowed, 3 both, 0
+    neither or not read."""
     i = wp.tid() + offset
     edge[i] = 0
+    verdict[i] = 0
     if not gb_covered(gb, i):
         return
     ok, box, zr = pixel_footprint(lv, cam, gb.width, gb.height, gb_pixel(gb, i), gb.pos[i], gb.nrm[i], 0.0, 0, 1)
@@ -113,14 +119,18 @@ def edge_stencil(
     y0 = wp.clamp(y0, 0, size - 1)
     y1 = wp.clamp(y1, 0, size - 1)
     m = wp.vec2(0.0)
+    ms = wp.vec2(0.0)
     cnt = float(0.0)
     for y in range(y0, y1 + 1):
         for x in range(x0, x1 + 1):
             m += moments_at(pyr, level_off[lev], size, x, y)
+            ms += moments_at(pyr_shadowed, level_off[lev], size, x, y)
             cnt += 1.0
     m = m / cnt
+    ms = ms / cnt
     lit = chebyshev(m, tn, min_var, 1) < threshold  # occluder mass in front of the footprint: almost none
-    shadowed = chebyshev(m, tn, min_var, 0) < threshold and may_shadow != 0  # mass at or beyond it: almost none
+    shadowed = chebyshev(ms, tn, min_var, 0) < threshold and may_shadow != 0  # mass at or beyond it: almost none
+    verdict[i] = wp.where(lit, 1, 0) + wp.where(shadowed, 2, 0)
     if listing != 0:
         if lit or shadowed:
             edge[i] = 1
@@ -331,15 +341,36 @@ def bounds_stencil_pass(p, gb, ds, outer, back, opened, inner, cam, L: LightGPU,
     return edge_counters(counters, edge, gb), hits
 
 
-def vsm_stencil_pass(p, gb, dm, cam, may_shadow: int, device: str, counters: dict) -> wp.array:
-    """The ``vsm`` stencil of one light from its depth map ``dm`` (mip-mapped moments)."""
+def vsm_stencil_pass(p, gb, dm, cam, may_shadow: int, device: str, counters: dict, inner=None,
+                     cutouts: Surfaces | None = None) -> tuple[wp.array, wp.array]:
+    """The ``vsm`` stencil of one light from its depth map ``dm`` (mip-mapped moments; ``inner``:
+    an inner-coverage map of the same view, whose moments the certainly-shadowed bound reads
+    instead; ``cutouts``: the scene's, to flag every pixel next to another surface as well,
+    :func:`~wsoft.techniques.izb.samples.mixed_pixels`): (the stencil, the verdicts of
+    :func:`edge_stencil`)."""
     v = dm.view
     pyr, offs = build_moments_pyramid(dm.depth, v.near, v.far, device)
+    pyr_sh = pyr
+    if inner is not None:
+        iv = inner.view
+        if (iv.width, iv.height, tuple(np.ravel(iv.window)), iv.near, iv.far) != (v.width, v.height, tuple(np.ravel(v.window)), v.near, v.far):
+            raise ValueError("the stencil's inner-coverage map is not in its depth map's view")
+        pyr_sh, _ = build_moments_pyramid(inner.depth, v.near, v.far, device)
     edge = wp.empty(gb.count, dtype=wp.int32, device=device)
+    verdict = wp.empty(gb.count, dtype=wp.int32, device=device)
     scale = 1.0 / (v.far - v.near) if v.far > v.near else 1.0
     launch_chunked(edge_stencil, gb.count,
-                   inputs=[gb.gpu(), cam, v.gpu(), pyr, wp.array(offs, dtype=wp.int32, device=device), len(offs) - 1,
+                   inputs=[gb.gpu(), cam, v.gpu(), pyr, pyr_sh, wp.array(offs, dtype=wp.int32, device=device), len(offs) - 1,
                            p.shadow_map_size, scale, p.edge_threshold, p.min_variance, p.stencil_bias,
                            int(p.stencil_rule == "listing"), may_shadow],
-                   outputs=[edge], device=device)
-    return edge_counters(counters, edge, gb)
+                   outputs=[edge, verdict], device=device)
+    if cutouts is not None:
+        mixed = wp.empty(gb.count, dtype=wp.int32, device=device)
+        launch_chunked(mixed_pixels, gb.count, inputs=[gb.gpu(), cutouts], outputs=[mixed], device=device)
+        mh = mixed.numpy() != 0
+        counters["mixed_pixels_flagged"] = int((mh & (edge.numpy() == 0)).sum())
+        edge = wp.array((edge.numpy() != 0) | mh, dtype=wp.int32, device=device)
+    vh = verdict.numpy()
+    counters["certainly_lit_pixels"] = int(((vh & 1) != 0).sum())
+    counters["certainly_shadowed_pixels"] = int(((vh & 2) != 0).sum())
+    return edge_counters(counters, edge, gb), verdict
