@@ -148,3 +148,19 @@ def test_a_second_thread_count_is_refused():
     assert "LP_NUM_THREADS" in llvmpipe.unavailable(n + 1)
     assert llvmpipe.unavailable(n) is None
     assert "llvmpipe" in llvmpipe.context_info()["renderer"]
+
+
+def test_only_the_rows_asked_for_run(monkeypatch, tmp_path):
+    """``python -m wsoft.bench.foundation --only KIND`` runs only that kind's missing rows, then reports every row held."""
+    from wsoft.bench import foundation
+
+    ran = []
+    monkeypatch.setattr(foundation, "cases", lambda quick, devices: [{"kind": "a", "n": 1}, {"kind": "b", "n": 2}, {"kind": "b", "n": 3}])
+    monkeypatch.setattr(foundation, "run_case", lambda case, ctx: ran.append(case["n"]) or {"n": case["n"]})
+    reported = []
+    monkeypatch.setattr(foundation, "report", lambda rows, md, ctx: reported.append(sorted(r["n"] for r in rows)))
+    assert foundation.run_only(["b"], out_dir=str(tmp_path)) == 0
+    assert ran == [2, 3] and reported == [[2, 3]]
+    assert foundation.run_only(["a", "b"], out_dir=str(tmp_path)) == 0
+    assert ran == [2, 3, 1] and reported[-1] == [1, 2, 3]  # the rows held are not run again
+    assert foundation.run_only(["c"], out_dir=str(tmp_path)) == 2
