@@ -84,6 +84,9 @@ def cases(quick: bool, devices: list[str]) -> list[dict]:
                 for scene, light, rounds in LLVMPIPE_VIEWS:
                     out.append({"kind": "raster_llvmpipe", "scene": scene, "light": light, "size": 2048, "width": 320, "height": 240,
                                 "rounds": rounds, "device": dev})
+                for size in (512, 2048):
+                    out.append({"kind": "raster_llvmpipe_fill", "scene": "contact", "light": None, "size": size, "width": 320, "height": 240,
+                                "rounds": 7, "device": dev})
     return out
 
 
@@ -93,7 +96,8 @@ LLVMPIPE_VIEWS = [("city", "Sun", 7), ("city", "Rect", 7), ("forest", "Sun", 3),
 
 def run_case(case: dict, ctx: dict) -> dict:
     return {"render": render_row, "raster_vs_raycast": _raster_vs_raycast, "ray_throughput": _throughput, "reference_frame": _reference_frame,
-            "raster_baseline": _raster_baseline, "raster_bound": _raster_bound, "raster_llvmpipe": _raster_llvmpipe}[case["kind"]](case, ctx)
+            "raster_baseline": _raster_baseline, "raster_bound": _raster_bound, "raster_llvmpipe": _raster_llvmpipe,
+            "raster_llvmpipe_fill": _raster_llvmpipe_fill}[case["kind"]](case, ctx)
 
 
 # -- rows --------------------------------------------------------------------------------------
@@ -457,6 +461,83 @@ def _raster_llvmpipe(case: dict, ctx: dict) -> dict:
     return out
 
 
+def _large_triangles(ds, view, triangles: np.ndarray) -> np.ndarray:
+    """Which of the soup's ``triangles`` the CPU rasterizer draws in its banded pass for large
+    triangles: a texel box (clipped to the map) over ``BIG_TRIANGLE_TEXELS``, or crossing a
+    perspective view's near plane (far faces of closed surfaces included: the rasterizer culls
+    them before it looks at their box, llvmpipe draws them)."""
+    from wsoft.raster.rasterizer import BIG_TRIANGLE_TEXELS
+
+    idx = ds.indices.numpy().reshape(-1, 3)[triangles]
+    v = view.to_view(ds.points.numpy().astype(np.float64))[idx]  # [T, 3 corners, 3]
+    z = v[..., 2]
+    crossing = np.zeros(len(idx), bool)
+    if view.persp:
+        crossing = (z.min(axis=1) < view.near) & (z.max(axis=1) >= view.near)
+        v = v[..., :2] / np.where(z > 0, z, 1.0)[..., None]
+    l, r, b, t = view.window
+    x = (v[..., 0] - l) / (r - l) * view.width
+    y = (v[..., 1] - b) / (t - b) * view.height
+    bw = np.minimum(x.max(axis=1), view.width) - np.maximum(x.min(axis=1), 0.0)
+    bh = np.minimum(y.max(axis=1), view.height) - np.maximum(y.min(axis=1), 0.0)
+    return crossing | ((bw >= 0) & (bh >= 0) & (bw * bh > BIG_TRIANGLE_TEXELS))
+
+
+def _raster_llvmpipe_fill(case: dict, ctx: dict) -> dict:
+    """Where the time of a map of few large triangles goes, beside llvmpipe: the row's map drawn
+    whole, its large triangles only (:func:`_large_triangles`), the others only, and no triangle
+    (the map's clear and set-up), each by both, in ``case["rounds"]`` rounds whose order turns from
+    round to round (medians); the texels each draws (its depth map's coverage)."""
+    import statistics
+
+    import warp as wp
+
+    from wsoft.bench import llvmpipe
+    from wsoft.lightspace.view import DEPTH_CLEAR
+    from wsoft.parallel import cpu_threads
+    from wsoft.raster.depth_map import rasterize
+
+    threads = cpu_threads()
+    scene = load(case["scene"])
+    light = scene.find_light(case["light"]) if case["light"] else scene.lights[0]
+    row = {"scene": case["scene"], "light": light.path, "device": case["device"], "size": case["size"], "threads": threads,
+           "triangles": scene.total_triangles}
+    reason = llvmpipe.unavailable(threads)
+    if reason:
+        return row | {"skipped": reason}
+    if scene.instanced:
+        return row | {"skipped": "an instanced stage (its maps draw every triangle)"}
+    ds, view, alpha, casting, _ = _depth_pass_inputs(case, scene, light)
+    tris = np.arange(scene.triangle_count, dtype=np.int32) if casting is None else np.asarray(casting, np.int32)
+    large = _large_triangles(ds, view, tris)
+    sets = {"all": tris, "large": tris[large], "small": tris[~large], "none": tris[:0]}
+    peers = {k: llvmpipe.LlvmpipeDepthMap(ds, view, alpha_tested=alpha, triangles=v, threads=threads) for k, v in sets.items()}
+    jobs = {}
+    for k, v in sets.items():
+        jobs[f"wsoft_{k}"] = lambda v=v: rasterize(ds, view, alpha_tested=alpha, triangles=v)
+        jobs[f"llvmpipe_{k}"] = peers[k].draw
+
+    def clock(fn):
+        wp.synchronize()
+        t0 = time.perf_counter()
+        fn()
+        wp.synchronize()
+        return 1e3 * (time.perf_counter() - t0)
+
+    covered = {k: int((rasterize(ds, view, alpha_tested=alpha, triangles=v).depth.numpy() < DEPTH_CLEAR).sum()) for k, v in sets.items()}
+    for p in peers.values():
+        p.draw()
+    names = list(jobs)
+    times = {n: [] for n in names}
+    for k in range(case["rounds"]):
+        for n in names[k % len(names):] + names[: k % len(names)]:
+            times[n].append(clock(jobs[n]))
+    for p in peers.values():
+        p.release()
+    return row | {"large": int(large.sum()), "small": int((~large).sum()), "covered": covered,
+                  **{f"{n}_ms": statistics.median(v) for n, v in times.items()}, **{f"{n}_ms_runs": v for n, v in times.items()}}
+
+
 def _llvmpipe_section(rows: list[dict]) -> list[str]:
     """The report's rows of the light depth map beside llvmpipe."""
     if not rows:
@@ -500,6 +581,39 @@ def _llvmpipe_section(rows: list[dict]) -> list[str]:
         odd = [r for r in done if not r["map_is_the_pass_map"]]
         if odd:
             L.append("The timed call's map differs from the render pass's on " + ", ".join(f"{r['scene']} {r['light'].split('/')[-1]}" for r in odd) + ".")
+    return L
+
+
+def _llvmpipe_fill_section(rows: list[dict]) -> list[str]:
+    """The report's rows of where a fill-bound map's time goes, beside llvmpipe."""
+    if not rows:
+        return []
+    L = ["", "## Few large triangles beside llvmpipe: where the time goes", ""]
+    L.append("The same comparison on a map that a few large triangles fill (a ground plane under a handful of objects): the map")
+    L.append("drawn whole, its `large` triangles only (texel box over `BIG_TRIANGLE_TEXELS`, or crossing the near plane: the")
+    L.append("rasterizer's banded pass; far faces it culls first included), the `small` ones only, and `none` (the clear and set-up),")
+    L.append("each by both in the same")
+    L.append("alternating rounds (medians). `ns / texel`: (large − none) over the texels the large triangles cover, the fill cost.")
+    L.append("")
+    L.append("| scene | size | threads | triangles (large) | texels covered: all, large, small | wsoft ms: all / large / small / none | "
+             "llvmpipe ms: all / large / small / none | wsoft / llvmpipe (all) | fill ns / texel: wsoft, llvmpipe | load |")
+    L.append("|---|---|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        if "skipped" in r:
+            L.append(f"| {r['scene']} | {r['size']} | {r['threads']} | skipped: {r['skipped']} | | | | | | |")
+            continue
+        c = r["covered"]
+        w = " / ".join(f"{r[f'wsoft_{k}_ms']:.1f}" for k in ("all", "large", "small", "none"))
+        g = " / ".join(f"{r[f'llvmpipe_{k}_ms']:.1f}" for k in ("all", "large", "small", "none"))
+        fill = [1e6 * (r[f"{s}_large_ms"] - r[f"{s}_none_ms"]) / max(c["large"], 1) for s in ("wsoft", "llvmpipe")]
+        L.append(f"| {r['scene']} | {r['size']} | {r['threads']} | {r['triangles']:,} ({r['large']}) | {c['all']:,}, {c['large']:,}, {c['small']:,} | "
+                 f"{w} | {g} | {r['wsoft_all_ms'] / r['llvmpipe_all_ms']:.2f} | {fill[0]:.1f}, {fill[1]:.1f} | {r['machine']['load']:.1f} |")
+    done = [r for r in rows if "skipped" not in r]
+    if done:
+        L += ["", "Per row: " + "; ".join(
+            f"{r['scene']} {r['size']}²: the large triangles alone take {r['wsoft_large_ms'] / r['wsoft_all_ms']:.0%} of wsoft's time for the whole "
+            f"map, and wsoft fills a texel in {(r['wsoft_large_ms'] - r['wsoft_none_ms']) / max(r['llvmpipe_large_ms'] - r['llvmpipe_none_ms'], 1e-9):.1f}× "
+            f"llvmpipe's time" for r in done) + "."]
     return L
 
 
@@ -797,6 +911,7 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
                      f"that 15x allows ({r['draw_ms'] / (r['ray_ms'] / 15):.2f} of it), before the clears, the merge, the projection and the large "
                      f"triangles the rasterizer also pays for; its small-box triangles alone take {r['small_ms']:.1f} ms ({r['small_ms'] / (r['ray_ms'] / 15):.2f} of it).")
     L += _llvmpipe_section([r for r in rows if r["case"]["kind"] == "raster_llvmpipe"])
+    L += _llvmpipe_fill_section([r for r in rows if r["case"]["kind"] == "raster_llvmpipe_fill"])
     # CPU utilisation of the heavy passes inside renders
     util = []
     for r in renders:

@@ -164,3 +164,24 @@ def test_only_the_rows_asked_for_run(monkeypatch, tmp_path):
     assert foundation.run_only(["a", "b"], out_dir=str(tmp_path)) == 0
     assert ran == [2, 3, 1] and reported[-1] == [1, 2, 3]  # the rows held are not run again
     assert foundation.run_only(["c"], out_dir=str(tmp_path)) == 2
+
+
+def test_large_triangles_are_the_banded_passes():
+    """The fill row's `large` set is what the CPU rasterizer draws in its banded pass for large triangles (its own
+    count), but for far faces of closed surfaces, which it culls first (and llvmpipe draws)."""
+    from wsoft.bench.foundation import _depth_pass_inputs, _large_triangles
+    from wsoft.bench.harness import load
+    from wsoft.raster.depth_map import rasterize
+
+    scene = load("contact")
+    ds, view, alpha, _, _ = _depth_pass_inputs({"width": 96, "height": 72, "size": 512, "device": "cpu"}, scene, scene.lights[0])
+    tris = np.arange(scene.triangle_count, dtype=np.int32)
+    large = _large_triangles(ds, view, tris)
+    assert 0 < large.sum() < 10
+    assert rasterize(ds, view, alpha, triangles=tris[~large]).big_triangles == 0
+    banded = culled = 0
+    for t in tris[large]:
+        m = rasterize(ds, view, alpha, triangles=np.array([t], np.int32))
+        banded += m.big_triangles
+        culled += m.big_triangles == 0 and not (m.depth.numpy() < DEPTH_CLEAR).any()
+    assert banded >= 1 and banded + culled == large.sum()
