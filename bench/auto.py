@@ -2,7 +2,8 @@
 
 Rows: per frame of ``wsoft bench pareto`` (its scenes, lights, camera and size, :func:`wsoft.bench.pareto.cases`) the
 light's features (:func:`wsoft.auto.features.light_features`: cheap, before any technique renders),
-stored beside the pareto rows they are joined with. The report fits the model
+stored beside the pareto rows they are joined with, and per sequence of ``wsoft bench temporal``
+(:func:`wsoft.bench.temporal.cases`) its first frame's (``sweep: temporal``), for the flicker model. The report fits the model
 (:mod:`wsoft.auto.model`) once per bundled scene with that scene left out and lets it choose on
 that scene's frames, for three budgets (the fastest setting's measured time x 1.2, x 2, x 5) and
 three error targets (0.1, 0.05, 0.02), against the best fixed setting of the same rows
@@ -26,6 +27,10 @@ def cases(quick: bool, devices: list[str]) -> list[dict]:
     frames = pareto.cases(quick, devices)
     out = [{"kind": "features", "scene": c["scene"], "light": c["light"], "device": c["device"], "width": c["width"],
             "height": c["height"], "quick": quick} for c in frames]
+    from wsoft.bench import temporal
+
+    out += [{"kind": "features", "sweep": "temporal", "scene": c["scene"], "light": c["light"], "device": c["device"], "width": c["width"],
+             "height": c["height"], "frames": c["frames"], "quick": quick} for c in temporal.cases(quick, devices)]
     out += [{"kind": "render", "scene": c["scene"], "light": c["light"], "device": c["device"], "width": c["width"], "height": c["height"],
              "budget_ms": b, "quick": quick} for c in frames if c["scene"] in RENDERED for b in RENDER_BUDGETS]
     return out
@@ -39,11 +44,20 @@ def run_case(case: dict, ctx: dict) -> dict:
     from wsoft.auto.features import light_features
     from wsoft.bench.harness import load
 
-    scene = load(case["scene"])
+    if case.get("sweep") == "temporal":
+        from wsoft.auto.calibrate import first_time
+        from wsoft.bench.harness import scene_file
+        from wsoft.pipeline import load_stage
+
+        t = first_time(case)
+        scene = load_stage(scene_file(case["scene"]), time=t)
+        extra = {"sweep": "temporal", "time": t}
+    else:
+        scene, extra = load(case["scene"]), {}
     t0 = time.perf_counter()
     f = light_features(scene, case["light"], width=case["width"], height=case["height"], device=case["device"])
     return {"kind": "features", "scene": case["scene"], "light": case["light"], "device": case["device"], "width": case["width"],
-            "height": case["height"], "features": f, "features_ms": round(1e3 * (time.perf_counter() - t0), 1)}
+            "height": case["height"], **extra, "features": f, "features_ms": round(1e3 * (time.perf_counter() - t0), 1)}
 
 
 def render_case(case: dict, ctx: dict) -> dict:
@@ -101,7 +115,8 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
 
     L = report_header("auto", rows, md, ctx)
     pareto = read_rows(md.parent / ("pareto-quick.jsonl" if ctx.get("quick") else "pareto.jsonl"))
-    L += report_lines(pareto, [r for r in rows if r.get("kind", "features") == "features"], ctx)
+    seqs = read_rows(md.parent / ("temporal-quick.jsonl" if ctx.get("quick") else "temporal.jsonl"))
+    L += report_lines(pareto, [r for r in rows if r.get("kind", "features") == "features"], ctx, temporal_rows=seqs)
     rendered = [r for r in rows if r.get("kind") == "render"]
     if rendered:
         L += ["", "## Rendered through `--technique auto` (held out)", "",
