@@ -3,7 +3,7 @@
 Rows: per frame of ``wsoft bench pareto`` (its scenes, lights, camera and size, :func:`wsoft.bench.pareto.cases`) the
 light's features (:func:`wsoft.auto.features.light_features`: cheap, before any technique renders),
 stored beside the pareto rows they are joined with, and per sequence of ``wsoft bench temporal``
-(:func:`wsoft.bench.temporal.cases`) its first frame's (``sweep: temporal``), for the flicker model. The report fits the model
+(:func:`wsoft.bench.temporal.cases`) its first frame's (``source: temporal``), for the flicker model. The report fits the model
 (:mod:`wsoft.auto.model`) once per bundled scene with that scene left out and lets it choose on
 that scene's frames, for three budgets (the fastest setting's measured time x 1.2, x 2, x 5) and
 three error targets (0.1, 0.05, 0.02), against the best fixed setting of the same rows
@@ -29,7 +29,7 @@ def cases(quick: bool, devices: list[str]) -> list[dict]:
             "height": c["height"], "quick": quick} for c in frames]
     from wsoft.bench import temporal
 
-    out += [{"kind": "features", "sweep": "temporal", "scene": c["scene"], "light": c["light"], "device": c["device"], "width": c["width"],
+    out += [{"kind": "features", "source": "temporal", "scene": c["scene"], "light": c["light"], "device": c["device"], "width": c["width"],
              "height": c["height"], "frames": c["frames"], "quick": quick} for c in temporal.cases(quick, devices)]
     out += [{"kind": "render", "scene": c["scene"], "light": c["light"], "device": c["device"], "width": c["width"], "height": c["height"],
              "budget_ms": b, "quick": quick} for c in frames if c["scene"] in RENDERED for b in RENDER_BUDGETS]
@@ -44,14 +44,14 @@ def run_case(case: dict, ctx: dict) -> dict:
     from wsoft.auto.features import light_features
     from wsoft.bench.harness import load
 
-    if case.get("sweep") == "temporal":
+    if case.get("source") == "temporal":
         from wsoft.auto.calibrate import first_time
         from wsoft.bench.harness import scene_file
         from wsoft.pipeline import load_stage
 
         t = first_time(case)
         scene = load_stage(scene_file(case["scene"]), time=t)
-        extra = {"sweep": "temporal", "time": t}
+        extra = {"source": "temporal", "time": t}
     else:
         scene, extra = load(case["scene"]), {}
     t0 = time.perf_counter()
@@ -110,13 +110,18 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
     import statistics
 
     from wsoft.auto.evaluate import report_lines
+    from wsoft.auto.model import merge_rows
     from wsoft.bench.common import report_header
     from wsoft.bench.harness import read_rows
 
     L = report_header("auto", rows, md, ctx)
     pareto = read_rows(md.parent / ("pareto-quick.jsonl" if ctx.get("quick") else "pareto.jsonl"))
     seqs = read_rows(md.parent / ("temporal-quick.jsonl" if ctx.get("quick") else "temporal.jsonl"))
+    modern = read_rows(md.parent / ("modern-quick.jsonl" if ctx.get("quick") else "modern.jsonl"))
+    pareto, added = merge_rows(pareto, modern)  # as wsoft calibrate --modern does
     L += report_lines(pareto, [r for r in rows if r.get("kind", "features") == "features"], ctx, temporal_rows=seqs)
+    L += ["", f"`modern.jsonl`: {added} of its entries joined the pareto row of their frame (those the row lacks; "
+          "`wsoft calibrate --modern` adds the same)."]
     rendered = [r for r in rows if r.get("kind") == "render"]
     if rendered:
         L += ["", "## Rendered through `--technique auto` (held out)", "",

@@ -247,7 +247,7 @@ def test_calibrate_fits_the_flicker_model_to_moving_sequences_and_merges_modern_
 
     feats = [{"scene": s, "light": "/L", "features": dict(light_features_stub(), penumbra_px=p, shadowed_fraction=0.01 * p)}
              for s, p in (("a", 2.0), ("b", 6.0), ("c", 20.0))]
-    seq = [dict(f, sweep="temporal", scene="seq_" + f["scene"]) for f in feats]
+    seq = [dict(f, source="temporal", scene="seq_" + f["scene"]) for f in feats]
 
     def entry(t, params, ms, err, flip=None):
         return {"technique": t, "params": params, "frame_ms": ms, "error": {"mae_penumbra": err, "mae": err, "penumbra_pixels": 5, "flip": flip}}

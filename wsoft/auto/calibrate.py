@@ -38,7 +38,7 @@ def first_time(row: dict) -> float | None:
 
 def frame_features(rows: list[dict], device: str = "cpu", sweep: str | None = None) -> list[dict]:
     """Features of every frame of ``rows`` (their scene, light and size; a sequence's at its first
-    time code), as ``wsoft bench auto`` stores them (``sweep``: ``temporal`` for sequences' rows)."""
+    time code), as ``wsoft bench auto`` stores them (``sweep``: ``temporal`` for sequences' rows, stored as ``source``)."""
     from wsoft.auto.features import light_features
     from wsoft.bench.harness import scene_file
     from wsoft.pipeline import load_stage
@@ -49,13 +49,13 @@ def frame_features(rows: list[dict], device: str = "cpu", sweep: str | None = No
         if (r["scene"], t) not in scenes:
             scenes[(r["scene"], t)] = load_stage(scene_file(r["scene"]), time=t)  # a bundled stage's name, or a path
         f = light_features(scenes[(r["scene"], t)], r["light"], width=r["width"], height=r["height"], device=device)
-        out.append({"kind": "features", "scene": r["scene"], "light": r["light"], "features": f, **({"sweep": sweep, "time": t} if sweep else {})})
+        out.append({"kind": "features", "scene": r["scene"], "light": r["light"], "features": f, **({"source": sweep, "time": t} if sweep else {})})
     return out
 
 
 def missing_features(rows: list[dict], features: list[dict], sweep: str | None, device: str) -> list[dict]:
     """``features`` and those of the frames of ``rows`` it lacks (computed)."""
-    have = {(f["scene"], f["light"]) for f in features if "features" in f and (f.get("sweep") == "temporal") == (sweep == "temporal")}
+    have = {(f["scene"], f["light"]) for f in features if "features" in f and (f.get("source") == "temporal") == (sweep == "temporal")}
     todo = [r for r in rows if (r["scene"], r["light"]) not in have]
     return features + (frame_features(todo, device, sweep) if todo else [])
 

@@ -223,6 +223,6 @@ def _auto_class():
 
 
 def auto_technique(params: dict):
-    """An ``auto`` technique instance from ``{budget_ms | target_error, model}`` (unknown keys are errors)."""
+    """An ``auto`` technique instance from ``{budget_ms | target_error | target_flip | target_flicker, model}`` (unknown keys are errors)."""
     cls = _auto_class()
     return cls(cls.make_params(params))

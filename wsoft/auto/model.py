@@ -85,7 +85,7 @@ def training_frames(rows: list[dict], features: list[dict]) -> list[dict]:
     """Sweep rows (``wsoft bench pareto``'s) joined with their features (rows of ``wsoft bench
     auto``: ``scene``, ``light``, ``features``) by scene and light: per frame the transformed features
     and, per setting, its measured time (ms) and error. Rows without features are left out."""
-    feats = {(f["scene"], f["light"]): f["features"] for f in features if "features" in f and f.get("sweep") != "temporal"}
+    feats = {(f["scene"], f["light"]): f["features"] for f in features if "features" in f and f.get("source") != "temporal"}
     out = []
     for r in rows:
         f = feats.get((r["scene"], r["light"]))
@@ -123,11 +123,11 @@ def merge_rows(rows: list[dict], extra: list[dict]) -> tuple[list[dict], int]:
 
 def temporal_frames(rows: list[dict], features: list[dict]) -> list[dict]:
     """``wsoft bench temporal``'s rows joined with their first frame's features (rows of ``wsoft bench
-    auto`` with ``sweep: temporal``): per moving sequence, each setting's frame time (median over the
+    auto`` with ``source: temporal``): per moving sequence, each setting's frame time (median over the
     frames), flicker, mean penumbra MAE and ꟻLIP. A still sequence (``static``) is left out: the
     features of one frame cannot tell it from a moving one, and its flicker is only the stochastic
     techniques' crawl (0 for every other), which would pull every prediction towards 0."""
-    feats = {(f["scene"], f["light"]): f["features"] for f in features if "features" in f and f.get("sweep") == "temporal"}
+    feats = {(f["scene"], f["light"]): f["features"] for f in features if "features" in f and f.get("source") == "temporal"}
     out = []
     for r in rows:
         f = feats.get((r["scene"], r["light"]))
