@@ -19,6 +19,7 @@ from pathlib import Path
 REPORT = "auto"
 RENDERED = ("box_plane", "contact", "cutout", "penumbra_ramp")  # small stages rendered through --technique auto
 RENDER_BUDGETS = (100.0, 500.0)
+_METHODS: dict = {}  # (pareto rows file, its modification time, frames) -> the predictors the held-out comparison picks
 
 
 def cases(quick: bool, devices: list[str]) -> list[dict]:
@@ -81,7 +82,11 @@ def render_case(case: dict, ctx: dict) -> dict:
         from wsoft.errors import ParameterError
 
         raise ParameterError(f"{case['scene']} {case['light']}: no pareto row with features (run wsoft bench pareto, then this sweep again)")
-    method = best_method(compare_methods(frames))
+    src = out / f"{stem}.jsonl"
+    ident = (str(src), src.stat().st_mtime_ns, len(frames))
+    if ident not in _METHODS:  # the held-out comparison, once per rows file and process (it refits every scene)
+        _METHODS[ident] = best_method(compare_methods(frames))
+    method = _METHODS[ident]
     m = fit([f for f in frames if f["scene"] != case["scene"]], method=method)
     scene = load(case["scene"])
     with tempfile.TemporaryDirectory() as tmp:
