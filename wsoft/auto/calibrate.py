@@ -40,14 +40,14 @@ def frame_features(rows: list[dict], device: str = "cpu", sweep: str | None = No
     """Features of every frame of ``rows`` (their scene, light and size; a sequence's at its first
     time code), as ``wsoft bench auto`` stores them (``sweep``: ``temporal`` for sequences' rows, stored as ``source``)."""
     from wsoft.auto.features import light_features
-    from wsoft.bench.harness import scene_file
     from wsoft.pipeline import load_stage
+    from wsoft.usd_scenes import resolve
 
     out, scenes = [], {}
     for r in rows:
         t = first_time(r) if sweep == "temporal" else None
         if (r["scene"], t) not in scenes:
-            scenes[(r["scene"], t)] = load_stage(scene_file(r["scene"]), time=t)  # a bundled stage's name, or a path
+            scenes[(r["scene"], t)] = load_stage(resolve(r["scene"]), time=t)  # a bundled stage's name, or a path
         f = light_features(scenes[(r["scene"], t)], r["light"], width=r["width"], height=r["height"], device=device)
         out.append({"kind": "features", "scene": r["scene"], "light": r["light"], "features": f, **({"source": sweep, "time": t} if sweep else {})})
     return out
