@@ -2,7 +2,8 @@
 
 Rows: per frame of ``wsoft bench pareto`` (its scenes, lights, camera and size, :func:`wsoft.bench.pareto.cases`) the
 light's features (:func:`wsoft.auto.features.light_features`: cheap, before any technique renders),
-stored beside the pareto rows they are joined with. The report fits the model
+stored beside the pareto rows they are joined with, and per sequence of ``wsoft bench temporal``
+(:func:`wsoft.bench.temporal.cases`) its first frame's (``source: temporal``), for the flicker model. The report fits the model
 (:mod:`wsoft.auto.model`) once per bundled scene with that scene left out and lets it choose on
 that scene's frames, for three budgets (the fastest setting's measured time x 1.2, x 2, x 5) and
 three error targets (0.1, 0.05, 0.02), against the best fixed setting of the same rows
@@ -18,6 +19,7 @@ from pathlib import Path
 REPORT = "auto"
 RENDERED = ("box_plane", "contact", "cutout", "penumbra_ramp")  # small stages rendered through --technique auto
 RENDER_BUDGETS = (100.0, 500.0)
+_METHODS: dict = {}  # (pareto rows file, its modification time, frames) -> the predictors the held-out comparison picks
 
 
 def cases(quick: bool, devices: list[str]) -> list[dict]:
@@ -26,6 +28,10 @@ def cases(quick: bool, devices: list[str]) -> list[dict]:
     frames = pareto.cases(quick, devices)
     out = [{"kind": "features", "scene": c["scene"], "light": c["light"], "device": c["device"], "width": c["width"],
             "height": c["height"], "quick": quick} for c in frames]
+    from wsoft.bench import temporal
+
+    out += [{"kind": "features", "source": "temporal", "scene": c["scene"], "light": c["light"], "device": c["device"], "width": c["width"],
+             "height": c["height"], "frames": c["frames"], "quick": quick} for c in temporal.cases(quick, devices)]
     out += [{"kind": "render", "scene": c["scene"], "light": c["light"], "device": c["device"], "width": c["width"], "height": c["height"],
              "budget_ms": b, "quick": quick} for c in frames if c["scene"] in RENDERED for b in RENDER_BUDGETS]
     return out
@@ -39,11 +45,20 @@ def run_case(case: dict, ctx: dict) -> dict:
     from wsoft.auto.features import light_features
     from wsoft.bench.harness import load
 
-    scene = load(case["scene"])
+    if case.get("source") == "temporal":
+        from wsoft.auto.calibrate import first_time
+        from wsoft.bench.harness import scene_file
+        from wsoft.pipeline import load_stage
+
+        t = first_time(case)
+        scene = load_stage(scene_file(case["scene"]), time=t)
+        extra = {"source": "temporal", "time": t}
+    else:
+        scene, extra = load(case["scene"]), {}
     t0 = time.perf_counter()
     f = light_features(scene, case["light"], width=case["width"], height=case["height"], device=case["device"])
     return {"kind": "features", "scene": case["scene"], "light": case["light"], "device": case["device"], "width": case["width"],
-            "height": case["height"], "features": f, "features_ms": round(1e3 * (time.perf_counter() - t0), 1)}
+            "height": case["height"], **extra, "features": f, "features_ms": round(1e3 * (time.perf_counter() - t0), 1)}
 
 
 def render_case(case: dict, ctx: dict) -> dict:
@@ -67,7 +82,11 @@ def render_case(case: dict, ctx: dict) -> dict:
         from wsoft.errors import ParameterError
 
         raise ParameterError(f"{case['scene']} {case['light']}: no pareto row with features (run wsoft bench pareto, then this sweep again)")
-    method = best_method(compare_methods(frames))
+    src = out / f"{stem}.jsonl"
+    ident = (str(src), src.stat().st_mtime_ns, len(frames))
+    if ident not in _METHODS:  # the held-out comparison, once per rows file and process (it refits every scene)
+        _METHODS[ident] = best_method(compare_methods(frames))
+    method = _METHODS[ident]
     m = fit([f for f in frames if f["scene"] != case["scene"]], method=method)
     scene = load(case["scene"])
     with tempfile.TemporaryDirectory() as tmp:
@@ -96,12 +115,18 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
     import statistics
 
     from wsoft.auto.evaluate import report_lines
+    from wsoft.auto.model import merge_rows
     from wsoft.bench.common import report_header
     from wsoft.bench.harness import read_rows
 
     L = report_header("auto", rows, md, ctx)
     pareto = read_rows(md.parent / ("pareto-quick.jsonl" if ctx.get("quick") else "pareto.jsonl"))
-    L += report_lines(pareto, [r for r in rows if r.get("kind", "features") == "features"], ctx)
+    seqs = read_rows(md.parent / ("temporal-quick.jsonl" if ctx.get("quick") else "temporal.jsonl"))
+    modern = read_rows(md.parent / ("modern-quick.jsonl" if ctx.get("quick") else "modern.jsonl"))
+    pareto, added = merge_rows(pareto, modern)  # as wsoft calibrate --modern does
+    L += report_lines(pareto, [r for r in rows if r.get("kind", "features") == "features"], ctx, temporal_rows=seqs)
+    L += ["", f"`modern.jsonl`: {added} of its entries joined the pareto row of their frame (those the row lacks; "
+          "`wsoft calibrate --modern` adds the same)."]
     rendered = [r for r in rows if r.get("kind") == "render"]
     if rendered:
         L += ["", "## Rendered through `--technique auto` (held out)", "",

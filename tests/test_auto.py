@@ -185,3 +185,83 @@ def test_calibrate_quick_writes_a_scaled_model_and_bad_arguments_are_one_line(tm
     for bad in ([], ["--rows", str(tmp_path / "none.jsonl")], ["--quick", "--rows", str(out)]):
         r = wsoft_cli("calibrate", *bad)
         assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, (bad, r.stderr)
+
+
+# -- ꟻLIP and flicker targets -------------------------------------------------------------------
+
+
+def test_a_flip_target_picks_the_fastest_setting_whose_flip_bound_reaches_it(box):
+    m, _ = load_model()
+    assert m.method["flip"] in ("loglinear", "nearest") and m.settings("flip")
+    rec = choose(box, box.lights[0], target_flip=0.01, model=m, width=W, height=H).record()
+    assert rec["goal"] == {"target_flip": 0.01} and not rec["warning"]
+    reach = [c for c in rec["candidates"] if c["flip_bound"] <= 0.01]
+    assert 0 < len(reach) < len(rec["candidates"])  # the target splits the candidates
+    assert rec["choice"]["ms_bound"] == min(c["ms_bound"] for c in reach)
+    assert all(c["predicted_flip"] is not None and c["predicted_error"] is not None for c in rec["candidates"])
+
+
+def test_a_flicker_target_has_only_settings_with_flicker_rows_as_candidates_and_says_which_are_not(box):
+    m, _ = load_model()
+    fm = m.flicker
+    assert fm is not None and fm.quantities == ("time", "flicker") and len(fm.data["frames"]) >= 2
+    assert any('"view": "stable"' in k for k in fm.settings())  # temporal's own settings, not the pareto ones
+    # the same model with pcss's flicker rows removed: pcss is no candidate, and the record says why
+    data = json.loads(json.dumps(m.data))
+    data["flicker"]["settings"] = {k: s for k, s in data["flicker"]["settings"].items() if s["technique"] != "pcss"}
+    rec = choose(box, box.lights[0], target_flicker=0.003, model=Model(data), width=W, height=H).record()
+    assert rec["goal"] == {"target_flicker": 0.003}
+    assert "no flicker rows" in rec["not_candidates"]["pcss"]
+    assert all(c["technique"] != "pcss" and c["predicted_flicker"] is not None for c in rec["candidates"])
+    ok = [c for c in rec["candidates"] if c["flicker_bound"] <= 0.003]
+    assert ok and rec["choice"]["ms_bound"] == min(c["ms_bound"] for c in ok)
+    # a model without a flicker model refuses a flicker target in one line
+    data.pop("flicker")
+    with pytest.raises(ParameterError, match="no flicker model") as e:
+        choose(box, box.lights[0], target_flicker=0.003, model=Model(data), width=W, height=H)
+    assert "\n" not in str(e.value)
+
+
+def test_flip_and_flicker_targets_render_and_plan_and_bad_goals_are_one_line_errors(tmp_path, box):
+    f = wsoft.render(box, "auto", target_flicker=0.01, width=W, height=H, device="cpu")
+    rec = f.stats["counters"]["techniques"]["auto"]["Light"]["auto"]
+    assert rec["goal"] == {"target_flicker": 0.01} and rec["choice"]["predicted_flicker"] <= rec["choice"]["flicker_bound"]
+    assert "flicker model" in rec["model"]["predicts"] and (f.V < 0.5).any()
+    r = wsoft_cli("plan", scene_path("box_plane.usda"), "-t", "auto", "--target-flip", "0.02")
+    assert r.returncode == 0, r.stderr
+    assert "auto (target flip 0.02): Light:" in r.stdout and "pred. ꟻLIP" in r.stdout and "pred. flicker" in r.stdout
+    for bad in (["--target-flip", "-0.1"], ["--target-flicker", "nan"], ["--target-flip", "0.02", "--target-flicker", "0.01"],
+                ["--target-error", "0.05", "--budget-ms", "40"]):
+        r = wsoft_cli("render", scene_path("box_plane.usda"), "-t", "auto", *bad, "--out", str(tmp_path / "b.exr"))
+        assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, (bad, r.stderr)
+    for kw in ({"target_flip": float("nan")}, {"target_flicker": -1.0}, {"target_flip": 0.02, "target_flicker": 0.01}):
+        with pytest.raises(ParameterError) as e:
+            wsoft.render(box, "auto", width=W, height=H, device="cpu", **kw)
+        assert "\n" not in str(e.value)
+
+
+def test_calibrate_fits_the_flicker_model_to_moving_sequences_and_merges_modern_entries():
+    """``model_from_rows`` on a few rows: the flicker model leaves a still sequence out, and an entry of
+    a modern row joins the pareto row of the same frame that lacks it."""
+    from wsoft.auto.calibrate import model_from_rows
+
+    feats = [{"scene": s, "light": "/L", "features": dict(light_features_stub(), penumbra_px=p, shadowed_fraction=0.01 * p)}
+             for s, p in (("a", 2.0), ("b", 6.0), ("c", 20.0))]
+    seq = [dict(f, source="temporal", scene="seq_" + f["scene"]) for f in feats]
+
+    def entry(t, params, ms, err, flip=None):
+        return {"technique": t, "params": params, "frame_ms": ms, "error": {"mae_penumbra": err, "mae": err, "penumbra_pixels": 5, "flip": flip}}
+
+    pareto = [{"scene": f["scene"], "light": "/L", "width": 64, "height": 48,
+               "entries": [entry("hard", {"shadow_map_size": 1024}, 10.0 + i, 0.2, 0.01), entry("pcss", {"shadow_map_size": 1024}, 20.0 + i, 0.05, 0.004)]}
+              for i, f in enumerate(feats)]
+    modern = [{"scene": "a", "light": "/L", "width": 64, "height": 48, "entries": [entry("rtdenoise", {}, 30.0, 0.03)]}]
+    temporal = [{"scene": f["scene"], "light": "/L", "static": f["scene"] == "seq_c",
+                 "entries": [{"technique": "hard", "params": {"view": "stable"}, "frame_ms": 9.0, "temporal": {"flicker": 0.002 * (i + 1)}}]}
+                for i, f in enumerate(seq)]
+    m, _ = model_from_rows(pareto, feats + seq, temporal=temporal, modern=modern)
+    assert m.data["source"]["modern_entries_added"] == 1 and m.data["settings"]['rtdenoise{}']["n"] == 1
+    assert "flip_coef" not in m.data["settings"]['rtdenoise{}'] and set(m.settings("flip")) == {'hard{"shadow_map_size": 1024}', 'pcss{"shadow_map_size": 1024}'}
+    fm = m.flicker
+    assert [f["scene"] for f in fm.data["frames"]] == ["seq_a", "seq_b"]  # the still sequence is left out
+    assert 0.001 < fm.predict_q(feats[0]["features"], 'hard{"view": "stable"}', "flicker") < 0.005

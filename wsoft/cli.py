@@ -297,16 +297,23 @@ def cmd_render(args) -> int:
 
 
 def _auto_args(args, technique) -> dict:
-    """``--budget-ms``, ``--target-error``, ``--auto-model`` as ``auto``'s parameters (an error with another technique)."""
+    """``--budget-ms``, ``--target-error``, ``--target-flip``, ``--target-flicker``, ``--auto-model`` as
+    ``auto``'s parameters (an error with another technique, with no goal or two, or a goal that is
+    not a positive finite number)."""
     from wsoft.errors import ParameterError
 
-    given = {k: v for k, v in (("budget_ms", getattr(args, "budget_ms", None)), ("target_error", getattr(args, "target_error", None)),
-                                ("model", getattr(args, "auto_model", None))) if v is not None}
+    goals = ("budget_ms", "target_error", "target_flip", "target_flicker")
+    given = {k: getattr(args, k, None) for k in goals}
+    given["model"] = getattr(args, "auto_model", None)
+    given = {k: v for k, v in given.items() if v is not None}
     if given and technique != "auto":
         raise ParameterError(f"--{next(iter(given)).replace('_', '-').replace('model', 'auto-model')} goes with --technique auto")
-    if technique == "auto" and "budget_ms" not in given and "target_error" not in given:
-        raise ParameterError("--technique auto needs --budget-ms MS or --target-error MAE")
     if technique == "auto":
+        from wsoft.auto.model import goal_of
+
+        if not any(k in given for k in goals):
+            raise ParameterError("--technique auto needs --budget-ms MS, --target-error MAE, --target-flip FLIP or --target-flicker F")
+        goal_of(**{k: given[k] for k in goals if k in given})
         import wsoft.auto  # noqa: F401  (registers technique auto with the pipeline)
     return given
 
@@ -314,9 +321,11 @@ def _auto_args(args, technique) -> dict:
 def _auto_line(light: str, a: dict) -> str:
     """``auto: Light: pcss(...) (predicted 12.0 ms, penumbra MAE 0.031; runner-up ...)``."""
     c, r = a["choice"], a["runner_up"]
-    goal = f"budget {a['goal']['budget_ms']:g} ms" if "budget_ms" in a["goal"] else f"target error {a['goal']['target_error']:g}"
-    return (f"auto ({goal}): {light}: {c['setting']} (predicted {c['predicted_ms']:.1f} ms, error {c['predicted_error']:.4f})"
-            + (f"; runner-up {r['setting']} ({r['predicted_ms']:.1f} ms, {r['predicted_error']:.4f})" if r else "")
+    (k, v), = a["goal"].items()
+    goal = f"budget {v:g} ms" if k == "budget_ms" else f"target {k[len('target_'):]} {v:g}"
+    q = "error" if k in ("budget_ms", "target_error") else k[len("target_"):]
+    return (f"auto ({goal}): {light}: {c['setting']} (predicted {c['predicted_ms']:.1f} ms, {q} {c['predicted_' + q]:.4f})"
+            + (f"; runner-up {r['setting']} ({r['predicted_ms']:.1f} ms, {r['predicted_' + q]:.4f})" if r else "")
             + f"; of {len(a['candidates'])} candidates")
 
 
@@ -475,15 +484,21 @@ def print_auto_plan(light: str, a: dict) -> None:
     """``wsoft plan --technique auto``: a light's features, every candidate's predictions, the choice and the runner-up."""
     print(_auto_line(light, a))
     m = a["model"]
-    print(f"  model: {m['path']} ({m['device_kind']}; time by {m['method']['time']}, error by {m['method']['error']}"
+    print(f"  model: {m['path']} ({m.get('predicts', 'frame model')}; {m['device_kind']}; "
+          + ", ".join(f"{q} by {v}" for q, v in m["method"].items())
           + (f"; times x {m['scale']:.3g}" if m["scale"] != 1.0 else "") + ")" + (f"; {m['note']}" if m["note"] else ""))
     print("  features: " + ", ".join(f"{k} {v:.4g}" for k, v in a["features"].items()))
     if a["warning"]:
         print(f"  warning: {a['warning']}")
-    print(f"  {'candidate':<52} {'pred. ms':>9} {'ms bound':>9} {'pred. error':>11} {'error bound':>11}")
+    for t, why in a.get("not_candidates", {}).items():
+        print(f"  {t}: {why}")
+    num = lambda v, w: f"{v:>{w}.4f}" if v is not None else f"{'-':>{w}}"  # noqa: E731
+    print(f"  {'candidate':<52} {'pred. ms':>9} {'ms bound':>9} {'pred. error':>11} {'error bound':>11} {'pred. ꟻLIP':>10} {'ꟻLIP bound':>10} "
+          f"{'pred. flicker':>13} {'flicker bound':>13}")
     for c in a["candidates"]:
         mark = " <- choice" if c["setting"] == a["choice"]["setting"] else " <- runner-up" if a["runner_up"] and c["setting"] == a["runner_up"]["setting"] else ""
-        print(f"  {c['setting']:<52} {c['predicted_ms']:>9.1f} {c['ms_bound']:>9.1f} {c['predicted_error']:>11.4f} {c['error_bound']:>11.4f}{mark}")
+        print(f"  {c['setting']:<52} {c['predicted_ms']:>9.1f} {c['ms_bound']:>9.1f} {num(c.get('predicted_error'), 11)} {num(c.get('error_bound'), 11)} "
+              f"{num(c.get('predicted_flip'), 10)} {num(c.get('flip_bound'), 10)} {num(c.get('predicted_flicker'), 13)} {num(c.get('flicker_bound'), 13)}{mark}")
 
 
 def cmd_techniques(args) -> int:
@@ -767,13 +782,16 @@ def cmd_calibrate(args) -> int:
 
     if args.quick and args.rows:
         raise ParameterError("calibrate: --quick or --rows, one of the two")
-    for path, what in ((args.rows, "--rows"), (args.features, "--features")):
+    if args.quick and (args.temporal or args.modern):
+        raise ParameterError("calibrate: --temporal and --modern go with --rows, not --quick")
+    for path, what in ((args.rows, "--rows"), (args.features, "--features"), (args.temporal, "--temporal"), (args.modern, "--modern")):
         if path and not os.path.isfile(path):
             raise ParameterError(f"{what} {path}: no such file")
     check_device(args.device)
     if args.out:
         check_output(args.out, "--out")
-    dest, what = calibrate(rows=args.rows, features=args.features, quick=args.quick, device=resolve_device(args.device), out=args.out)
+    dest, what = calibrate(rows=args.rows, features=args.features, quick=args.quick, device=resolve_device(args.device), out=args.out,
+                           temporal=args.temporal, modern=args.modern)
     print(f"wrote {dest}: {what}")
     return 0
 
@@ -945,6 +963,10 @@ def auto_options(p) -> None:
                    "predicted time fits MS (split evenly between the lights)")
     p.add_argument("--target-error", type=float, metavar="MAE", help="with --technique auto: per light, the fastest setting predicted "
                    "to reach penumbra MAE")
+    p.add_argument("--target-flip", type=float, metavar="FLIP", help="with --technique auto: per light, the fastest setting predicted "
+                   "to reach mean ꟻLIP FLIP")
+    p.add_argument("--target-flicker", type=float, metavar="F", help="with --technique auto: per light, the fastest setting with flicker "
+                   "rows (wsoft bench temporal) predicted to flicker by at most F over a sequence")
     p.add_argument("--auto-model", metavar="JSON", help="with --technique auto: the model file (default: the package's for the device "
                    "kind; see wsoft calibrate)")
 
@@ -1080,7 +1102,10 @@ def parser() -> argparse.ArgumentParser:
                        "each quantity by the closer, fitted to every frame. --quick: no sweep, the model's times scaled by measured "
                        "over predicted times of a few settings on a small bundled frame.")
     k.add_argument("--rows", metavar="JSONL", help="a pareto sweep's rows (reports/pareto.jsonl)")
-    k.add_argument("--features", metavar="JSONL", help="their features (reports/auto.jsonl; default: computed)")
+    k.add_argument("--features", metavar="JSONL", help="their features (reports/auto.jsonl; those it lacks are computed)")
+    k.add_argument("--temporal", metavar="JSONL", help="wsoft bench temporal's rows (reports/temporal.jsonl): the flicker model")
+    k.add_argument("--modern", metavar="JSONL", help="wsoft bench modern's rows (reports/modern.jsonl): entries the pareto row of the same "
+                   "frame lacks are added")
     k.add_argument("--quick", action="store_true", help="scale the model's times by a quick measurement instead")
     k.add_argument("--device", help="the device to calibrate for (default: the default device)")
     k.add_argument("--out", metavar="JSON", help="where to write the model (default: the package's model of the device kind)")

@@ -1,9 +1,12 @@
 """``wsoft calibrate``: the auto model rebuilt for a machine.
 
-* From sweep rows (``--rows``: ``wsoft bench pareto``'s, measured on the user's own machine):
-  each frame's features are computed (or read from ``--features``, rows of ``wsoft bench auto``),
-  both predictors are compared scene by scene held out (:mod:`wsoft.auto.evaluate`), each
-  quantity gets the closer one, and the model is fitted to every frame.
+* From sweep rows (``--rows``: ``wsoft bench pareto``'s, measured on the user's own machine; with
+  ``--modern``, ``wsoft bench modern``'s entries the pareto row of the same frame lacks; with
+  ``--temporal``, ``wsoft bench temporal``'s sequences for the flicker model): each frame's
+  features are read from ``--features`` (rows of ``wsoft bench auto``) and computed where that
+  file has none, both predictors are compared scene by scene held out (:mod:`wsoft.auto.evaluate`),
+  each quantity (time, error, ꟻLIP; the flicker model's time and flicker) gets the closer one, and
+  the model is fitted to every frame.
 * Quick (``--quick``): no sweep; one small frame (:data:`QUICK_STAGE`, :data:`QUICK_SIZE`) is
   rendered with a few settings the model knows, and the ratio of their measured to predicted
   times (median) scales the model's times (:func:`quick_scale`): the CPU model on a device kind
@@ -23,34 +26,65 @@ QUICK_SETTINGS = ('hard{"shadow_map_size": 1024}', 'pcss{"shadow_map_size": 1024
 _SCALES: dict = {}
 
 
-def frame_features(rows: list[dict], device: str = "cpu") -> list[dict]:
-    """Features of every frame of ``rows`` (their scene, light and size), as ``wsoft bench auto`` stores them."""
+def first_time(row: dict) -> float | None:
+    """The first time code of a sequence row (``wsoft bench temporal``'s), None for a single frame's."""
+    from wsoft.params import parse_frames
+
+    if "cost" in row and row["cost"].get("time_codes"):
+        return float(row["cost"]["time_codes"][0])
+    frames = (row.get("case") or {}).get("frames") or row.get("frames")
+    return float(parse_frames(frames)[0]) if isinstance(frames, str) else None
+
+
+def frame_features(rows: list[dict], device: str = "cpu", sweep: str | None = None) -> list[dict]:
+    """Features of every frame of ``rows`` (their scene, light and size; a sequence's at its first
+    time code), as ``wsoft bench auto`` stores them (``sweep``: ``temporal`` for sequences' rows, stored as ``source``)."""
     from wsoft.auto.features import light_features
     from wsoft.pipeline import load_stage
+    from wsoft.usd_scenes import resolve
 
     out, scenes = [], {}
     for r in rows:
-        if r["scene"] not in scenes:
-            scenes[r["scene"]] = load_stage(r["scene"])  # a bundled stage's name, or a path
-        f = light_features(scenes[r["scene"]], r["light"], width=r["width"], height=r["height"], device=device)
-        out.append({"scene": r["scene"], "light": r["light"], "features": f})
+        t = first_time(r) if sweep == "temporal" else None
+        if (r["scene"], t) not in scenes:
+            scenes[(r["scene"], t)] = load_stage(resolve(r["scene"]), time=t)  # a bundled stage's name, or a path
+        f = light_features(scenes[(r["scene"], t)], r["light"], width=r["width"], height=r["height"], device=device)
+        out.append({"kind": "features", "scene": r["scene"], "light": r["light"], "features": f, **({"source": sweep, "time": t} if sweep else {})})
     return out
 
 
-def model_from_rows(rows: list[dict], features: list[dict], *, device_kind: str = "cpu", source: dict | None = None,
-                    pixel_exp: float = 1.0):
-    """The model fitted to every frame of ``rows`` (joined with ``features``), each quantity by the
-    predictor that is closer held out; (model, the comparison :func:`wsoft.auto.evaluate.compare_methods` gave)."""
-    from wsoft.auto.evaluate import best_method, compare_methods
-    from wsoft.auto.model import fit, training_frames
+def missing_features(rows: list[dict], features: list[dict], sweep: str | None, device: str) -> list[dict]:
+    """``features`` and those of the frames of ``rows`` it lacks (computed)."""
+    have = {(f["scene"], f["light"]) for f in features if "features" in f and (f.get("source") == "temporal") == (sweep == "temporal")}
+    todo = [r for r in rows if (r["scene"], r["light"]) not in have]
+    return features + (frame_features(todo, device, sweep) if todo else [])
 
+
+def model_from_rows(rows: list[dict], features: list[dict], *, device_kind: str = "cpu", source: dict | None = None,
+                    pixel_exp: float = 1.0, temporal: list[dict] | None = None, modern: list[dict] | None = None):
+    """The model fitted to every frame of ``rows`` (with ``modern``'s entries merged in, joined with
+    ``features``), each quantity by the predictor that is closer held out, and its flicker model
+    fitted to ``temporal``'s moving sequences; (model, the comparison :func:`wsoft.auto.evaluate.compare_methods` gave)."""
+    from wsoft.auto.evaluate import best_method, compare_methods
+    from wsoft.auto.model import SEQUENCE_QUANTITIES, fit, merge_rows, temporal_frames, training_frames
+
+    added = 0
+    if modern:
+        rows, added = merge_rows(rows, modern)
     frames = training_frames(rows, features)
     results = compare_methods(frames)
     method = best_method(results)
-    src = dict(source or {}, frames=len(frames), scenes=sorted({f["scene"] for f in frames}),
-               held_out={f"{t}/{e}": {"time_log": round(r["prediction"]["time_log"], 4), "error_log": round(r["prediction"]["error_log"], 4)}
-                         for (t, e), r in results.items()})
-    return fit(frames, device_kind=device_kind, method=method, source=src, pixel_exponent=pixel_exp), results
+    src = dict(source or {}, frames=len(frames), scenes=sorted({f["scene"] for f in frames}), modern_entries_added=added,
+               held_out={f"{t}/{e}": {k: round(v, 4) for k, v in r["prediction"].items() if k.endswith("_log")} for (t, e), r in results.items()})
+    m = fit(frames, device_kind=device_kind, method=method, source=src, pixel_exponent=pixel_exp)
+    tframes = temporal_frames(temporal or [], features)
+    if len(tframes) >= 2:
+        tres = compare_methods(tframes, SEQUENCE_QUANTITIES)
+        tm = fit(tframes, device_kind=device_kind, method=best_method(tres), pixel_exponent=pixel_exp, quantities=SEQUENCE_QUANTITIES,
+                 source={"frames": len(tframes), "scenes": sorted({f["scene"] for f in tframes}),
+                         "held_out": {f"{t}/{e}": {k: round(v, 4) for k, v in r["prediction"].items() if k.endswith("_log")} for (t, e), r in tres.items()}})
+        m.data["flicker"] = tm.data
+    return m, results
 
 
 def _timed(scene, technique: str, params: dict, w: int, h: int, light: str, device: str, runs: int = 3) -> float:
@@ -131,7 +165,8 @@ def read_rows(path: Path) -> list[dict]:
     return out
 
 
-def calibrate(*, rows: str | None = None, features: str | None = None, quick: bool = False, device: str = "cpu", out: str | None = None) -> tuple[Path, str]:
+def calibrate(*, rows: str | None = None, features: str | None = None, quick: bool = False, device: str = "cpu", out: str | None = None,
+              temporal: str | None = None, modern: str | None = None) -> tuple[Path, str]:
     """Write a model (see the module's docstring) to ``out`` (default the package's for the device's
     kind); (its path, a line saying what was done)."""
     from wsoft.auto.model import device_kind, load_model, model_path
@@ -153,11 +188,24 @@ def calibrate(*, rows: str | None = None, features: str | None = None, quick: bo
     pr = read_rows(Path(rows))
     if not pr:
         raise ParameterError(f"calibrate: {rows}: no rows")
-    fr = read_rows(Path(features)) if features else frame_features(pr, device)
+    tr = read_rows(Path(temporal)) if temporal else []
+    if temporal and not tr:
+        raise ParameterError(f"calibrate: {temporal}: no rows")
+    mr = read_rows(Path(modern)) if modern else []
+    fr = [r for r in read_rows(Path(features)) if "features" in r] if features else []
+    fr = missing_features(pr, fr, None, device)
+    if tr:
+        fr = missing_features(tr, fr, "temporal", device)
     px = pixel_exponent(device)
-    m, results = model_from_rows(pr, fr, device_kind=kind, pixel_exp=px,
+    m, results = model_from_rows(pr, fr, device_kind=kind, pixel_exp=px, temporal=tr, modern=mr,
                                  source={"rows": Path(rows).name, "features": Path(features).name if features else "computed",
+                                         "temporal": Path(temporal).name if temporal else None, "modern": Path(modern).name if modern else None,
                                          "pixel_exponent": {"stage": QUICK_STAGE, "sizes": [list(s) for s in PIXEL_SIZES], "settings": list(QUICK_SETTINGS)}})
     m.save(dest)
+    fm = m.flicker
     return dest, (f"fitted to {len(m.data['frames'])} frames ({len(m.data['settings'])} settings): time by {m.method['time']}, "
-                  f"error by {m.method['error']}; frame time ~ pixels ** {px:.2f} (measured on {QUICK_STAGE})")
+                  f"error by {m.method['error']}, ꟻLIP by {m.method['flip']}; "
+                  + (f"flicker model fitted to {len(fm.data['frames'])} moving sequences ({len(fm.data['settings'])} settings), flicker by "
+                     f"{fm.method['flicker']}; " if fm else "no flicker model (give --temporal); ")
+                  + (f"{m.data['source']['modern_entries_added']} entries of {modern} added; " if modern else "")
+                  + f"frame time ~ pixels ** {px:.2f} (measured on {QUICK_STAGE})")

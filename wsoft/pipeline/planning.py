@@ -70,7 +70,7 @@ def plan(scene, techniques: list[str] | None = None, *, width: int | None = None
     renders of each cylinder light (``cylinder_lights``: its :attr:`~wsoft.techniques.Technique.cylinder_model`);
     for each sphere, point or cylinder light whether the shadow-map techniques draw it as one frustum or
     a cube map, and why (``light_views``, :class:`~wsoft.lightspace.cube.CubeDecision`).
-    ``auto``: the parameters of technique ``auto`` (``budget_ms`` or ``target_error``) when
+    ``auto``: the parameters of technique ``auto`` (one goal: ``budget_ms``, ``target_error``, ``target_flip`` or ``target_flicker``) when
     ``techniques`` names it; ``auto`` in the plan then holds per light its choice's record
     (:meth:`wsoft.auto.choose.Choice.record`: features, candidates' predictions, choice, runner-up)."""
     from wsoft.techniques import TECHNIQUES
