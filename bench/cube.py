@@ -374,6 +374,21 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
                          f"{e['texels']:,} | {e['error']['mae_penumbra']:.4f} | {e['error']['mae']:.4f} | {eq} | {e['depth_ms']:.1f} | "
                          f"{e['frame_ms']:.1f} |")
         L.append("")
+        ratios = []
+        for r in paras:
+            for t in PARABOLOID_TECHS:
+                cube_e = next((e for e in r["entries"] if e["technique"] == t and e["params"]["omni"] == "cube"), None)
+                dp_e = next((e for e in r["entries"] if e["technique"] == t and e["params"]["omni"] == "paraboloid"
+                             and e["params"]["shadow_map_size"] == r["map"]), None)
+                if cube_e and dp_e and cube_e["views"].startswith("cube") and dp_e["views"].startswith("dual"):
+                    ratios.append((f"{r['scene']}/{r['light'].split('/')[-1]} {t}", dp_e["depth_ms"] / cube_e["depth_ms"],
+                                   dp_e["frame_ms"] / cube_e["frame_ms"],
+                                   dp_e["error"]["mae_penumbra"] - cube_e["error"]["mae_penumbra"]))
+        if ratios:
+            L += ["At the cube's size per side, the dual-paraboloid map over the cube map (depth passes' time, frame time; penumbra MAE "
+                  "difference): " + "; ".join(f"{k} {a:.1f}x, {b:.2f}x, {d:+.4f}" for k, a, b, d in ratios) + "." + (" Here the traced "
+                  "hemispheres cost more than rasterizing the cube's faces on every frame, although they hold at most a third of its texels."
+                  if all(a > 1.0 for _, a, _, _ in ratios) else ""), ""]
     if seams:
         r = seams[0]
         L += ["## Seams: guard bands against none", "",
