@@ -242,3 +242,32 @@ def test_fence_mesh_hides_what_the_perforated_fence_hides():
     assert cover.max() == 1  # no strip overlaps another
     want = np.tile(fence_tile(), (nv, nu))  # the tile is symmetric: its orientation does not matter
     assert np.array_equal(cover == 1, want)
+
+
+def test_dcs_alpha_transmittance_scales_the_binary_shadow(device, tmp_path):
+    """``dcs transmittance=alpha`` (the paper's general case): a perforated card whose texture's
+    alpha is 0.4 everywhere lets 0.6 of every light sample it hides through, so per pixel
+    V_alpha = 1 - 0.4 (1 - V_binary) on the same samples (the binary test calls the card opaque,
+    its threshold 0.3 being below the alpha); binary stays the default."""
+    from PIL import Image
+    import wsoft
+    from wsoft.stages.builders import add_camera, add_cutout_material, add_mesh, add_quad, add_rect_light, make_stage
+
+    Image.fromarray(np.full((8, 8, 4), 102, np.uint8)).save(tmp_path / "alpha.png")  # 102 / 255 = 0.4
+    st = make_stage()
+    add_quad(st, "/World/Ground", (0, 0, 0), 4)
+    mat = add_cutout_material(st, "/World/Looks/Card", (0.5, 0.5, 0.5), str(tmp_path / "alpha.png"), threshold=0.3)
+    quad = ([(-0.8, -0.8, 1.0), (0.8, -0.8, 1.0), (0.8, 0.8, 1.0), (-0.8, 0.8, 1.0)], [4], [0, 1, 2, 3])
+    add_mesh(st, "/World/Card", quad, True, mat, st=np.array([(0, 0), (1, 0), (1, 1), (0, 1)], np.float32))
+    add_rect_light(st, "/World/Light", (0, 0, 3), 1.0, 1.0)
+    add_camera(st, "/World/Cam", (0, -4.0, 5.0), (0, 0, 0), focal=20)
+    scene = wsoft.load_scene(st)
+    kw = {"width": 64, "height": 48, "device": device, "samples": 16}
+    binary = wsoft.render(scene, "dcs", **kw)
+    alpha = wsoft.render(scene, "dcs", transmittance="alpha", **kw)
+    assert np.array_equal(wsoft.render(scene, "dcs", transmittance="binary", **kw).V, binary.V)
+    pen = (binary["A"] > 0) & (binary.V > 0.05) & (binary.V < 0.95)
+    assert pen.sum() > 50 and (binary.V < 0.01).sum() > 50  # penumbra and umbra are there
+    assert np.abs(alpha.V - (1.0 - 0.4 * (1.0 - binary.V))).max() < 2e-3
+    with pytest.raises(Exception, match="transmittance"):
+        wsoft.render(scene, "dcs", transmittance="fractional", **kw)

@@ -148,6 +148,24 @@ def sample_blocked(cut: Surfaces, tri: int, st: STriangle, J: wp.mat33, p: wp.ve
     return alpha >= cut.threshold[c]
 
 
+@wp.func
+def sample_transmittance(cut: Surfaces, tri: int, st: STriangle, J: wp.mat33, p: wp.vec3, s: wp.vec3) -> float:
+    """The paper's general case: the share of the light sample ``s`` that triangle ``tri`` lets
+    through to ``p``, ``1 - alpha`` at eq. 5's texture coordinate (alpha clamped to [0, 1]; the
+    material's threshold is not applied), 1 where the segment misses the triangle."""
+    h = sample_bary(J, p, s)
+    if not crosses(h):
+        return 1.0
+    c = cut.tri_cut[tri]
+    if c < 0:
+        return 0.0
+    alpha = cut.opacity[c]
+    t = cut.tex[c]
+    if t >= 0:
+        alpha = sample_alpha(cut, t, sample_texcoord(st, h))
+    return 1.0 - wp.clamp(alpha, 0.0, 1.0)
+
+
 # --------------------------------------------------------------------------- the volume
 
 
