@@ -54,6 +54,7 @@ def cases(quick: bool, devices: list[str]) -> list[dict]:
             for tech in ("dcs", "pwedge"):
                 out.append(base | {"kind": "fig11", "scene": scene, "light": None, "technique": tech, "params": {"samples": 16}, "image": True})
         out.append({"kind": "fence_refs", "device": dev, "width": w, "height": h, "ref_samples": ref})
+        out.append({"kind": "fig11_rounds", "device": dev, "width": w, "height": h, "rounds": 3})
         for scene in (("fence_perforated", "factory") if quick else FIG8_SCENES):
             for light in (_lights(scene)[:1] if quick else _lights(scene)):
                 scene_ref = {"ref_samples": 64 if quick else 256}  # per light of every scene: fewer reference samples
@@ -85,6 +86,8 @@ def run_case(case: dict, ctx: dict) -> dict:
         return _target(case)
     if case["kind"] == "fence_refs":
         return _fence_refs(case)
+    if case["kind"] == "fig11_rounds":
+        return _fig11_rounds(case)
     row = render_row(case, ctx, extra=_off_by if case["kind"] == "overlap" else None)
     row["kind"] = case["kind"]
     return row
@@ -110,6 +113,27 @@ def _fence_refs(case: dict) -> dict:
             "penumbra_pixels": int(pen.sum()), "mean_dv": float(d[both].mean()), "mean_abs_dv": float(np.abs(d[both]).mean()),
             "mean_dv_penumbra": float(d[pen].mean()), "mean_abs_dv_penumbra": float(np.abs(d[pen]).mean()), "max_abs_dv": float(np.abs(d[both]).max()),
             "stderr_mean": float(a["V_stderr"][both].mean())}
+
+
+def _fig11_rounds(case: dict) -> dict:
+    """Fig. 11's ratio in alternating rounds in one process: ``dcs`` (16 samples) on ``fence_mesh``
+    and on ``fence_perforated`` (STSV), one after the other, ``rounds`` times after a warm-up of each."""
+    import wsoft
+    from wsoft.bench.harness import load
+
+    kw = {"width": case["width"], "height": case["height"], "device": case["device"], "samples": 16}
+    scenes = {n: load(n) for n in ("fence_perforated", "fence_mesh")}
+    for s in scenes.values():
+        wsoft.render(s, "dcs", **kw)  # compile and warm
+    times = {n: [] for n in scenes}
+    for _ in range(case["rounds"]):
+        for n, s in scenes.items():
+            t0 = time.perf_counter()
+            wsoft.render(s, "dcs", **kw)
+            times[n].append(1e3 * (time.perf_counter() - t0))
+    ratios = [m / p for m, p in zip(times["fence_mesh"], times["fence_perforated"])]
+    return {"kind": "fig11_rounds", "width": case["width"], "height": case["height"], "times_ms": times, "ratios": ratios,
+            "median_ratio": float(np.median(ratios))}
 
 
 def _target(case: dict) -> dict:
@@ -181,6 +205,13 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
             L += ["", f"Frame time ratio fence_mesh with dcs / fence_perforated with {t} (STSV): **{ratio:.1f}x** (technique passes alone "
                   f"{own:.1f}x); target >= 25x at comparable error: **{'met' if met else 'not met'}** (penumbra MAE "
                   f"{a['error']['mae_penumbra']:.4f} vs {b['error']['mae_penumbra']:.4f})."]
+    for r in by("fig11_rounds"):
+        t = r["times_ms"]
+        L += ["", f"In alternating rounds in one process ({r['width']}x{r['height']}, dcs at 16 samples on both, {len(r['ratios'])} rounds after a "
+              f"warm-up; the rows above time each scene on its own): fence_mesh {', '.join(f'{x:.0f}' for x in t['fence_mesh'])} ms, "
+              f"fence_perforated {', '.join(f'{x:.0f}' for x in t['fence_perforated'])} ms; ratio per round "
+              f"{', '.join(f'{x:.1f}' for x in r['ratios'])}, median **{r['median_ratio']:.1f}x** (target >= 25x: "
+              f"**{'met' if r['median_ratio'] >= 25 else 'not met'}**)."]
     L += ["", "Paper: 90 vs 3.3 fps (27x) on a GPU. Fig. 4's panels (a) pwedge + STSV and (b) dcs + STSV beside the reference are "
           "the fence_perforated images above (only perforated triangles cast there, so the two agree bit for bit); the wedges' "
           "overlap artifact of panel (a) is shown on wedge_overlap below.", "", "## Figs. 8–9: per scene and light", "",
