@@ -5,8 +5,9 @@ their errors against the reference:
 * Fig. 1 (``fig1_plant``): b_mo = 12 without and with blending, b_mo = 5, the 12 -> 5 radial budget map;
 * Fig. 8 (``fig8_tree``): the integer levels a budget of 16 asks for with the HSM, the MSSM without
   and with the over-precision fix, and the YSM;
-* Fig. 12 (``fig1_plant``, ``palm_dino``): micropatches (bitmask) against microrects (area and
-  bitmask) at coarse levels, with the error on the pixels that use levels >= 2;
+* Fig. 12 (``fig1_plant``, ``palm_dino`` and the small stages of :mod:`wsoft.stages.ssm_cases`):
+  micropatches (bitmask) against microrects (area and bitmask, each gather, each depth
+  comparison, each diagonal rule) at coarse levels, with the error on the pixels that use levels >= 2;
 * Fig. 9 (``palm_dino``, 4 samples a pixel): one visibility a pixel without and with the
   neighbour interpolation, the brute-force per-sample version, and what each costs.
 """
@@ -262,10 +263,11 @@ def fig12(case: dict, ctx: dict) -> dict:
               ("micropatches, no gap fill, bitmask", {"occluder": "micropatch", "visibility": "bitmask", "gap_fill": False}),
               ("microrects, area", {"occluder": "microrect", "visibility": "area"}),
               ("microrects, bitmask", {"occluder": "microrect", "visibility": "bitmask"}),
-              ("microrects, bitmask, wide gather", {"occluder": "microrect", "visibility": "bitmask", "gather": "wide"}),
+              ("microrects, bitmask, budget gather", {"occluder": "microrect", "visibility": "bitmask", "gather": "budget"}),
+              ("microrects, bitmask, exact depth comparison", {"occluder": "microrect", "visibility": "bitmask", "microrect_tie": 0.0}),
+              ("microrects, bitmask, exact depth comparison, budget gather", {"occluder": "microrect", "visibility": "bitmask", "microrect_tie": 0.0,
+                                                                              "gather": "budget"}),
               ("microrects, nearest diagonal, bitmask", {"occluder": "microrect", "visibility": "bitmask", "microrect_diagonal": "nearest"}),
-              ("microrects, nearest diagonal, bitmask, wide gather", {"occluder": "microrect", "visibility": "bitmask", "microrect_diagonal": "nearest",
-                                                                    "gather": "wide"}),
               ("microquads, bitmask", {"occluder": "microquad", "visibility": "bitmask"})]
     results, image = {}, None
     for b in case["budgets"]:
@@ -283,7 +285,7 @@ def fig12(case: dict, ctx: dict) -> dict:
             results["coverage_nearest"] = coverage(runs["microrects, nearest diagonal, bitmask"][2]["_maps"], range(1, 7))
         if b == case["budgets"][len(case["budgets"]) // 2] or image is None:
             panels = [("(a) reference", gray(ref["V"], cov))]
-            for (label, _), tag in zip(setups, "bxcdxfxe"):
+            for (label, _), tag in zip(setups, "bxcdxxxfe"):
                 if tag == "x":
                     continue
                 r = res[label]
@@ -437,11 +439,17 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
         L.append("MAE over the whole image, over the reference's penumbra (V in (0.01, 0.99)) and over the backprojecting pixels")
         L.append("whose (smoothed) level is ≥ 2 in the micropatch run; `bias` = mean signed error there (negative: too dark,")
         L.append("over-occlusion). Every occluder type searches the same areas at the same levels (the region grown to the")
-        L.append("micro-occluders' support decides lit / umbra only), and microrects read the (b+1)² cells over the search area")
-        L.append("(`wide gather`: one more cell each side, up to (b+3)², beyond the budget). `plate_rotated`, `plate_holes` and")
-        L.append("`plates_stacked` are the small stages of `wsoft.stages.ssm_cases`: a solid plate turned 30° in the light's view,")
-        L.append("the same with a 4×4 grid of holes (where §5's bounding-box union is expected to lose), two stacked plates.")
-        L.append("`nearest diagonal` is not the paper's merge (`microrect_diagonal=nearest`, see below); every other row follows §5.2.")
+        L.append("micro-occluders' support decides lit / umbra only). Microrects read every microrect whose extent reaches the search")
+        L.append("area: a level-j extent lies within one cell of its reference point, so the (b+1)² cells over the area and one more")
+        L.append("on its +x and +y sides (`gather=extent`, up to (b+2)²); `budget gather` reads the (b+1)² cells alone, as")
+        L.append("micropatches, and misses the extents that reach in from the +x / +y cells (under-occlusion). Merge partners are")
+        L.append("chosen by depth difference with differences within 1e-6 (relative) counted as ties, which go to the first pass")
+        L.append("(`microrect_tie`); `exact depth comparison` (`microrect_tie=0`) lets float32 rounding of a flat occluder's depth pick")
+        L.append("the partners (see below). `plate_aligned`, `plate_rotated`, `plate_holes` and `plates_stacked` are the small stages")
+        L.append("of `wsoft.stages.ssm_cases`: a solid square plate with its edges along the light view's axes, parallel to the ground")
+        L.append("and to the square rect light; the same plate turned 30° in the light's view; that one with a 4×4 grid of holes")
+        L.append("(where §5's bounding-box union is expected to lose); two stacked plates. `nearest diagonal` is not the paper's merge")
+        L.append("(`microrect_diagonal=nearest`, see below); every other row follows §5.2.")
         L += ["", "| scene | b_mo | pixels at levels ≥ 2 | setup | MAE | MAE penumbra | MAE levels ≥ 2 | bias levels ≥ 2 | mean occluders |",
               "|---|---|---|---|---|---|---|---|---|"]
         verdicts = []
@@ -465,16 +473,25 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
         L += ["", "Target: microrects lower error than micropatches (both with bitmasks, same areas and levels).", "",
               "| scene | b_mo | levels ≥ 2: micropatch | §5.2 microrect | nearest-diagonal microrect | penumbra: micropatch | §5.2 microrect | "
               "nearest-diagonal microrect |", "|---|---|---|---|---|---|---|---|"] + verdicts
-        L += ["", "Why §5.2's microrects lose: the second pass merges a diagonal neighbour that the first pass left (its -x-y",
-              "retained neighbour's first-pass extent does not contain it) into the retained microrect at its +x+y corner, whatever",
-              "its depth (\"we then merge with all those level-i neighbors in negative direction ... which have not been aggregated",
-              "yet\"), and the merged depth is the minimum. Next to a caster's edge a ground microrect so takes a caster diagonal and",
-              "the caster's depth; its extent, mostly ground, then occludes at the caster's depth, and the merge choices of the next",
-              "levels (by depth difference) see it as caster and grow it further. `tests/test_ssm.py` measures it on a synthetic",
-              "128² map (a plate turned 30°: at level 4 the §5.2 microrects at the plate's depth cover 6679 ground texels, more than",
-              "the micropatches' 6388). The `nearest diagonal` rows give such a diagonal to whichever of its four retained",
-              "neighbours has the nearest depth (ties in the paper's order); the members still partition the map, no caster texel",
-              "is lost. The paper's text is explicit, so `paper` stays the default and `nearest` is a parameter.", "",
+        L += ["", "What separates the two signs of error on `plate_aligned` at b_mo = 3 (compare the rows above):",
+              "",
+              "* Under-occlusion (positive error) comes from the gather: with `budget gather` a receiver misses the microrects of the",
+              "  cells just beyond its search area's +x / +y sides whose extents (merged toward -x / -y in the second pass) reach",
+              "  into it. `gather=extent` reads them; it processes a few more micro-occluders (the `mean occluders` column).",
+              "* Over-occlusion (negative error) comes from the depth comparison: the light-view depths of a flat plate differ by",
+              "  float32 rounding (a few ulps), so with an exact comparison the rounding decides whether a plate microrect merges",
+              "  with its -x or +x neighbour; the first-pass extents turn irregular, their diagonals fail the containment test, and",
+              "  the second pass gives each such diagonal, whatever its depth (\"we then merge with all those level-i neighbors in",
+              "  negative direction ... which have not been aggregated yet\"), to the retained microrect at its +x+y corner: along",
+              "  the plate's +x and +y edges a ground microrect takes the plate's minimum depth and occludes a whole cell beyond the",
+              "  edge. Ties within the depth map's rounding keep the merge of the noise-free map. `tests/test_ssm.py` measures it on a",
+              "  256² map: ground texels covered at the plate's depth at levels 3 / 4 / 5 are 1144 / 5327 / 14296 with the exact",
+              "  comparison and 41 / 922 / 2060 with the tie (the noise-free map's), against 1680 / 3536 / 9680 for micropatches.",
+              "",
+              "The paper's diagonal rule itself still puts a caster's depth on ground texels where the bounding-box union overhangs",
+              "a diagonal edge (`plate_rotated`); the `nearest diagonal` rows give a diagonal that the first pass left to whichever",
+              "of its four retained neighbours has the nearest depth (ties in the paper's order); the members still partition the",
+              "map, no caster texel is lost. The paper's text is explicit, so `paper` stays the default and `nearest` is a parameter.", "",
               "Level-0 texels that the casters' micro-occluders cover at each level (casters = texels nearer than the map's median",
               "depth; `true` = those texels themselves; micropatch / §5.2 microrect / nearest-diagonal microrect):", "",
               "| scene | true | " + " | ".join(f"level {i}" for i in range(1, 7)) + " |", "|---|---|" + "---|" * 6]

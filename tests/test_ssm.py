@@ -71,10 +71,11 @@ def test_structure_memory_matches_the_papers_layout():
     assert abs(mb["hsm"] - 10.67) < 0.01 and abs(mb["mssm"] - 88.0) < 0.01 and abs(mb["ysm"] - 14.67) < 0.01
 
 
-def _microrects_reference(d: np.ndarray, levels: int, diagonal: str = "paper"):
+def _microrects_reference(d: np.ndarray, levels: int, diagonal: str = "paper", tie: float = 1e-6):
     """Pure-Python greedy two-pass merge, tracking each microrect's level-0 member texels. A
     diagonal the first pass leaves goes to the retained one at +x+y (``paper``) or to the
-    retained neighbour of nearest depth, ties in the order +x+y, +x-y, -x+y, -x-y (``nearest``)."""
+    retained neighbour of nearest depth, ties in the order +x+y, +x-y, -x+y, -x-y (``nearest``).
+    Depth differences within ``tie`` (relative) are equal, the tie going to the first partner."""
     n = d.shape[0]
     members = {(a, b): [(a, b)] for a in range(n) for b in range(n)}
     dep = {(a, b): float(d[b, a]) for a in range(n) for b in range(n)}
@@ -90,7 +91,7 @@ def _microrects_reference(d: np.ndarray, levels: int, diagonal: str = "paper"):
         take = {}  # level-i texel -> owner (a, b) at level i (even, even)
 
         def closer(x, first, second, dep=dep):
-            return abs(dep[x] - dep[first]) <= abs(dep[x] - dep[second])
+            return abs(dep[x] - dep[first]) <= abs(dep[x] - dep[second]) + tie * abs(dep[x])
 
         for a in range(0, m, 2):
             for b in range(0, m, 2):
@@ -129,10 +130,17 @@ def _microrects_reference(d: np.ndarray, levels: int, diagonal: str = "paper"):
     return out
 
 
-@pytest.mark.parametrize("diagonal", ["paper", "nearest"])
-def test_microrects_against_reference_and_invariants(device, diagonal):
+@pytest.mark.parametrize("diagonal,flat", [("paper", False), ("nearest", False), ("paper", True)])
+def test_microrects_against_reference_and_invariants(device, diagonal, flat):
+    """The kernels against the pure-Python merge; ``flat``: blocks of one depth up to float32
+    rounding (a few ulps), where the tie tolerance decides the partners."""
     n = 32
     d = _random_map(n, 5)
+    if flat:
+        rng = np.random.default_rng(6)
+        d = np.kron(rng.random((n // 4, n // 4)), np.ones((4, 4))).astype(np.float32)
+        d *= (1.0 + 2.4e-7 * rng.integers(-2, 3, (n, n))).astype(np.float32)
+        assert len(np.unique(d)) > 2 * (n // 4) ** 2  # the rounding is there
     mr = build_microrects(wp.array(d, dtype=float, device=device), device, diagonal)
     ref = _microrects_reference(d, 5, diagonal)
     partial_cover = 0
@@ -174,15 +182,14 @@ def _rotated_plate_map(n: int, angle: float) -> np.ndarray:
 
 @pytest.mark.parametrize("angle", [0.0, 30.0])
 def test_nearest_diagonal_keeps_the_casters_depth_off_the_ground(device, angle):
-    """Why §5.2's microrects lose to micropatches on a solid plate. In the
-    second pass a diagonal that the first pass of the retained microrect at its -x-y corner leaves
-    is merged, whatever its depth, into the one at its +x+y corner: a ground microrect next to the plate's edge takes a
-    plate diagonal and with it the plate's (minimum) depth, and its extent, mostly ground, then
-    occludes at the plate's depth; the contamination grows level by level. With
-    ``diagonal="nearest"`` (not the paper's) the diagonal goes to the neighbour of nearest depth.
-    Measured on a 128² map, ground texels covered by microrects at the plate's depth (paper /
-    nearest / micropatches): 0°: level 3 868 / 468 / 3440, level 4 6444 / 5664 / 10608; 30°:
-    level 3 2747 / 2003 / 3316, level 4 6679 / 5043 / 6388 (the paper's above micropatches)."""
+    """Where §5.2's diagonal rule puts a caster's depth on the ground. In the second pass a
+    diagonal that the first pass of the retained microrect at its -x-y corner leaves is merged,
+    whatever its depth, into the one at its +x+y corner: a ground microrect next to the plate's
+    edge takes a plate diagonal and with it the plate's (minimum) depth, and its extent, mostly
+    ground, then occludes at the plate's depth. With ``diagonal="nearest"`` (not the paper's) the
+    diagonal goes to the neighbour of nearest depth. Measured on a 128² map, ground texels covered
+    by microrects at the plate's depth (paper / nearest / micropatches): 0°: level 3 180 / 12 /
+    624, level 4 484 / 220 / 3440; 30°: level 3 1139 / 657 / 1524, level 4 2768 / 1970 / 3316."""
     n = 128
     d = _rotated_plate_map(n, angle)
     plate = d < 0.5
@@ -209,11 +216,81 @@ def test_nearest_diagonal_keeps_the_casters_depth_off_the_ground(device, angle):
 _ground_error = box_plane_ground_error
 
 
+def test_flat_occluder_rounding_does_not_choose_merge_partners(device):
+    """A flat square occluder over a flat ground whose rasterized depths vary by float32 rounding
+    (1e-7 relative): with an exact comparison the rounding picks each merge partner inside the
+    occluder, the first-pass extents turn irregular, their diagonals fail the containment test and
+    §5.2's second pass hands them, whatever their depth, to the ground microrect at their +x+y
+    corner, which then occludes at the occluder's depth a cell beyond its edge. Counting
+    differences within ``tie`` as equal keeps the noise-free merge. Measured on a 256² map, ground
+    texels covered at the occluder's depth at levels 3 / 4 / 5: exact 1144 / 5327 / 14296, tie
+    41 / 922 / 2060 (as without the noise), micropatches 1680 / 3536 / 9680."""
+    n = 256
+    rng = np.random.default_rng(1)
+    plate = np.zeros((n, n), bool)
+    plate[93:201, 81:181] = True
+    clean = np.where(plate, 0.3, 0.9).astype(np.float32)
+    noisy = (clean * (1.0 + 1e-7 * rng.standard_normal((n, n)))).astype(np.float32)
+
+    def ground_covered(d, tie):
+        mr = build_microrects(wp.array(d, dtype=float, device=device), device, "paper", tie)
+        out = []
+        for i in (3, 4, 5):
+            ext, dep = mr.level(i)
+            cov = np.zeros((n, n), bool)
+            for y, x in zip(*np.nonzero(dep < 0.5)):
+                x0, y0, x1, y1 = ext[y, x]
+                cov[y0:y1 + 1, x0:x1 + 1] = True
+            assert cov[plate].all()
+            out.append(int((cov & ~plate).sum()))
+        return out
+
+    exact, tied, clean_tied = ground_covered(noisy, 0.0), ground_covered(noisy, 1e-6), ground_covered(clean, 1e-6)
+    assert tied == clean_tied == ground_covered(clean, 0.0)
+    for i, lev in enumerate((3, 4, 5)):
+        c = 1 << lev
+        patch = int(plate.reshape(n // c, c, n // c, c).any(axis=(1, 3)).sum()) * c * c - int(plate.sum())
+        assert tied[i] < 0.3 * patch
+    assert exact[2] > 1.2 * (int(plate.reshape(8, 32, 8, 32).any(axis=(1, 3)).sum()) * 1024 - int(plate.sum()))
+    assert all(e > 4 * t for e, t in zip(exact, tied))
+
+
+def test_microrects_beat_micropatches_on_an_aligned_plate(device):
+    """Fig. 12's claim on the simplest case: a square plate with its edges along the light view's
+    axes, parallel to the ground and to a square rect light, b_mo = 3 (levels 4 and 5), against
+    the exact visible fraction. Two causes of error are separated: the gather (``budget`` reads the
+    (b+1)² cells over the search area and misses extents that reach into it from the +x / +y
+    cells: under-occlusion) and the rounding of the plate's depth deciding the merge partners
+    (``microrect_tie=0``: over-occlusion). Measured at 160 x 120, penumbra MAE (mean positive
+    error): micropatches 0.050 (0.000), microrects 0.031 (0.003), gather=budget 0.045 (0.020),
+    microrect_tie=0 0.119 (0.001), both 0.125 (0.022)."""
+    from wsoft.metrics.exact import parallel_rect_exact
+    from wsoft.stages.ssm_cases import stage_file
+
+    scene = wsoft.load_scene(stage_file("plate_aligned"))
+    kw = {"width": 160, "height": 120, "device": device, "budget": 3.0}
+    err = {}
+    for label, p in (("patch", {"occluder": "micropatch"}), ("rect", {"occluder": "microrect"}),
+                     ("budget", {"occluder": "microrect", "gather": "budget"}), ("exact", {"occluder": "microrect", "microrect_tie": 0.0})):
+        f = wsoft.render(scene, "ssm", **kw, **p)
+        g = (f["A"] > 0) & (np.abs(f["P.Z"]) < 1e-3)
+        ex = parallel_rect_exact(f["P.X"], f["P.Y"], 4.0, 1.0, 1.2, 0.75)
+        pen = g & (ex > 0.01) & (ex < 0.99)
+        assert pen.sum() > 1000
+        e = (f.V - ex)[pen]
+        err[label] = (float(np.abs(e).mean()), float(np.clip(e, 0, None).mean()))
+        if label == "rect":
+            assert set(f.counters()["levels_used"]) == {"4", "5"}
+    assert err["rect"][0] < 0.75 * err["patch"][0]
+    assert err["rect"][1] < 0.006 and err["budget"][1] > 0.012  # the +x / +y extents are read
+    assert err["exact"][0] > 2.5 * err["rect"][0]  # the rounding is there, and the tie keeps it out
+
+
 def test_microrects_fit_a_planar_occluder_better_at_coarse_levels(device):
     """§5's point on the simplest occluder: at a coarse level (b_mo = 3, level 4 here) a
     micropatch covers its whole aligned block at the block's minimum depth, so the square
     occluder's shadow grows to the block boundaries; the microrects merge only the occluder's
-    texels and keep its edges. Measured: MAE 0.0073 (micropatch) vs 0.0020 (microrect)."""
+    texels and keep its edges. Measured: MAE 0.0073 (micropatch) vs 0.0012 (microrect)."""
     scene = wsoft.load_scene(scene_path("box_plane.usda"))
     kw = {"width": 160, "height": 120, "device": device, "budget": 3.0, "blend": False}
     patch = wsoft.render(scene, "ssm", occluder="micropatch", **kw)
@@ -452,37 +529,38 @@ def test_table1_rows_and_report(tmp_path):
     assert "wsoft bench ssm-table1 --quick" in text and "YSM at least 4×" in text
 
 
-def test_microrect_gather_respects_the_budget(device):
-    """At a coarse level a receiver reads the (b+1)² cells over its search area
-    (at most (ceil(b)+1)² micro-occluders a level, as §3/§4.2 cap them, like micropatches);
-    ``gather=wide`` reads one more cell each side, up to (b+3)². Checked on
-    foliage (fig1_plant) and on a solid plate, where the budget gather must not under-occlude."""
+def test_microrect_gather_reads_every_extent_that_reaches_the_area(device):
+    """A level-j microrect's extent lies within one cell of its reference point, so the cells
+    over the search area plus one on its +x and +y sides hold every microrect that can reach it
+    (``gather=extent``, at most (ceil(b)+2)² a level, those whose extent misses the area skipped);
+    ``gather=budget`` reads the (ceil(b)+1)² cells over the area, as micropatches, and misses the
+    extents reaching in from the +x / +y cells. Checked on foliage (fig1_plant) and on a solid
+    plate, where the budget gather under-occludes and the extent gather does not."""
     from wsoft.stages.ssm_cases import stage_file
 
     b = 3.0
     kw = {"width": 96, "height": 72, "device": device, "budget": b, "blend": False, "occluder": "microrect"}
     for scene in (wsoft.load_scene(scene_path("fig1_plant.usdc")), wsoft.load_scene(stage_file("plate_rotated"))):
-        budget = wsoft.render(scene, "ssm", **kw)
-        wide = wsoft.render(scene, "ssm", gather="wide", **kw)
-        cap = (int(np.ceil(b)) + 1) ** 2
-        assert 0 < budget.counters()["occluders_max"] <= cap
-        assert wide.counters()["occluders_max"] >= budget.counters()["occluders_max"]
-        assert budget.counters()["occluders_mean"] < wide.counters()["occluders_mean"]
-        over = wide.counters()["occluders_max"] > cap  # the wide gather exceeds the cap on foliage
-        if scene.path.endswith("fig1_plant.usdc"):
-            assert over
+        extent = wsoft.render(scene, "ssm", **kw)
+        budget = wsoft.render(scene, "ssm", gather="budget", **kw)
+        assert 0 < budget.counters()["occluders_max"] <= (int(np.ceil(b)) + 1) ** 2
+        assert 0 < extent.counters()["occluders_max"] <= (int(np.ceil(b)) + 2) ** 2
+        assert extent.counters()["occluders_mean"] > budget.counters()["occluders_mean"]
+        assert np.all(extent.V <= budget.V + 1e-6)  # a superset of the same micro-occluders
     ref = wsoft.render(scene, "reference", width=96, height=72, device=device, samples=64)
     pen = (ref["A"] > 0) & (ref.V > 0.01) & (ref.V < 0.99)
     assert pen.sum() > 300
-    bias = float((budget.V - ref.V)[pen].mean())
-    assert bias < 0.02  # no under-occlusion of the solid plate (a reference-point gather gave +0.05)
+    missed = (budget.V - extent.V)[pen]
+    assert (missed > 0.05).sum() > 20  # the budget gather misses occluders on the plate's penumbra
+    assert float((extent.V - ref.V)[pen].mean()) < float((budget.V - ref.V)[pen].mean())
 
 
-def test_nearest_diagonal_microrects_beat_micropatches_on_a_solid_plate(device):
-    """On the plate turned 30° in the light's view, at b_mo = 3 and on the same
-    search areas and levels, microrects with the nearest-depth diagonal beat micropatches on the
-    reference's penumbra; §5.2's own merge does not (240 x 180, 256 spp: penumbra MAE 0.178
-    micropatches, 0.194 paper microrects, 0.080 nearest)."""
+def test_microrects_beat_micropatches_on_a_rotated_plate(device):
+    """On the plate turned 30° in the light's view, at b_mo = 3 and on the same search areas and
+    levels, microrects (both diagonal rules) beat micropatches on the reference's penumbra; the
+    nearest-depth diagonal (not the paper's) keeps less ground under the plate's depth where the
+    bounding-box union overhangs the diagonal edges (96 x 72, 64 spp: penumbra MAE 0.198
+    micropatches, 0.125 paper microrects, 0.097 nearest)."""
     from wsoft.stages.ssm_cases import stage_file
 
     scene = wsoft.load_scene(stage_file("plate_rotated"))
@@ -493,7 +571,7 @@ def test_nearest_diagonal_microrects_beat_micropatches_on_a_solid_plate(device):
     for label, p in (("patch", {"occluder": "micropatch"}), ("paper", {"occluder": "microrect"}),
                      ("nearest", {"occluder": "microrect", "microrect_diagonal": "nearest"})):
         err[label] = float(np.abs(wsoft.render(scene, "ssm", **kw, **p).V - ref.V)[pen].mean())
-    assert err["nearest"] < 0.7 * err["patch"] and err["nearest"] < 0.7 * err["paper"]
+    assert err["paper"] < 0.8 * err["patch"] and err["nearest"] < 0.9 * err["paper"]
 
 
 def test_occluder_types_share_search_areas_and_levels(device):

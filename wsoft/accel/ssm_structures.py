@@ -301,24 +301,26 @@ def rect_contains(a: wp.vec4i, b: wp.vec4i) -> bool:
 
 
 @wp.func
-def closer_to_first(d: float, d_first: float, d_second: float) -> bool:
-    """Is depth ``d`` at least as close to ``d_first`` as to ``d_second`` (merge partner choice)?"""
-    return wp.abs(d - d_first) <= wp.abs(d - d_second)
+def closer_to_first(d: float, d_first: float, d_second: float, tie: float) -> bool:
+    """Is depth ``d`` at least as close to ``d_first`` as to ``d_second`` (merge partner choice)?
+    Differences within ``tie`` (relative to ``|d|``) count as equal: the rounding of a flat
+    occluder's rasterized depth then does not decide, and a tie goes to ``d_first``."""
+    return wp.abs(d - d_first) <= wp.abs(d - d_second) + tie * wp.abs(d)
 
 
 @wp.func
-def first_pass(ext: wp.array[wp.vec4i], dep: wp.array[float], off: int, n: int, a: int, b: int) -> wp.vec4i:
+def first_pass(ext: wp.array[wp.vec4i], dep: wp.array[float], off: int, n: int, a: int, b: int, tie: float) -> wp.vec4i:
     """Extent after the first pass of the retained level-i microrect (a, b) (a, b even); the
     merged depth is recomputed by :func:`first_pass_depth`."""
     e = ext[off + b * n + a]
     d = dep[off + b * n + a]
     if a + 1 < n:
         db = dep[off + b * n + a + 1]
-        if a + 2 >= n or closer_to_first(db, d, dep[off + b * n + a + 2]):
+        if a + 2 >= n or closer_to_first(db, d, dep[off + b * n + a + 2], tie):
             e = rect_union(e, ext[off + b * n + a + 1])
     if b + 1 < n:
         dd = dep[off + (b + 1) * n + a]
-        if b + 2 >= n or closer_to_first(dd, d, dep[off + (b + 2) * n + a]):
+        if b + 2 >= n or closer_to_first(dd, d, dep[off + (b + 2) * n + a], tie):
             e = rect_union(e, ext[off + (b + 1) * n + a])
     return e
 
@@ -334,7 +336,7 @@ def takes_diagonal(ext: wp.array[wp.vec4i], off: int, n: int, a: int, b: int, e1
 
 
 @wp.func
-def diagonal_owner(ext: wp.array[wp.vec4i], dep: wp.array[float], off: int, n: int, dx: int, dy: int, nearest: int) -> wp.vec2i:
+def diagonal_owner(ext: wp.array[wp.vec4i], dep: wp.array[float], off: int, n: int, dx: int, dy: int, nearest: int, tie: float) -> wp.vec2i:
     """The retained level-i microrect that takes the diagonal microrect ``(dx, dy)`` (both odd).
 
     §5.2: the one at ``(dx - 1, dy - 1)`` when its first-pass extent contains it, else the one at
@@ -344,7 +346,7 @@ def diagonal_owner(ext: wp.array[wp.vec4i], dep: wp.array[float], off: int, n: i
     diagonal (and its minimum depth) across an edge."""
     a = dx - 1
     b = dy - 1
-    if takes_diagonal(ext, off, n, a, b, first_pass(ext, dep, off, n, a, b)):
+    if takes_diagonal(ext, off, n, a, b, first_pass(ext, dep, off, n, a, b, tie)):
         return wp.vec2i(a, b)
     if nearest == 0:
         return wp.vec2i(dx + 1, dy + 1)
@@ -372,6 +374,7 @@ def microrect_level(
     n: int,
     dst_off: int,
     nearest: int,
+    tie: float,
     # outputs
     ext: wp.array[wp.vec4i],
     dep: wp.array[float],
@@ -389,23 +392,23 @@ def microrect_level(
     e = ext[off + b * n + a]
     if a + 1 < n:
         db = dep[off + b * n + a + 1]
-        if a + 2 >= n or closer_to_first(db, d0, dep[off + b * n + a + 2]):
+        if a + 2 >= n or closer_to_first(db, d0, dep[off + b * n + a + 2], tie):
             e = rect_union(e, ext[off + b * n + a + 1])
             d = wp.min(d, db)
     if b + 1 < n:
         dd = dep[off + (b + 1) * n + a]
-        if b + 2 >= n or closer_to_first(dd, d0, dep[off + (b + 2) * n + a]):
+        if b + 2 >= n or closer_to_first(dd, d0, dep[off + (b + 2) * n + a], tie):
             e = rect_union(e, ext[off + (b + 1) * n + a])
             d = wp.min(d, dd)
     # second pass: -x, -y that no one took in the first
     if a >= 2:
         dl = dep[off + b * n + a - 1]
-        if not closer_to_first(dl, dep[off + b * n + a - 2], d0):
+        if not closer_to_first(dl, dep[off + b * n + a - 2], d0, tie):
             e = rect_union(e, ext[off + b * n + a - 1])
             d = wp.min(d, dl)
     if b >= 2:
         dl = dep[off + (b - 1) * n + a]
-        if not closer_to_first(dl, dep[off + (b - 2) * n + a], d0):
+        if not closer_to_first(dl, dep[off + (b - 2) * n + a], d0, tie):
             e = rect_union(e, ext[off + (b - 1) * n + a])
             d = wp.min(d, dl)
     # the diagonals this one owns (the paper's rule: +x+y when contained, -x-y when its owner
@@ -416,7 +419,7 @@ def microrect_level(
             dy = b - 1 + 2 * sy
             if dx < 0 or dy < 0 or dx >= n or dy >= n:
                 continue
-            o = diagonal_owner(ext, dep, off, n, dx, dy, nearest)
+            o = diagonal_owner(ext, dep, off, n, dx, dy, nearest, tie)
             if o[0] == a and o[1] == b:
                 e = rect_union(e, ext[off + dy * n + dx])
                 d = wp.min(d, dep[off + dy * n + dx])
@@ -461,11 +464,15 @@ class MicroRects:
         return self.ext.numpy()[a:b].reshape(n, n, 4), self.dep.numpy()[a:b].reshape(n, n)
 
 
-def build_microrects(depth: wp.array, device: str, diagonal: str = "paper") -> MicroRects:
+def build_microrects(depth: wp.array, device: str, diagonal: str = "paper", tie: float = 1e-6) -> MicroRects:
     """Microrects of every level from the level-0 depth map; ``diagonal`` picks who takes a
-    diagonal neighbour in the second pass (:func:`diagonal_owner`): ``paper`` or ``nearest``."""
+    diagonal neighbour in the second pass (:func:`diagonal_owner`): ``paper`` or ``nearest``;
+    ``tie``: relative depth difference within which two merge partners are equally near
+    (:func:`closer_to_first`; 0: exact comparison)."""
     if diagonal not in ("paper", "nearest"):
         raise ValueError(f"diagonal {diagonal!r} is not paper or nearest")
+    if not 0.0 <= tie < 1.0:
+        raise ValueError(f"tie {tie} is not in [0, 1)")
     n = depth.shape[1]
     log2_exact(n)
     offs = level_offsets(n)
@@ -476,7 +483,7 @@ def build_microrects(depth: wp.array, device: str, diagonal: str = "paper") -> M
     launch_chunked(microrect_base, n * n, inputs=[depth], outputs=[ext, dep], device=device)
     k, m = 0, n
     while m >= 2:
-        launch_chunked(microrect_level, (m // 2) ** 2, inputs=[int(offs[k]), m, int(offs[k + 1]), int(diagonal == "nearest")], outputs=[ext, dep], device=device)
+        launch_chunked(microrect_level, (m // 2) ** 2, inputs=[int(offs[k]), m, int(offs[k + 1]), int(diagonal == "nearest"), float(tie)], outputs=[ext, dep], device=device)
         k += 1
         m //= 2
     wp.synchronize_device(device)

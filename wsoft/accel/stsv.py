@@ -44,10 +44,9 @@ ball (local lights: centre and radius, :func:`light_ball`) or a cone of directio
   positive component along the axis);
 * the triangle's own plane, facing the light side the volume is for.
 
-The paper's back cap is the far end of the volume (it clamps the extrusion at the scene's bounds
-for rasterization); a point test needs no plane for it. :func:`stsv_corners` gives the closed
-polyhedron's six vertices (front cap ``t'`` and the back cap, extruded along the intersection of
-adjacent outer planes) for a rasterizing technique.
+The paper's back cap closes the volume for z-fail rasterization (its extruded corners and far
+triangle); here every receiver is tested against the half-spaces themselves, an open volume is
+a complete test, and no back cap is built.
 
 **Both sides** (§6): a volume is built for the side of the triangle's plane the light centre is on
 (side ``+1`` when the centre is in front of the normal); when the light's bound straddles the plane
@@ -147,6 +146,24 @@ def sample_blocked(cut: Surfaces, tri: int, st: STriangle, J: wp.mat33, p: wp.ve
     if t >= 0:
         alpha = sample_alpha(cut, t, sample_texcoord(st, h))
     return alpha >= cut.threshold[c]
+
+
+@wp.func
+def sample_transmittance(cut: Surfaces, tri: int, st: STriangle, J: wp.mat33, p: wp.vec3, s: wp.vec3) -> float:
+    """The paper's general case: the share of the light sample ``s`` that triangle ``tri`` lets
+    through to ``p``, ``1 - alpha`` at eq. 5's texture coordinate (alpha clamped to [0, 1]; the
+    material's threshold is not applied), 1 where the segment misses the triangle."""
+    h = sample_bary(J, p, s)
+    if not crosses(h):
+        return 1.0
+    c = cut.tri_cut[tri]
+    if c < 0:
+        return 0.0
+    alpha = cut.opacity[c]
+    t = cut.tex[c]
+    if t >= 0:
+        alpha = sample_alpha(cut, t, sample_texcoord(st, h))
+    return 1.0 - wp.clamp(alpha, 0.0, 1.0)
 
 
 # --------------------------------------------------------------------------- the volume
@@ -308,41 +325,6 @@ def in_volume(P: planes_t, x: wp.vec3, slack: float) -> bool:
         if r[0] * x[0] + r[1] * x[1] + r[2] * x[2] + r[3] > slack:
             return False
     return True
-
-
-@wp.func
-def stsv_corners(P: planes_t, v0: wp.vec3, v1: wp.vec3, v2: wp.vec3, B: wp.vec4, distant: int, length: float) -> wp.mat33:
-    """The back cap of §2.2 for a volume whose three edge planes exist: each front-cap corner
-    extruded by ``length`` along the intersection of its two adjacent outer planes (the cross
-    product of their normals, turned away from the light). Rows: the back cap's corners for
-    ``t'`` corners 0, 1, 2 (the front cap is ``t'`` of :func:`front_cap`)."""
-    c = wp.vec3(B[0], B[1], B[2])
-    out = wp.mat33(0.0)
-    corners = wp.mat33(v0[0], v0[1], v0[2], v1[0], v1[1], v1[2], v2[0], v2[1], v2[2])
-    for k in range(3):
-        vk = wp.vec3(corners[k, 0], corners[k, 1], corners[k, 2])
-        tk = vk
-        if distant == 0:
-            dm = wp.min(wp.min(wp.length(v0 - c), wp.length(v1 - c)), wp.length(v2 - c))
-            dk = wp.length(vk - c)
-            if dk > 0.0:
-                tk = c + (vk - c) * (dm / dk)
-        na = wp.vec3(P[(k + 2) % 3][0], P[(k + 2) % 3][1], P[(k + 2) % 3][2])  # plane of the edge ending at k
-        nb = wp.vec3(P[k][0], P[k][1], P[k][2])  # plane of the edge starting at k
-        d = wp.cross(na, nb)
-        ld = wp.length(d)
-        if ld > 0.0:
-            d = d / ld
-        away = tk - c
-        if distant != 0:
-            away = -c
-        if wp.dot(d, away) < 0.0:
-            d = -d
-        b = tk + d * length
-        out[k, 0] = b[0]
-        out[k, 1] = b[1]
-        out[k, 2] = b[2]
-    return out
 
 
 # --------------------------------------------------------------------------- wrappers (tests)

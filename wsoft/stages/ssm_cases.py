@@ -1,6 +1,8 @@
 """Small stages that separate the causes of Fig. 12's ranking (micropatches against microrects at
 coarse levels), for the ``ssm`` sweep and ``tests/test_ssm.py``:
 
+* ``plate_aligned`` — one solid square plate, its edges along the light view's axes, over a
+  parallel ground under a parallel square rect light: the simplest occluder for microrects;
 * ``plate_rotated`` — one solid square plate turned 30° in the light's view, over a ground: a solid
   planar occluder, where a microrect (a merged block's bounding box at its nearest depth) fits the
   plate better than aligned micropatches, so microrects must win;
@@ -51,7 +53,9 @@ def build(name: str):
     """The in-memory stage ``name`` (one of :data:`NAMES`)."""
     st = make_stage()
     add_quad(st, "/World/Ground", (0, 0, 0), 4)
-    if name == "plate_rotated":
+    if name == "plate_aligned":
+        _plate(st, "/World/Plate", (0, 0, 1.0), 1.2)
+    elif name == "plate_rotated":
         _plate(st, "/World/Plate", (0, 0, 1.0), 1.2, rotate=30.0)
     elif name == "plate_holes":
         _plate(st, "/World/Plate", (0, 0, 1.0), 1.2, holes=4, rotate=30.0)
@@ -65,7 +69,7 @@ def build(name: str):
     return st
 
 
-NAMES = ("plate_rotated", "plate_holes", "plates_stacked")
+NAMES = ("plate_aligned", "plate_rotated", "plate_holes", "plates_stacked")
 
 
 def stage_file(name: str) -> str:

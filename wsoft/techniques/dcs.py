@@ -65,7 +65,11 @@ inconsistent winding all follow one rule), and ``V`` only asks whether the count
    triangle both conservative volumes of §6 (:func:`~wsoft.accel.stsv.stsv_planes`, one per lit side of its plane), binned like
    the edges; a receiver inside either volume looks up every sample
    (:func:`~wsoft.accel.stsv.sample_blocked`: the crossing of eq. 1 and the alpha texture of
-   eq. 5) and adds 1 where it is blocked.
+   eq. 5) and adds 1 where it is blocked. With ``transmittance=alpha`` (the paper's general case
+   of a spatially varying transmittance) the perforated triangles do not count: each sample
+   carries the product of ``1 - alpha`` over the triangles it crosses
+   (:func:`~wsoft.accel.stsv.sample_transmittance`), and V sums those shares over the samples
+   with ``count = 0``.
 
 5. **V.** ``estimator=v_coef`` (the default, the paper's physically plausible ``v_coef``): the
    fraction of samples with ``count = 0``. ``estimator=direct``, the paper's Monte-Carlo
@@ -107,7 +111,7 @@ from wsoft.accel.dcs_bins import BinsGPU, receiver_items
 from wsoft.accel.occluders import count_crossings, in_wedge, side
 from wsoft.lightspace.light import LightGPU, disk_shaped, is_round, light_bound, light_point, lit_along, silhouette_ellipse, silhouette_rect
 from wsoft.lightspace.samples import LightSamples, sample_coords
-from wsoft.accel.stsv import in_volume, light_ball, planes_t, receiver_matrix, s_triangle, sample_blocked
+from wsoft.accel.stsv import in_volume, light_ball, planes_t, receiver_matrix, s_triangle, sample_blocked, sample_transmittance
 from wsoft.parallel import launch_chunked
 from wsoft.raster.gbuffer import GBufferGPU, gb_covered
 from wsoft.raster.shadow_rays import ray_epsilon, receiver_begin
@@ -118,7 +122,9 @@ from wsoft.techniques.base import Quality, Tolerance, check, param
 
 MAX_SAMPLES = 64
 ESTIMATORS = ("v_coef", "direct")
+TRANSMITTANCES = ("binary", "alpha")
 counts_t = wp.types.vector(length=MAX_SAMPLES, dtype=wp.int32)
+shares_t = wp.types.vector(length=MAX_SAMPLES, dtype=wp.float32)
 points_t = wp.types.matrix(shape=(MAX_SAMPLES, 3), dtype=wp.float32)
 BLOCKED = wp.constant(1 << 20)  # a sample behind the receiver's tangent plane
 
@@ -130,10 +136,14 @@ class DCSParams(ObjectBasedParams):
                                      "v_coef); direct: the Monte-Carlo direct-lighting variant, each sample weighted by its "
                                      "unshadowed irradiance (cosines over squared distance), V the fraction of that irradiance "
                                      "that arrives")
+    transmittance: str = param("binary", "perforated triangles: binary (a sample is hidden where the texture's alpha reaches the "
+                                         "material's opacityThreshold: the paper's implementation) or alpha (each crossing lets "
+                                         "1 - alpha of the sample through, the threshold unused: the paper's general case)")
 
     def __post_init__(self):
         super().__post_init__()
         check(self.estimator in ESTIMATORS, f"estimator {self.estimator!r} is not one of {', '.join(ESTIMATORS)}")
+        check(self.transmittance in TRANSMITTANCES, f"transmittance {self.transmittance!r} is not one of {', '.join(TRANSMITTANCES)}")
 
 
 # --------------------------------------------------------------------------- kernels
@@ -159,6 +169,7 @@ def dcs_visibility(
     cut: Surfaces,
     cut_pts: wp.array[wp.vec3],
     direct: int,
+    alpha_mode: int,
     # outputs
     vis: wp.array[float],
     wedge_tests: wp.array[wp.int32],
@@ -166,7 +177,9 @@ def dcs_visibility(
     volume_tests: wp.array[wp.int32],
 ):
     """Per receiver: the depth complexity of each light sample (module docstring) and V (the
-    fraction of samples with none, or with ``direct`` the irradiance-weighted fraction)."""
+    fraction of samples with none, or with ``direct`` the irradiance-weighted fraction). With
+    ``alpha_mode`` the perforated triangles do not count: each sample's share is the product of
+    their transmittances, and a sample with no opaque occluder adds its share."""
     i = wp.tid() + offset
     wedge_tests[i] = 0
     wedge_hits[i] = 0
@@ -179,6 +192,7 @@ def dcs_visibility(
     off, o, state, base, rot = receiver_begin(gb, ls, eps, i)
     S = ls.count
     cnt = counts_t()
+    share = shares_t()
     xs = points_t()
     first_front = int(-1)
     for s in range(S):
@@ -187,6 +201,7 @@ def dcs_visibility(
         d = wp.vec3(r[0], r[1], r[2])
         x = o + d * wp.max(r[3] - off, 0.0)
         xs[s] = x
+        share[s] = 1.0
         if lit_along(light, nrm, d):
             cnt[s] = 0
             if first_front < 0:
@@ -266,15 +281,21 @@ def dcs_visibility(
                                 cut.tri_uv[3 * tri], cut.tri_uv[3 * tri + 1], cut.tri_uv[3 * tri + 2])
                 J = receiver_matrix(st, o)
                 for s in range(S):
-                    if sample_blocked(cut, tri, st, J, o, xs[s]):
+                    if alpha_mode != 0:
+                        share[s] = share[s] * sample_transmittance(cut, tri, st, J, o, xs[s])
+                    elif sample_blocked(cut, tri, st, J, o, xs[s]):
                         cnt[s] = cnt[s] + 1
         volume_tests[i] = nt
     if direct == 0:
         visible = int(0)
+        shared = float(0.0)
         for s in range(S):
             if cnt[s] != BLOCKED and base_count + cnt[s] <= 0:
                 visible += 1
+                shared += share[s]
         vis[i] = float(visible) / float(S)
+        if alpha_mode != 0:
+            vis[i] = shared / float(S)
     else:
         # the Monte-Carlo direct-lighting estimator: each sample weighted by its share of the
         # unshadowed irradiance (receiver cosine x light cosine / distance^2, as the samples are
@@ -304,7 +325,7 @@ def dcs_visibility(
                     w = w * wp.max(wp.dot(d, axis), 0.0) / (dist * dist)
                 total += w
                 if cnt[s] != BLOCKED and base_count + cnt[s] <= 0:
-                    lit += w
+                    lit += w * share[s]
         vis[i] = 0.0
         if total > 0.0:
             vis[i] = lit / total
@@ -358,7 +379,7 @@ class DCS(ObjectBased):
             dcs_visibility, n,
             inputs=[gb.gpu(), p.sample_pattern().on(dev, disk_shaped(light)), ctx.light_gpu(light), ray_epsilon(gb, light),
                     a["has_opaque"], bvh_id, a["tri_pts"], a["ebins"].gpu, a["edge_pts"], a["edge_faces"], int(st is not None), tb, stri,
-                    planes, ds.cutouts, cut_pts, int(p.estimator == "direct")],
+                    planes, ds.cutouts, cut_pts, int(p.estimator == "direct"), int(p.transmittance == "alpha")],
             outputs=[vis, wt, wh, vt], device=dev, min_chunk=256, per_thread=32)
         counters = {"wedge_tests": int(wt.numpy().astype(np.int64).sum()), "wedge_receivers": int(wh.numpy().astype(np.int64).sum()),
                     "stsv_tests": int(vt.numpy().astype(np.int64).sum())}

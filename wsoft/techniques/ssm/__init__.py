@@ -10,7 +10,10 @@ covered share (a clamped sum of areas, or an occlusion bitmask over light sample
   bottom neighbours so their projections leave no gap), ``microquad`` (texel centres as the
   corners of a quad mesh, all four nearer than the receiver) and ``microrect`` (§5: extents and
   depths derived level by level by the greedy two-pass merge; two extra textures with full mip
-  chains, :mod:`wsoft.accel.ssm_structures`).
+  chains, :mod:`wsoft.accel.ssm_structures`). Merge partners are picked by depth difference,
+  differences within ``microrect_tie`` counting as ties (a flat occluder's rasterized depth varies
+  by float32 rounding, which must not pick them); a receiver reads every microrect whose extent
+  reaches its search area (``gather``).
 * Pruning (``structure``): ``hsm`` (min/max pyramid), ``mssm`` (ranges of every power-of-two
   neighbourhood of every texel) or ``ysm`` (the HSM plus an MSSM over HSM level ``n - 1`` of
   ``ysm_size`` texels per side), with ``refine`` iterations of search-area refinement.
@@ -113,8 +116,9 @@ class SSMParams(LightViewParams):
     depth_threshold: float = param(0.05, "relative camera-depth jump at which the LOQ smoothing stops", range=(1e-6, 100.0))
     refine: int = param(4, "search-area refinement iterations", range=(0, 16))
     overprecision: bool = param(True, "grow the queried region to the support of the level's micro-occluders (lit/umbra classification only)")
-    gather: str = param("budget", "microrects at a coarse level: budget (the cells over the search area, at most (b+1)² a level) or wide (one more cell each side)")
+    gather: str = param("extent", "microrects at a coarse level: extent (every microrect whose extent reaches the search area, read from the (b+2)² cells that can hold one) or budget (the (b+1)² cells over the search area, as micropatches: misses extents reaching in from the +x and +y cells)")
     microrect_diagonal: str = param("paper", "microrects: who takes a diagonal neighbour the first pass leaves: paper (the +x+y one, §5.2) or nearest (the neighbour of nearest depth; not the paper's)")
+    microrect_tie: float = param(1e-6, "microrects: relative depth difference within which two merge partners count as equally near (the rasterized depth of a flat occluder varies by a few float32 ulps; 0: exact comparison)", range=(0.0, 0.01))
     gap_fill: bool = param(True, "extend micropatches toward their left and bottom neighbours")
     msaa: str = param("interpolate", "with pixel_samples > 1: interpolate, single or per_sample")
     tau: float = param(0.01, "relative camera-depth difference below which a sample takes its pixel's visibility", range=(0.0, 100.0))
@@ -126,7 +130,7 @@ class SSMParams(LightViewParams):
         n = self.shadow_map_size
         check(n & (n - 1) == 0, f"shadow_map_size {n} must be a power of two in [256, 8192]")
         check(self.occluder in OCCLUDERS, f"occluder {self.occluder!r} is not one of {', '.join(OCCLUDERS)}")
-        check(self.gather in ("budget", "wide"), f"gather {self.gather!r} is not budget or wide")
+        check(self.gather in ("extent", "budget"), f"gather {self.gather!r} is not extent or budget")
         check(self.microrect_diagonal in ("paper", "nearest"), f"microrect_diagonal {self.microrect_diagonal!r} is not paper or nearest")
         check(self.visibility in ("area", "bitmask"), f"visibility {self.visibility!r} is not area or bitmask")
         check(self.bitmask_size in (8, 16, 32), f"bitmask_size {self.bitmask_size} is not 8, 16 or 32")
@@ -229,7 +233,7 @@ def build_maps(depth: wp.array, p: SSMParams, device: str) -> SSMMaps:
     if p.structure == "mssm":
         pyr = build_minmax_pyramid(depth, device, skip_empty=False)
         occ = build_structure("hsm", depth, device, pyramid=pyr)
-    mr = build_microrects(depth, device, p.microrect_diagonal) if p.occluder == "microrect" else None
+    mr = build_microrects(depth, device, p.microrect_diagonal, p.microrect_tie) if p.occluder == "microrect" else None
     return SSMMaps(st, occ, mr)
 
 
@@ -365,7 +369,7 @@ class SSM(Technique):
         gbuf = ctx.gbuffer()
         depth = ctx.light_depth(light, size=p.shadow_map_size, soft=True, view=p.view)
         # the pruning structure and microrects depend on the map only: shared by every budget
-        maps_key = ctx.shared_key("ssm_maps", light, p.shadow_map_size, "structure", "ysm_size", "occluder", "microrect_diagonal")
+        maps_key = ctx.shared_key("ssm_maps", light, p.shadow_map_size, "structure", "ysm_size", "occluder", "microrect_diagonal", "microrect_tie")
         search_key = ctx.key("ssm_search", light)
         loq_key = ctx.key("ssm_loq", light)
         out = ctx.visibility_key(light)
@@ -385,7 +389,7 @@ class SSM(Technique):
             st.pattern = code
             st.gap_fill = int(p.gap_fill)
             st.overprecision = int(p.overprecision)
-            st.gather_wide = int(p.gather == "wide")
+            st.gather_extent = int(p.gather == "extent")
             st.refine = p.refine
             st.bias = p.bias * dm.view.extent
             st.blend = int(p.blend and bool(np.isfinite(budget).any()))

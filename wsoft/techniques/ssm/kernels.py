@@ -71,7 +71,7 @@ class SSMSetup:
     pattern: int  # PATTERN_*
     gap_fill: int
     overprecision: int
-    gather_wide: int  # microrects: also the cells one beyond the search area's (up to (b+3)² a level)
+    gather_extent: int  # microrects: also the cells one beyond the search area's +x and +y sides (up to (b+2)² a level)
     refine: int  # search-area refinement iterations
     bias: float  # world units
     blend: int
@@ -379,11 +379,11 @@ def level_visibility(
     if st.occluder == OCC_MICROQUAD:  # a quad spans from one texel centre to the next
         cx0 -= 1
         cy0 -= 1
-    if st.occluder == OCC_MICRORECT and st.gather_wide != 0:
-        # the wide gather: one more cell each side, up to (b+3)² microrects against the b_mo x b_mo
-        # cap of §3/§4.2 (the default reads the (b+1)² cells over the search area, as micropatches)
-        cx0 -= 1
-        cy0 -= 1
+    if st.occluder == OCC_MICRORECT and st.gather_extent != 0:
+        # a level-j microrect's extent holds its reference point (cx 2^j, cy 2^j) and no other, so
+        # it lies within one cell of it: the cells [floor(a0 / 2^j), floor(a2 / 2^j) + 1] hold
+        # every microrect that can reach the area (the +1 cell's extent may reach back into it;
+        # the -1 cell's ends at cx0 2^j <= a0). Those whose extent misses the area are skipped below.
         cx1 += 1
         cy1 += 1
     cx0 = wp.max(cx0, 0)
