@@ -138,6 +138,13 @@ def _entries(case: dict, file: str, light_path: str, techs: list[tuple[str, dict
     return ref, fs
 
 
+def _measured(case: dict, light_path: str, techs: list[tuple[str, dict]]):
+    """A frame's graph measured against its reference: (reference, frames, penumbra pixels, covered pixels' positions)."""
+    ref, fs = _entries(case, case["file"], light_path, techs)
+    pen = (ref["A"] > 0) & (ref["V"] > 0.02) & (ref["V"] < 0.98)
+    return ref, fs, pen, _positions(fs)
+
+
 def _frame(case: dict) -> dict:
     from wsoft.techniques import TECHNIQUES, create
 
@@ -151,10 +158,7 @@ def _frame(case: dict) -> dict:
             continue
         for mode in ("auto", "never"):
             techs.append((t, {cls.size_param: case["map"], "cube": mode}))
-    ref, fs = _entries(case, case["file"], L.path, techs)
-    cov = ref["A"] > 0
-    pen = cov & (ref["V"] > 0.02) & (ref["V"] < 0.98)
-    P = _positions(fs)
+    ref, fs, pen, P = _measured(case, L.path, techs)
     entries = []
     for (t, params), (lab, fr) in zip(techs, fs.items()):
         st = fr.stats
@@ -210,10 +214,7 @@ def _paraboloid(case: dict) -> dict:
         techs.append((t, {"shadow_map_size": case["map"], "cube": "auto", "omni": "cube"}))
         for size in paraboloid_sizes(case["map"]):
             techs.append((t, {"shadow_map_size": size, "cube": "auto", "omni": "paraboloid"}))
-    ref, fs = _entries(case, case["file"], L.path, techs)
-    cov = ref["A"] > 0
-    pen = cov & (ref["V"] > 0.02) & (ref["V"] < 0.98)
-    P = _positions(fs)
+    ref, fs, pen, P = _measured(case, L.path, techs)
     entries = []
     for (t, params), (lab, fr) in zip(techs, fs.items()):
         st = fr.stats
