@@ -314,6 +314,36 @@ def choice_section(rows: list[dict]) -> list[str]:
     return L + [""]
 
 
+RUN_GAP_S = 3600.0  # rows finished further apart than this came from separate runs of the sweep
+
+
+def measured_in_runs(rows: list[dict]) -> list[str]:
+    """When the rows came from more than one run of the sweep (finish times over :data:`RUN_GAP_S`
+    apart, as a resumed sweep leaves them), a line per run: when, how (in-process or on Dask
+    workers) and which frames, so a reader sees which rows were measured with which code."""
+    import datetime
+
+    def when(r):
+        return datetime.datetime.fromisoformat(r["finished"]) if r.get("finished") else None
+
+    timed = sorted((r for r in rows if when(r)), key=when)
+    runs: list[list[dict]] = []
+    for r in timed:
+        if runs and (when(r) - when(runs[-1][-1])).total_seconds() <= RUN_GAP_S:
+            runs[-1].append(r)
+        else:
+            runs.append([r])
+    if len(runs) < 2:
+        return []
+    out = [f"The rows come from {len(runs)} runs of the sweep (a rerun resumes: it measures only the frames it lacks, with the code of "
+           "its day; each row's finish time, host and load are in the rows file):"]
+    for g in runs:
+        how = "on Dask workers" if all(r.get("worker") for r in g) else "in-process" if not any(r.get("worker") for r in g) else "mixed"
+        frames = ", ".join(f"{r['scene']}/{r['light'].split('/')[-1]}" for r in g)
+        out.append(f"* {g[0]['finished']} to {g[-1]['finished']}, {how}, {len(g)} rows: {frames}.")
+    return out
+
+
 def report(rows: list[dict], md: Path, ctx: dict) -> None:
     from wsoft.bench.common import report_header
 
@@ -321,6 +351,7 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
     if not rows:
         md.write_text("\n".join(L) + "\n")
         return
+    L += measured_in_runs(rows)
     techs = sorted({e["technique"] for r in rows for e in r["entries"]})
     sizes = sorted({e["params"][size_param(e["technique"])] for r in rows for e in r["entries"] if size_param(e["technique"]) in e["params"]})
     L.append(f"Every registered technique that supports the light ({', '.join(techs)}) at each of its declared quality settings and")
