@@ -113,7 +113,9 @@ def fit_paraboloid_view(light: Light, receivers: np.ndarray, size: int, guard_te
     at_light = dist <= 1e-7 * extent
     hemi = hemisphere_of(q)
     hemi[at_light] = -1
-    drawn = tuple(h for h in (0, 1) if np.any(hemi == h))
+    # a hemisphere is drawn when it owns a receiver, or one within rounding of the equator (float32 on the device may place it there)
+    band = np.abs(q[:, 2]) <= 1e-5 * dist
+    drawn = tuple(h for h in (0, 1) if np.any(hemi == h) or np.any(band & ~at_light))
     _, bound, _ = light_bound(light)
     near = max(1.0001 * bound, 1e-4 * extent, 1e-7)
     if np.any(~at_light):
