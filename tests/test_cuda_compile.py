@@ -1,7 +1,8 @@
 """The CUDA path without a GPU: every Warp module of the package that owns kernels is compiled for
-CUDA (PTX through the NVRTC that Warp's wheels carry) into a temporary folder (the user's kernel
-cache is left alone): for the newest architecture this NVRTC targets in the quick mode, and for
-sm_70, sm_75 and sm_80 in the full mode (``-m slow``). An architecture this NVRTC cannot target
+CUDA (PTX through the NVRTC that Warp's wheels carry) into a folder beside wsoft's reference cache (:func:`ptx_dir`;
+the user's kernel cache is left alone; a module whose code is unchanged is not compiled again): for
+the newest architecture this NVRTC targets in the quick mode, and for sm_70, sm_75 and sm_80 in the
+full mode (``-m slow``). An architecture this NVRTC cannot target
 is skipped with the reason (CUDA 13's NVRTC dropped Volta, sm_70). Generic kernels compile
 through their declared overloads; the rasterizer's specialised kernels (one Warp module per
 projection, fragment, conservative/alpha, listed/deferring combination) are generated first. A
@@ -98,7 +99,7 @@ def test_every_kernel_module_is_found(modules):
 
 
 @pytest.mark.parametrize("arch", ARCHS)
-def test_every_module_compiles_for_cuda(modules, arch, tmp_path):
+def test_every_module_compiles_for_cuda(modules, arch):
     from warp._src import context  # importable: the fixture checked
 
     supported = getattr(context.runtime, "nvrtc_supported_archs", None)
@@ -107,7 +108,7 @@ def test_every_module_compiles_for_cuda(modules, arch, tmp_path):
     elif supported is not None and arch not in supported:
         version = ".".join(map(str, context.runtime.get_nvrtc_version()))
         pytest.skip(f"this NVRTC (CUDA {version}) cannot target sm_{arch}; it targets sm_{min(supported)} and newer")
-    _compile_all(modules, arch, tmp_path)
+    _compile_all(modules, arch, ptx_dir(arch))
 
 
 def newest_arch() -> int:
@@ -117,15 +118,29 @@ def newest_arch() -> int:
     return max(getattr(context.runtime, "nvrtc_supported_archs", None) or [90])
 
 
-def _compile_all(modules: dict, arch: int, tmp_path) -> None:
+def ptx_dir(arch: int) -> Path:
+    """Where the PTX of ``arch`` is kept between runs: a folder of wsoft's cache (not Warp's kernel cache).
+    Warp names each module's PTX by the hash of its code and options and compiles only a module whose
+    PTX of that hash is missing, so an unchanged module is not compiled again and any change is."""
+    return Path(os.environ.get("WSOFT_CACHE_DIR", Path.home() / ".cache" / "wsoft")) / "cuda-check" / f"sm_{arch}"
+
+
+def _compile_all(modules: dict, arch: int, folder: Path) -> None:
     def build(item):
         name, module = item
+        where = folder / name
         try:
-            wp.compile_aot_module(module, arch=arch, module_dir=str(tmp_path / name), use_ptx=True)
+            made = [Path(a) for a in wp.compile_aot_module(module, arch=arch, module_dir=str(where), use_ptx=True)]
         except Exception as exc:  # noqa: BLE001 - any compiler error is the finding
             return f"{name} (sm_{arch}): {' '.join(str(exc).split())[:2000]}"
-        ptx = [p for p in os.listdir(tmp_path / name) if p.endswith(".ptx")]
-        return None if ptx else f"{name} (sm_{arch}): no PTX written"
+        ptx = [a for a in made if a.suffix == ".ptx" and a.is_file()]
+        if not ptx:
+            return f"{name} (sm_{arch}): no PTX written"
+        stems = {a.name.split(f".sm{arch}.")[0] + "." for a in ptx}
+        for old in where.iterdir():  # an earlier version's files of this module
+            if not any(old.name.startswith(st) for st in stems):
+                old.unlink()
+        return None
 
     with ThreadPoolExecutor(max_workers=max(1, min(4, os.cpu_count() or 1))) as pool:
         errors = [e for e in pool.map(build, sorted(modules.items())) if e]
@@ -133,9 +148,9 @@ def _compile_all(modules: dict, arch: int, tmp_path) -> None:
 
 
 @pytest.mark.slow
-def test_the_rasterizers_other_corner_sources_compile_for_cuda(modules, tmp_path):
+def test_the_rasterizers_other_corner_sources_compile_for_cuda(modules):
     """Instanced work items and corners projected per triangle (short triangle lists) are the same code
     for every fragment and architecture: those specialisations for one fragment, on one arch."""
     extra = {k.module.name: k.module for k in rasterizer_kernels(OTHER_SOURCES, fragments=("depth_min",))}
     assert len(extra) == 64 and not set(extra) & set(modules)
-    _compile_all(extra, newest_arch(), tmp_path)
+    _compile_all(extra, newest_arch(), ptx_dir(newest_arch()))
