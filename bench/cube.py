@@ -203,7 +203,8 @@ def paraboloid_sizes(size: int) -> tuple[int, int]:
 
 
 def _paraboloid(case: dict) -> dict:
-    from wsoft.lightspace.paraboloid import guard_texels_for, window_radius
+    from wsoft.lightspace.cube import guard_window
+    from wsoft.lightspace.paraboloid import guard_texels_for
     from wsoft.techniques import create
 
     scene = load(case["file"])
@@ -223,7 +224,7 @@ def _paraboloid(case: dict) -> dict:
         seam = None
         if dp:
             g = guard_texels_for(create(t, params).params.radius if t == "pcf" else 0.0)
-            near = equator_texels(L, P, params["shadow_map_size"], window_radius(g, params["shadow_map_size"])) <= max(EDGE_TEXELS, g)
+            near = equator_texels(L, P, params["shadow_map_size"], guard_window(g, params["shadow_map_size"])) <= max(EDGE_TEXELS, g)
             seam = _seam(fr.V, ref["V"], near, pen)
         t_ms = st["timings_ms"]
         depth_ms = (sum(v for k, v in t_ms.items() if k.startswith(f"paraboloid[{label}]")) if dp else _depth_ms(st, label))

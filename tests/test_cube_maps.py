@@ -239,7 +239,7 @@ def test_plan_says_which_lights_get_a_cube_map(tmp_path):
 def test_dual_paraboloid_hard_equals_the_exact_answer_on_every_wall(tmp_path, corner):
     """``hard`` with ``omni=paraboloid`` in the closed box: the reference's one-sample answer on all six
     walls (the two cameras), from the hemispheres that hold receivers, no warning."""
-    from wsoft.lightspace.paraboloid import window_radius
+    from wsoft.lightspace.cube import guard_window
 
     c = np.array(corner, float)
     path = _closed_box(tmp_path, "box", tuple(-0.3 * c), tuple(1.9 * c))
@@ -252,7 +252,7 @@ def test_dual_paraboloid_hard_equals_the_exact_answer_on_every_wall(tmp_path, co
     assert "cube_faces" not in c_ and c_["paraboloid_texels"] == len(c_["paraboloid_hemispheres"]) * 512 * 512
     p = next(v for k, v in hard.stats["counters"]["passes"].items() if k.startswith("paraboloid["))
     assert sum(p["receivers_per_hemisphere"].values()) == int(cov.sum())
-    assert p["window_radius"] == pytest.approx(window_radius(2.0, 512))
+    assert p["window_radius"] == pytest.approx(guard_window(2.0, 512))
     assert not hard.stats["warnings"]
 
 

@@ -207,9 +207,10 @@ def cube_decision(light: Light, receivers: np.ndarray, probe: str) -> CubeDecisi
     return CubeDecision(light.path, True, angle, tuple(faces), probe)
 
 
-def _guard_tan(guard_texels: float, size: int) -> float:
-    """The half-window ``T`` whose border holds ``guard_texels`` texels past tangent 1:
-    ``(T - 1) size / (2 T) = guard_texels``."""
+def guard_window(guard_texels: float, size: int) -> float:
+    """The half-window ``T`` of a map ``size`` texels wide whose border past 1 holds ``guard_texels``
+    texels: ``(T - 1) size / (2 T) = guard_texels`` (at most a quarter of the map). A cube face's
+    window in tangents, a dual-paraboloid hemisphere's in paraboloid coordinates."""
     g = min(max(float(guard_texels), 0.0), 0.25 * size)
     return 1.0 / (1.0 - 2.0 * g / size)
 
@@ -218,7 +219,7 @@ def fit_cube_views(light: Light, receivers: np.ndarray, faces: tuple[int, ...], 
                    casters: np.ndarray | None = None) -> tuple[dict[int, LightView], dict]:
     """The views of the cube map's ``faces`` (:class:`CubeDecision`) fitted to ``receivers`` (the
     frame's, world [N, 3]), each ``size`` texels a side, all with the same window ``[-T, T]^2``:
-    ``T - 1`` the guard band (:func:`_guard_tan` of ``guard_texels``; with ``casters``, a soft
+    ``T - 1`` the guard band (:func:`guard_window` of ``guard_texels``; with ``casters``, a soft
     view, at least the growth that maps every caster that can block part of the light from a
     face's receivers; at most :data:`GUARD_MAX`). Each face's depth range runs from a near plane
     outside the light's bound (or half the nearest receiver's depth, if nearer) to just past the
@@ -237,7 +238,7 @@ def fit_cube_views(light: Light, receivers: np.ndarray, faces: tuple[int, ...], 
     at_light = np.linalg.norm(q, axis=1) <= 1e-7 * ext
     owner = owner_faces(q)
     owner[at_light] = -1
-    T = _guard_tan(guard_texels, size)
+    T = guard_window(guard_texels, size)
     capped = False
     _, bound, _ = light_bound(light)
     w = light.extent()

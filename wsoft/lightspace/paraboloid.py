@@ -27,14 +27,13 @@ tessellated finely enough for the bend to vanish)."""
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 import warp as wp
 
 from wsoft.lightspace.samples import to_light_coords
-from wsoft.lightspace.view import DEPTH_CLEAR, to_frame
+from wsoft.lightspace.view import to_frame
 from wsoft.scene.types import Light
 
 OMNI_MAPS = ("cube", "paraboloid")
@@ -86,13 +85,6 @@ class ParaboloidView:
         return len(self.drawn) * self.size * self.size
 
 
-def window_radius(guard_texels: float, size: int) -> float:
-    """The window's half-width ``R`` whose border past the unit disk holds ``guard_texels`` texels:
-    ``(R - 1) size / (2 R) = guard_texels`` (at most a quarter of the map)."""
-    g = min(max(float(guard_texels), 0.0), 0.25 * size)
-    return 1.0 / (1.0 - 2.0 * g / size)
-
-
 def hemisphere_of(q: np.ndarray) -> np.ndarray:
     """The hemisphere of each direction (rows of ``q``, in the cube frame): 0 where ``q_z >= 0``."""
     return (np.asarray(q, np.float64).reshape(-1, 3)[:, 2] < 0.0).astype(np.int32)
@@ -102,7 +94,7 @@ def fit_paraboloid_view(light: Light, receivers: np.ndarray, size: int, guard_te
     """The dual-paraboloid map of ``light`` for ``receivers`` (world [N, 3]): the hemispheres that
     own a receiver are drawn; rays start outside the light's bound (its enclosing ball), or at half
     the nearest receiver's distance if that is nearer."""
-    from wsoft.lightspace.cube import cube_frame
+    from wsoft.lightspace.cube import cube_frame, guard_window
     from wsoft.lightspace.light import light_bound
 
     rec = np.asarray(receivers, np.float64).reshape(-1, 3)
@@ -121,7 +113,7 @@ def fit_paraboloid_view(light: Light, receivers: np.ndarray, size: int, guard_te
     if np.any(~at_light):
         near = min(near, 0.5 * float(dist[~at_light].min()))
     return ParaboloidView(light_path=light.path, origin=origin.copy(), frame=frame, size=int(size),
-                          radius=window_radius(guard_texels, size), near=float(near), drawn=drawn, extent=float(extent),
+                          radius=guard_window(guard_texels, size), near=float(near), drawn=drawn, extent=float(extent),
                           receivers={HEMISPHERES[h]: int(np.count_nonzero(hemi == h)) for h in (0, 1)},
                           at_light=int(at_light.sum()))
 
@@ -236,9 +228,6 @@ class ParaboloidMap:
     alpha_tested: bool
     rays: int
 
-    @property
-    def clear(self) -> float:
-        return DEPTH_CLEAR
 
 
 def guard_texels_for(kernel_radius: float) -> float:
@@ -246,11 +235,6 @@ def guard_texels_for(kernel_radius: float) -> float:
     reads across the equator: its half-width, a texel for the tap's rounding and one for the
     receiver-plane step."""
     return float(kernel_radius) + 2.0
-
-
-def axis_texel_radians(size: int, radius: float) -> float:
-    """The angle one texel spans at a paraboloid's axis (its widest): ``4 R / size``."""
-    return 4.0 * radius / size if size else math.inf
 
 
 def paraboloid_visibility(dm: ParaboloidMap, gb, taps, ntaps: int, disk: bool, radius: float, bias: float, plane_slope: float,
