@@ -214,7 +214,10 @@ class Technique:
 
     def instancing_why(self) -> str:
         """"" when this instance (its parameters) keeps a stage's instances, else why it needs the
-        triangle soup (:attr:`instancing_refusal` unless a parameter changes it)."""
+        triangle soup (:attr:`instancing_refusal` unless a parameter changes it: ``omni=paraboloid``
+        traces the soup)."""
+        if getattr(self.params, "omni", "cube") == "paraboloid":
+            return "a dual-paraboloid map traces the flattened triangle soup"
         return self.instancing_refusal
 
     def cube_guard_texels(self) -> float:

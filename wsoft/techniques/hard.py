@@ -106,9 +106,6 @@ class Hard(Technique):
     horizon = "centre"  # binary: dark where the light's centre is behind the receiver's plane
     cylinder_model = "the shadow of its centre (its size plays no part), in a light view that looks at the receivers as a sphere light's does"
 
-    def instancing_why(self) -> str:
-        return "a dual-paraboloid map traces the flattened triangle soup" if self.params.omni == "paraboloid" else self.instancing_refusal
-
     def add_paraboloid_passes(self, ctx, light):
         """The light's dual-paraboloid map (``omni=paraboloid``): one texel per receiver, its tangent plane's distance along the texel's direction."""
         p = self.params

@@ -124,9 +124,6 @@ class PCF(Technique):
         """Its kernel's half-width and the bilinear tap's texel."""
         return float(self.params.radius) + 2.0
 
-    def instancing_why(self) -> str:
-        return "a dual-paraboloid map traces the flattened triangle soup" if self.params.omni == "paraboloid" else self.instancing_refusal
-
     def add_paraboloid_passes(self, ctx, light):
         """The light's dual-paraboloid map (``omni=paraboloid``): the same taps over ``radius`` texels of its hemisphere's map."""
         p = self.params
