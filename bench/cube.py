@@ -11,6 +11,10 @@ Three kinds of row, each against a ray-traced reference on the same pixels:
 * ``seam``: the ring of posts of :func:`~wsoft.stages.cube_cases.ring_stage`, whose penumbrae cross
   face edges, with each technique's guard band and with none
   (:data:`~wsoft.lightspace.cube.GUARD_OVERRIDE` = 0): error near edges against error elsewhere.
+* ``seam_lookup``: the same ring, ``pcf`` with its kernel crossing face edges read two ways: faces
+  drawn with a guard band of the kernel's width (``seams=guard``) or with the bilinear texel's and
+  each tap read from the face its direction belongs to (``seams=lookup``,
+  :mod:`wsoft.accel.cube_filter`), at two kernel widths.
 * ``paraboloid``: the frames of ``frame`` again, for the techniques that take ``omni`` (``hard``,
   ``pcf``): the cube map against a dual-paraboloid map (:mod:`wsoft.lightspace.paraboloid`) at the
   same size per side and at about the cube's texel count: error, the error within a kernel's width
@@ -66,6 +70,7 @@ def cases(quick: bool, devices: list[str]) -> list[dict]:
                     out.append({"kind": "frame", "scene": name, "file": name, "light": l.path, "device": dev, **common})
                     out.append({"kind": "paraboloid", "scene": name, "file": name, "light": l.path, "device": dev, **common})
         out.append({"kind": "seam", "scene": "cube_ring", "device": dev, **common, "width": 3 * h // 2, "height": 3 * h // 2})
+        out.append({"kind": "seam_lookup", "scene": "cube_ring", "device": dev, **common, "width": 3 * h // 2, "height": 3 * h // 2})
         for a in QUICK_SPREAD if quick else SPREAD_ANGLES:
             out.append({"kind": "spread", "scene": f"cube_spread_{a:g}", "angle": a, "device": dev, **common, "width": h, "height": h})
     return out
@@ -128,7 +133,8 @@ def _depth_ms(stats: dict, light_label: str) -> float:
 
 
 def run_case(case: dict, ctx: dict) -> dict:
-    return {"frame": _frame, "seam": _seam_row, "spread": _spread, "paraboloid": _paraboloid}[case["kind"]](case)
+    return {"frame": _frame, "seam": _seam_row, "seam_lookup": _seam_lookup, "spread": _spread,
+            "paraboloid": _paraboloid}[case["kind"]](case)
 
 
 def _entries(case: dict, file: str, light_path: str, techs: list[tuple[str, dict]], extra=None):
@@ -275,6 +281,39 @@ def _seam_row(case: dict) -> dict:
             "ground_truth_samples": case["ground_truth"], "guards": out}
 
 
+LOOKUP_RADII = (2.0, 8.0)  # pcf kernel half-widths (texels) of the seam_lookup rows
+
+
+def _seam_lookup(case: dict) -> dict:
+    """``pcf`` on the ring with ``seams=guard`` and ``seams=lookup`` at :data:`LOOKUP_RADII`: the
+    seam error (pixels within the kernel's width, at least :data:`EDGE_TEXELS`, of a face edge), the
+    change when the light's frame turns 30°, the depth passes' and the frame's time."""
+    from wsoft.stages.cube_cases import ring_stage
+
+    folder = _stage_folder()
+    files = {turn: ring_stage(folder, turn) for turn in (0.0, 30.0)}
+    light = load(files[0.0]).lights[0]
+    label = light.path.rsplit("/", 1)[-1]
+    techs = [("pcf", {"shadow_map_size": case["map"], "cube": "always", "radius": r, "seams": s}) for r in LOOKUP_RADII
+             for s in ("guard", "lookup")]
+    (ref0, fs0), (_, fs30) = (_entries(case, files[t], light.path, techs) for t in (0.0, 30.0))
+    cov = ref0["A"] > 0
+    pen = cov & (ref0["V"] > 0.02) & (ref0["V"] < 0.98)
+    P = _positions(fs0)
+    res = []
+    for (t, params), fr, fr30 in zip(techs, fs0.values(), fs30.values()):
+        near = edge_texels(light, P, case["map"], 0.0) <= max(EDGE_TEXELS, params["radius"] + 2.0)
+        s = _seam(fr.V, ref0["V"], near, pen)
+        d = np.abs(fr.V - fr30.V)
+        guard = next((v.get("guard", 0.0) for k, v in fr.stats["counters"]["passes"].items() if k.startswith("fit_cube[")), 0.0)
+        s.update(technique=t, radius=params["radius"], seams=params["seams"], guard=float(guard),
+                 turned_edge=float(d[pen & near].mean()), turned_elsewhere=float(d[pen & ~near].mean()),
+                 depth_ms=_depth_ms(fr.stats, label), frame_ms=fr.stats["timings_ms"]["total"])
+        res.append(s)
+    return {"scene": case["scene"], "device": case["device"], "width": case["width"], "height": case["height"], "map": case["map"],
+            "ground_truth_samples": case["ground_truth"], "settings": res}
+
+
 def _spread(case: dict) -> dict:
     from wsoft.stages.cube_cases import spread_stage
 
@@ -405,6 +444,33 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
                 if e:
                     L.append(f"| {t} | {'its own' if g == 'technique' else 'none'} | {e['mae_edge']:.4f} | {e['mae_elsewhere']:.4f} | "
                              f"{e['turned_edge']:.4f} | {e['turned_elsewhere']:.4f} | {e['frame_ms']:.1f} |")
+        L.append("")
+    lookups = [r for r in rows if r["case"]["kind"] == "seam_lookup"]
+    if lookups:
+        r = lookups[0]
+        L += ["## Seams: guard bands against a direction lookup", "",
+              f"`pcf` on the same ring ({r['width']}x{r['height']}, {r['map']}² maps, cube=always): faces drawn with a guard band of the "
+              "kernel's width, each tap read from its receiver's own face (`seams=guard`, the default), against faces drawn with the "
+              "bilinear texel's band and each tap past a face's edge read from the face its direction belongs to, as a GPU's cube-map "
+              "sampler does (`seams=lookup`, `wsoft.accel.cube_filter`). Near edges: penumbra pixels within the kernel's width (at "
+              f"least {EDGE_TEXELS:g} texels) of a face edge. Guard: the band past each face's 90°, in tangents.", "",
+              "| radius (texels) | seams | guard | MAE near edges | MAE elsewhere | ΔV turned, near edges | ΔV turned, elsewhere | "
+              "depth ms | frame ms |",
+              "|---:|---|---:|---:|---:|---:|---:|---:|---:|"]
+        for e in r["settings"]:
+            L.append(f"| {e['radius']:g} | {e['seams']} | {e['guard']:.4f} | {e['mae_edge']:.4f} | {e['mae_elsewhere']:.4f} | "
+                     f"{e['turned_edge']:.4f} | {e['turned_elsewhere']:.4f} | {e['depth_ms']:.1f} | {e['frame_ms']:.1f} |")
+        by = {(e["radius"], e["seams"]): e for e in r["settings"]}
+        said = []
+        for rad in sorted({e["radius"] for e in r["settings"]}):
+            g, k = by.get((rad, "guard")), by.get((rad, "lookup"))
+            if g and k:
+                said.append(f"radius {rad:g}: near-edge MAE {k['mae_edge']:.4f} against {g['mae_edge']:.4f}, frame time "
+                            f"{k['frame_ms'] / g['frame_ms']:.2f}x the guard band's")
+        if said:
+            L += ["", "Direction lookup against guard bands: " + "; ".join(said) + ". The guard band keeps the filter on one map per "
+                  "receiver; the lookup projects each tap's direction and reads the neighbouring face, and keeps every face's window "
+                  "at the bilinear texel's band whatever the kernel."]
         L.append("")
     if spreads:
         L += ["## Where one frustum stops sufficing", "",

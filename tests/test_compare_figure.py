@@ -146,8 +146,8 @@ def test_a_side_by_side_label_wraps_inside_its_panel(tmp_path):
 
     from wsoft.bench.common import LABEL_PX, params_label, side_by_side, wrap_label
 
-    label = params_label("salzman", {"radius": 16, "shadow_map_size": 512, "far_bound": False})
-    assert label == "salzman: radius=16, shadow_map_size=512, far_bound=False"
+    label = params_label("salzman", {"radius": 16, "shadow_map_size": 512, "far_bound": "off"})
+    assert label == "salzman: radius=16, shadow_map_size=512, far_bound=off"
     font = ImageFont.load_default(size=LABEL_PX)
     draw = ImageDraw.Draw(Image.new("L", (1, 1)))
     lines = wrap_label(draw, label, font, 96 - 8)

@@ -232,3 +232,19 @@ def test_cli_essm_bad_value(tmp_path):
 
     rc = main(["render", scene_path("box_plane.usda"), "-t", "essm", "--set", "sat=half", "--out", str(tmp_path / "x.exr")])
     assert rc == 2
+
+
+def test_receiver_hidden_past_the_range_stays_in_shadow(tmp_path):
+    """A closed room under a rect light (the ceiling the map's farthest caster, every receiver hidden
+    past the effective range's far end): ``beyond_range=flat`` keeps them dark, where their tilted
+    tangent planes (``plane``) reach back to the ceiling's depth and let light through."""
+    from wsoft.stages.adversarial import b_room_ceiling
+
+    path = b_room_ceiling(str(tmp_path))
+    flat = wsoft.render(path, "essm", width=48, height=36, shadow_map_size=256)
+    tilted = wsoft.render(path, "essm", width=48, height=36, shadow_map_size=256, beyond_range="plane")
+    cov = flat["A"] > 0
+    assert float(flat.V[cov].mean()) <= 0.01
+    assert float(tilted.V[cov].mean()) > 0.03  # measured 0.068
+    with pytest.raises(ParameterError, match="beyond_range"):
+        create("essm", {"beyond_range": "clamp"})

@@ -148,3 +148,21 @@ def test_exact_on_parallel_rectangles_and_transparency(device):
     under = (half["A"] > 0) & (np.abs(half["P.Z"]) < 1e-3) & (np.abs(half["P.X"]) < 0.5) & (np.abs(half["P.Y"]) < 0.5)
     assert under.sum() > 20
     assert np.allclose(half.V[under], 0.5, atol=0.02) and np.allclose(full.V[under], 0.0, atol=0.02)
+
+
+def test_far_bound_auto_is_off_where_every_prim_casts(tmp_path):
+    """Where every prim casts (no dynamic prims), the surface behind a caster is itself a caster:
+    ``far_bound=auto`` draws no far bound there, and a floor behind two casters (a closed room's
+    ceiling and an occluder under it) stays in shadow; ``on`` lets it out (the one-layer answer)."""
+    from wsoft.stages.adversarial import b_room_ceiling
+
+    path = b_room_ceiling(str(tmp_path))
+    auto = wsoft.render(path, "salzman", width=48, height=36, shadow_map_size=256)
+    on = wsoft.render(path, "salzman", width=48, height=36, shadow_map_size=256, far_bound=True)
+    cov = auto["A"] > 0
+    assert auto.counters("Light")["casters"] == "all" and auto.counters("Light")["far_bound"] is False
+    assert on.counters("Light")["far_bound"] is True
+    assert float(auto.V[cov].mean()) <= 0.01
+    assert float(on.V[cov].mean()) > 0.5  # measured 0.83
+    with pytest.raises(wsoft.ParameterError, match="far_bound"):
+        wsoft.render(path, "salzman", width=8, height=8, far_bound="sometimes")

@@ -203,7 +203,7 @@ def visibility_of(ctx: RenderContext, tctx: TechniqueContext, light: Light) -> K
     if faces and getattr(tech.params, "omni", "cube") == "paraboloid":  # a dual-paraboloid map in the cube map's place
         vk = tech.add_paraboloid_passes(tctx, light)
     elif faces:  # a cube map: the technique's passes on each face, each receiver's visibility from its own face
-        vk = ctx.select_cube_faces(tctx, light, faces, [tech.add_passes(tctx, f) for f in faces])
+        vk = tech.add_cube_passes(tctx, light, faces)
     else:
         vk = tech.add_passes(tctx, light)
     if tctx.ctx.graph.producers.get(vk) and tctx.counters(light).get("auto", {}).get("warning"):

@@ -522,23 +522,31 @@ class RenderContext:
                            inputs=[gb.pos, gb.prim, wp.vec3(*np.asarray(light.position, np.float64)), wp.mat33(*frame.T.ravel()),
                                    vec6i(*slots), *arrays, float(1e-7 * ext)],
                            outputs=[vis, face_of], device=dev)
-            fo = face_of.numpy()
-            total = int(np.count_nonzero(fo != 6))
-            c = tctx.counters(light)
-            c["cube_faces"] = [f.face_name for f in faces]
-            c["cube_texels"] = int(sum(res[k].width * res[k].height for k in views))
-            at_light, undrawn = int(np.count_nonzero(fo == -1)), int(np.count_nonzero(fo == -2))
-            if at_light:
-                self.warn(name, f"light {light.path}: {at_light} of {total} visible samples lie at its centre (no direction to it): "
-                                "V = 1 there")
-            if undrawn:
-                self.warn(name, f"light {light.path}: {undrawn} of {total} visible samples lie in cube-map faces the "
-                                f"{self.cube_decision(light).probe} probe found no receiver in, which were not drawn: they are "
-                                "left unshadowed")
+            self.report_cube_faces(tctx, light, faces, face_of, int(sum(res[k].width * res[k].height for k in views)), name)
             return {out: tctx.visibility(vis)}
 
         return tctx.ctx.add(Pass(name, (gk, *vis_keys, *views), (out,), run, kind="technique", stage="cube_select",
                                  technique=tctx.label_, light=self.label(light)))
+
+    def report_cube_faces(self, tctx: "TechniqueContext", light: Light, faces: list[CubeFace], face_of: wp.array, texels: int,
+                          name: str) -> None:
+        """A technique's counters for ``light``'s cube map (``cube_faces``, ``cube_texels``: the
+        texels of the face views its passes read) and the warnings of pass ``name`` for the samples
+        ``face_of`` (:func:`select_cube_face`'s codes) left lit: at the light's centre, in a face
+        not drawn."""
+        fo = face_of.numpy()
+        total = int(np.count_nonzero(fo != 6))
+        c = tctx.counters(light)
+        c["cube_faces"] = [f.face_name for f in faces]
+        c["cube_texels"] = int(texels)
+        at_light, undrawn = int(np.count_nonzero(fo == -1)), int(np.count_nonzero(fo == -2))
+        if at_light:
+            self.warn(name, f"light {light.path}: {at_light} of {total} visible samples lie at its centre (no direction to it): "
+                            "V = 1 there")
+        if undrawn:
+            self.warn(name, f"light {light.path}: {undrawn} of {total} visible samples lie in cube-map faces the "
+                            f"{self.cube_decision(light).probe} probe found no receiver in, which were not drawn: they are "
+                            "left unshadowed")
 
     def provide(self, key: Key, value: Any, *, name: str | None = None, kind: str = "reference") -> Key:
         """A resource computed outside the graph (a cached reference image): a pass that hands it over."""

@@ -996,15 +996,6 @@ def judge(case: Case, technique: str, res: Result, frame_of: Callable[[str], dic
 
 # known defects the corpus shows: (case, technique) -> what the defect is and where it lies
 KNOWN: dict[tuple[str, str], str] = {
-    ("room_ceiling", "essm"): "the walls' feet lit (mean V 0.068, at 256² and 1024²): the receivers lie hidden under the ceiling, past the "
-                              "effective depth range the map's pyramid gives (depth_range=bounds: 0.023; a range reaching the farthest "
-                              "receiver: 0.022, but greece's MAE 0.0425 -> 0.0472)",
-    ("lamp_sphere", "essm"): "the ground beyond the shade partly lit (mean V 0.084 at 1024², 0.29 at 256²): every texel of a face "
-                             "holds the closed shade, so the map's pyramid gives an effective depth range that ends at the shade and "
-                             "the ground behind it lies past it, as in room_ceiling (depth_range=bounds: 0.020)",
-    ("room_ceiling", "salzman"): "the floor lit (mean V 0.83): its far bound, the nearest surface behind the casters, is the occluder "
-                                 "under the ceiling, and a receiver behind two casters escapes the shadow (the paper's one layer; "
-                                 "0.000 without that occluder)",
 }
 
 

@@ -226,6 +226,13 @@ class Technique:
         so a kernel crossing an edge reads the neighbouring directions from the face's own map."""
         return 2.0
 
+    def add_cube_passes(self, ctx, light, faces):
+        """The passes for ``light``'s cube map (``faces``, :class:`~wsoft.lightspace.cube.CubeFace`):
+        by default :meth:`add_passes` on each face (drawn with :meth:`cube_guard_texels`'s guard band)
+        and each receiver's visibility from its own face
+        (:meth:`~wsoft.pipeline.context.RenderContext.select_cube_faces`); the key of the visibility."""
+        return ctx.ctx.select_cube_faces(ctx, light, faces, [self.add_passes(ctx, f) for f in faces])
+
     def add_paraboloid_passes(self, ctx, light):
         """The passes for ``light`` on a dual-paraboloid map instead of a cube map
         (:mod:`wsoft.lightspace.paraboloid`): a technique whose ``Params`` has ``omni`` implements it

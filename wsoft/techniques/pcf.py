@@ -43,6 +43,9 @@ from wsoft.params import LightViewParams, check_ranges
 from wsoft.techniques.base import PassSpec, Quality, Technique, Tolerance, check, param
 
 
+SEAMS = ("guard", "lookup")  # how a cube map's filter crosses a face's edge (PCFParams.seams)
+
+
 @dataclass(frozen=True)
 class PCFParams(LightViewParams):
     shadow_map_size: int = param(1024, "texels per side of the light depth map", range=(256, 8192))
@@ -58,8 +61,14 @@ class PCFParams(LightViewParams):
     omni: str = param("cube", "where a light's receivers call for more than one frustum (cube=auto or always): cube (six 90-degree faces) "
                               "or paraboloid (two hemispheres, drawn by one ray per texel; the receiver-plane bias; "
                               "wsoft.lightspace.paraboloid)", choices=OMNI_MAPS)
+    seams: str = param("guard", "a cube map's face edges: guard (each face drawn with a guard band of the kernel's width) or lookup "
+                                "(a tap past its face's edge reads the face its direction belongs to, as a cube-map sampler; "
+                                "wsoft.accel.cube_filter; receiver_bias=plane)", choices=SEAMS)
+
     def __post_init__(self):
         check_ranges(self)
+        check(self.seams == "guard" or self.receiver_bias == "plane", f"seams=lookup compares taps by the receiver's plane: receiver_bias "
+              f"{self.receiver_bias!r} must be plane")
         check(self.pattern in ("grid", "poisson"), f"pattern {self.pattern!r} is not grid or poisson")
         check(self.receiver_bias in RECEIVER_BIASES, f"receiver_bias {self.receiver_bias!r} is not one of {', '.join(RECEIVER_BIASES)}")
         check(self.pattern != "grid" or math.isqrt(self.taps) ** 2 == self.taps, f"the grid pattern needs a square tap count, not {self.taps}")
@@ -121,8 +130,49 @@ class PCF(Technique):
                       "receivers as a sphere light's does")
 
     def cube_guard_texels(self) -> float:
-        """Its kernel's half-width and the bilinear tap's texel."""
-        return float(self.params.radius) + 2.0
+        """Its kernel's half-width and the bilinear tap's texel (``seams=lookup``: the texel alone;
+        taps past a face's edge read the neighbouring face)."""
+        return 2.0 if self.params.seams == "lookup" else float(self.params.radius) + 2.0
+
+    def add_cube_passes(self, ctx, light, faces):
+        """``seams=guard``: the taps on each face's own map (:meth:`Technique.add_cube_passes`);
+        ``seams=lookup``: one pass over every face's map, each tap read from the face its direction
+        belongs to (:func:`~wsoft.accel.cube_filter.shade_pcf_cube`)."""
+        p = self.params
+        if p.seams == "guard":
+            return super().add_cube_passes(ctx, light, faces)
+        from wsoft.accel.cube_filter import shade_pcf_cube
+        from wsoft.lightspace.cube import cube_frame, vec6i
+        from wsoft.lightspace.view import ViewGPU
+
+        gbuf = ctx.gbuffer()
+        depths = [ctx.light_depth(f, size=p.shadow_map_size, view=p.view) for f in faces]
+        out = ctx.visibility_key(light)
+        frame = cube_frame(light)
+        name = ctx.pass_name("pcf_cube_lookup", light)
+
+        def run(res):
+            gb = res[gbuf]
+            maps = {f.face: res[k] for f, k in zip(faces, depths)}
+            first = next(iter(maps.values()))
+            slots = [k if k in maps else -1 for k in range(6)]
+            views = wp.array([maps.get(k, first).view.gpu() for k in range(6)], dtype=ViewGPU, device=ctx.device)
+            arrays = [maps.get(k, first).depth for k in range(6)]
+            taps = taps_on(ctx.device, p.pattern, p.taps)
+            vis = wp.empty(gb.count, dtype=float, device=ctx.device)
+            face_of = wp.empty(gb.count, dtype=wp.int32, device=ctx.device)
+            ext = first.view.extent
+            launch_chunked(
+                shade_pcf_cube, gb.count,
+                inputs=[views, vec6i(*slots), wp.mat33(*frame.T.ravel()), *arrays, gb.gpu(), taps.array, taps.count,
+                        int(p.pattern == "poisson"), p.radius, p.bias * ext, p.plane_slope_bias, light.shadow_distance,
+                        float(1e-7 * ctx.ctx.scene.diagonal)],
+                outputs=[vis, face_of], device=ctx.device, min_chunk=256,
+            )
+            ctx.ctx.report_cube_faces(ctx, light, faces, face_of, sum(m.view.width * m.view.height for m in maps.values()), name)
+            return {out: ctx.visibility(vis)}
+
+        return ctx.add_pass(name, inputs=(gbuf, *depths), outputs=(out,), run=run, stage="shadow", light=light)
 
     def add_paraboloid_passes(self, ctx, light):
         """The light's dual-paraboloid map (``omni=paraboloid``): the same taps over ``radius`` texels of its hemisphere's map."""
