@@ -183,7 +183,7 @@ def report(rows: list[dict], md, ctx: dict) -> None:
         lines.append(f"| {n}{' †' if first['silent_hazard'] else ''} | {first['expect']} | {first['note']} | " + " | ".join(cells) + " |")
     lines += ["", "† an input that, left unchecked, gives a silent wrong answer or a traceback.", "",
               "‡ known defects the corpus finds (expected failures in `tests/test_adversarial.py`):", ""]
-    lines += [f"* `{r['case']}` x `{r['technique']}`: {r['known']} (measured here: {'; '.join(r['problems'])})" for r in known]
+    lines += [f"* `{r['case']}` x `{r['technique']}`: {r['known']} (measured here: {'; '.join(r['problems'])})" for r in known] or ["* none"]
     lines += ["",
               "## What each case says (first technique)", ""]
     for n in names:
