@@ -116,6 +116,16 @@ def _seam(v: np.ndarray, truth: np.ndarray, near: np.ndarray, pen: np.ndarray) -
             "mae_elsewhere": float(e[b].mean()) if b.any() else math.nan}
 
 
+def _turned_seam(fr, fr30, truth: np.ndarray, near: np.ndarray, pen: np.ndarray) -> dict:
+    """:func:`_seam` of frame ``fr`` and how much V changes in ``fr30`` (the light's frame turned
+    30°, which moves the face edges, not the shadows) near the edges and elsewhere, and its frame ms."""
+    s = _seam(fr.V, truth, near, pen)
+    d = np.abs(fr.V - fr30.V)
+    s.update(turned_edge=float(d[pen & near].mean()), turned_elsewhere=float(d[pen & ~near].mean()),
+             frame_ms=fr.stats["timings_ms"]["total"])
+    return s
+
+
 def _face_ms(stats: dict, light_label: str) -> float:
     """The time of the passes run once per cube face (their names carry ``[Light/+x]``)."""
     return float(sum(v for k, v in stats["timings_ms"].items() if f"{light_label}/" in k))
@@ -271,11 +281,7 @@ def _seam_row(case: dict) -> dict:
         res = []
         for (t, _), (lab, fr), (_, fr30) in zip(techs, fs0.items(), fs30.items()):
             near = edge_texels(light, P, case["map"], 0.0) <= max(EDGE_TEXELS, 8.0)
-            s = _seam(fr.V, ref0["V"], near, pen)
-            d = np.abs(fr.V - fr30.V)
-            s.update(turned_edge=float(d[pen & near].mean()), turned_elsewhere=float(d[pen & ~near].mean()),
-                     frame_ms=fr.stats["timings_ms"]["total"])
-            res.append({"technique": t, **s})
+            res.append({"technique": t, **_turned_seam(fr, fr30, ref0["V"], near, pen)})
         out[guard] = res
     return {"scene": case["scene"], "device": case["device"], "width": case["width"], "height": case["height"], "map": case["map"],
             "ground_truth_samples": case["ground_truth"], "guards": out}
@@ -303,13 +309,9 @@ def _seam_lookup(case: dict) -> dict:
     res = []
     for (t, params), fr, fr30 in zip(techs, fs0.values(), fs30.values()):
         near = edge_texels(light, P, case["map"], 0.0) <= max(EDGE_TEXELS, params["radius"] + 2.0)
-        s = _seam(fr.V, ref0["V"], near, pen)
-        d = np.abs(fr.V - fr30.V)
         guard = next((v.get("guard", 0.0) for k, v in fr.stats["counters"]["passes"].items() if k.startswith("fit_cube[")), 0.0)
-        s.update(technique=t, radius=params["radius"], seams=params["seams"], guard=float(guard),
-                 turned_edge=float(d[pen & near].mean()), turned_elsewhere=float(d[pen & ~near].mean()),
-                 depth_ms=_depth_ms(fr.stats, label), frame_ms=fr.stats["timings_ms"]["total"])
-        res.append(s)
+        res.append({**_turned_seam(fr, fr30, ref0["V"], near, pen), "technique": t, "radius": params["radius"], "seams": params["seams"],
+                    "guard": float(guard), "depth_ms": _depth_ms(fr.stats, label)})
     return {"scene": case["scene"], "device": case["device"], "width": case["width"], "height": case["height"], "map": case["map"],
             "ground_truth_samples": case["ground_truth"], "settings": res}
 

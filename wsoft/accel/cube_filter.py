@@ -13,10 +13,10 @@ from __future__ import annotations
 
 import warp as wp
 
+from wsoft.accel.filters import tap_lit
 from wsoft.lightspace.cube import owner_face, vec6i
 from wsoft.lightspace.samples import to_light_coords
-from wsoft.lightspace.view import ViewGPU, depth_at, receiver_tap_depth, texel_center, texel_size, view_dir, view_of, map_coords, \
-    within_distance
+from wsoft.lightspace.view import ViewGPU, depth_at, map_coords, texel_center, texel_size, view_dir, view_of
 from wsoft.raster.gbuffer import GBufferGPU, gb_covered
 
 
@@ -109,14 +109,6 @@ def shade_pcf_cube(
             tm = wp.vec2(wp.dot(w, tv.ax) / tz, wp.dot(w, tv.ay) / tz)
         else:
             k2 = k
-        qv = view_of(tv, p)
-        nq = view_dir(tv, n)
-        zr = receiver_tap_depth(tv, qv, nq, tm, plane_slope)
-        z = face_depth(k2, tv, d0, d1, d2, d3, d4, d5, tm)
-        if zr - bias <= z:
-            lit += 1.0
-        elif dmax >= 0.0:
-            tc = texel_center(tv, tm)
-            if not within_distance(tv, qv, wp.vec2(tc[0], tc[1]), z, dmax):
-                lit += 1.0
+        lit += tap_lit(tv, view_of(tv, p), view_dir(tv, n), tm, face_depth(k2, tv, d0, d1, d2, d3, d4, d5, tm), bias, 1, plane_slope,
+                       dmax)
     vis[i] = lit / float(ntaps)

@@ -44,6 +44,27 @@ def taps_on(device: str, pattern: str, n: int) -> Taps:
 
 
 @wp.func
+def tap_lit(lv: ViewGPU, pv: wp.vec3, nv: wp.vec3, m: wp.vec2, d: float, bias: float, use_plane: int, plane_slope: float,
+            dmax: float) -> float:
+    """1 where the receiver (view-space point ``pv``, normal ``nv``) is lit at the tap of window
+    coordinates ``m`` whose texel stores depth ``d``, else 0: its depth there (with ``use_plane``
+    its tangent plane's at the tap's texel centre less ``plane_slope`` of the plane's step per
+    texel, :func:`~wsoft.lightspace.view.receiver_tap_depth`; else ``pv``'s own) less ``bias`` is
+    not behind ``d``, or (``dmax >= 0``, ``inputs:shadow:distance``) the tap's caster lies farther
+    than ``dmax`` from the receiver (:func:`~wsoft.lightspace.view.within_distance`)."""
+    zr = pv[2]
+    if use_plane != 0:
+        zr = receiver_tap_depth(lv, pv, nv, m, plane_slope)
+    if zr - bias <= d:
+        return 1.0
+    if dmax >= 0.0:
+        c = texel_center(lv, m)
+        if not within_distance(lv, pv, wp.vec2(c[0], c[1]), d, dmax):
+            return 1.0
+    return 0.0
+
+
+@wp.func
 def pcf_visibility(
     lv: ViewGPU,
     depth: wp.array2d[float],
@@ -70,14 +91,5 @@ def pcf_visibility(
     for i in range(ntaps):
         o = to_light_coords(taps[i], disk)
         m = wp.vec2(m0[0] + o[0] * half[0], m0[1] + o[1] * half[1])
-        c = texel_center(lv, m)
-        zr = pv[2]
-        if use_plane != 0:
-            zr = receiver_tap_depth(lv, pv, nv, m, plane_slope)
-        d = depth_at(lv, depth, m)
-        if zr - bias <= d:
-            lit += 1.0
-        elif dmax >= 0.0:
-            if not within_distance(lv, pv, wp.vec2(c[0], c[1]), d, dmax):
-                lit += 1.0
+        lit += tap_lit(lv, pv, nv, m, depth_at(lv, depth, m), bias, use_plane, plane_slope, dmax)
     return lit / float(ntaps)
