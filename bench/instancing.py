@@ -4,8 +4,10 @@ Each row runs in a child process of its own (``python -m wsoft.bench.instancing 
 its peak resident memory (``ru_maxrss``) is its own: a stage loaded flattened or instanced
 (``load_scene(..., instancing=...)``), uploaded to the device (``upload_scene``: the BVHs, and for
 instances the prototypes' BVHs and the top level), then the frames asked for at 640 x 480 (160 x
-120 in ``--quick``): ``hard`` (a 2048² map; 512² quick) and ``reference`` (16 light samples). A
-warm-up frame at 32 x 24 compiles the kernels first, so frame times hold no compilation.
+120 in ``--quick``), each light's in alternating rounds (:data:`ROUNDS`, medians): ``hard`` (a 2048²
+map; 512² quick) at its defaults (``map_texels=auto``) and rasterizing the whole map
+(``map_texels=all``), and ``reference`` at 16 and at 4 light samples. A warm-up frame at 32 x 24
+compiles the kernels first, so frame times hold no compilation.
 
 * ``city`` (344 instanceable buildings of 12 prototypes, 1.04M triangles flattened): both ways,
   with the shadow rays of the reference's 16 samples per pixel traced again from arrays, the same
@@ -52,6 +54,22 @@ def run_case(case: dict, ctx: dict) -> dict:
         tail = (proc.stderr or proc.stdout).strip().splitlines()[-1:] or ["no output"]
         raise WsoftError(f"instancing row {case['scene']} {case['mode']} failed: {tail[0]}")
     return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+ROUNDS = 3  # alternating rounds of every frame setting; medians are reported
+
+
+def frame_settings(case: dict) -> dict:
+    """The frames of a light: ``hard`` at its defaults (``map_texels=auto``), ``hard`` rasterizing the
+    whole map (``map_texels=all``), the reference at the case's samples and at 4 samples."""
+    size = case["map"]
+    return {"hard": ("hard", {"shadow_map_size": size}), "hard_raster": ("hard", {"shadow_map_size": size, "map_texels": "all"}),
+            "reference": ("reference", {"samples": case["samples"]}), "reference4": ("reference", {"samples": 4})}
+
+
+def technique_ms(timings: dict) -> float:
+    """A frame's passes but the G-buffer's (and the scene's upload): what a technique itself costs."""
+    return float(sum(v for k, v in timings.items() if k not in ("total", "compile", "upload_scene") and not k.startswith("gbuffer")))
 
 
 def _rss_mib() -> float:
@@ -115,12 +133,28 @@ def measure(case: dict) -> dict:
     w, h = case["size"]
     for light in scene.lights:
         lrow = {}
-        for tech, kw in (("hard", {"shadow_map_size": case["map"]}), ("reference", {"samples": case["samples"]})):
+        settings = frame_settings(case)
+        for tech, kw in settings.values():
             render(scene, tech, width=32, height=24, light=light.path, device=dev, **kw)  # compile
-            fr = render(scene, tech, width=w, height=h, light=light.path, device=dev, **kw)
-            lrow[tech] = {"frame_ms": fr.stats["timings_ms"]["total"], "passes_ms": fr.stats["timings_ms"],
-                          "mean_V": float(np.nanmean(fr.V)), "nan": int(np.isnan(fr.V).sum()),
-                          "instancing": fr.stats["scene"]["instancing"]["mode"]}
+        times = {k: [] for k in settings}
+        last_v = {}
+        for _ in range(ROUNDS):  # alternating rounds: each setting once per round
+            for k, (tech, kw) in settings.items():
+                fr = render(scene, tech, width=w, height=h, light=light.path, device=dev, **kw)
+                tm = fr.stats["timings_ms"]
+                times[k].append((tm["total"], technique_ms(tm)))
+                lrow[k] = {"mean_V": float(np.nanmean(fr.V)), "nan": int(np.isnan(fr.V).sum()),
+                           "instancing": fr.stats["scene"]["instancing"]["mode"], "passes_ms": tm,
+                           "drawn_by": sorted({"rays" if "_read" in n else "rasterizer" for n in fr.stats["passes"] if n.startswith("light_depth")}),
+                           "texels_read": sum(c.get("texels_read", 0) for c in fr.stats["counters"]["passes"].values())}
+                if k.startswith("hard"):
+                    last_v[k] = fr.V
+        for k, t in times.items():
+            lrow[k]["frame_ms"] = float(np.median([a for a, _ in t]))
+            lrow[k]["technique_ms"] = float(np.median([b for _, b in t]))
+            lrow[k]["rounds_technique_ms"] = [b for _, b in t]
+        if "hard_raster" in last_v:  # the map of the texels read against the rasterized map: pixels whose V differs
+            lrow["hard"]["pixels_differing_from_raster"] = int(np.count_nonzero(last_v["hard"] != last_v["hard_raster"]))
         if case["rays"]:
             lrow["rays"] = _rays(scene, ds, light, w, h, case["samples"], dev)
         row["lights"][light.name] = lrow
@@ -192,11 +226,32 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
                 L.append(f"forest flattened would hold about {r['triangles'] * per_tri / 2**30:,.1f} GiB on the device "
                          f"(an estimate: city's {per_tri:.0f} bytes per flattened triangle × {r['triangles']:,} triangles; not loaded), "
                          f"against {_mib(r['device_bytes'])} MiB instanced.")
-    L += ["", "## Frames", "", "| scene | mode | light | hard ms | reference ms | hard mean V | reference mean V | NaN |", "|---|---|---|---|---|---|---|---|"]
+    L += ["", "## Frames", "",
+          f"Every light's frames in {ROUNDS} alternating rounds in one process (medians): `hard` at its defaults (`map_texels=auto`: "
+          "where the light's casting triangles, instances placed, outnumber the frame's samples 16 to one, only the texels the "
+          "receivers read are drawn, one ray each, `wsoft.raster.raycast`), `hard` rasterizing the whole map (`map_texels=all`), "
+          "and the reference at 4 samples and at the case's samples. *Technique ms*: the frame's passes but the G-buffer's.", "",
+          "| scene | mode | light | hard map drawn by | texels read | hard technique ms | hard, whole map rasterized, technique ms | reference 4 samples technique ms | "
+          "hard / reference 4 | reference 16 frame ms | hard mean V | pixels where the two hard maps differ | reference 16 mean V | NaN |",
+          "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         for light, lr in r["lights"].items():
-            L.append(f"| {r['scene']} | {r['mode']} ({lr['hard']['instancing']}) | {light} | {lr['hard']['frame_ms']:.0f} | {lr['reference']['frame_ms']:.0f} | "
-                     f"{lr['hard']['mean_V']:.4f} | {lr['reference']['mean_V']:.4f} | {lr['hard']['nan'] + lr['reference']['nan']} |")
+            h, hr, r4, ref = lr["hard"], lr.get("hard_raster"), lr.get("reference4"), lr["reference"]
+            if hr is None or r4 is None:
+                continue
+            nan = sum(x["nan"] for x in (h, hr, r4, ref))
+            L.append(f"| {r['scene']} | {r['mode']} ({h['instancing']}) | {light} | {', '.join(h['drawn_by'])} | {h['texels_read']:,} | "
+                     f"{h['technique_ms']:.0f} | {hr['technique_ms']:.0f} | {r4['technique_ms']:.0f} | {h['technique_ms'] / r4['technique_ms']:.2f} | "
+                     f"{ref['frame_ms']:.0f} | {h['mean_V']:.4f} | {h['pixels_differing_from_raster']:,} | {ref['mean_V']:.4f} | {nan} |")
+    for r in rows:
+        for light, lr in r["lights"].items():
+            h, hr = lr["hard"], lr.get("hard_raster")
+            if hr is None or "rays" not in h["drawn_by"] or not h["texels_read"]:
+                continue
+            L.append(f"\n{r['scene']} {light}: the whole map rasterized costs {1e6 * hr['technique_ms'] / r['triangles']:.0f} ns of wall time per "
+                     f"placed triangle of the stage ({r['triangles']:,}; the map draws every instance whose box reaches the view); the texels the receivers "
+                     f"read cost {1e3 * h['technique_ms'] / h['texels_read']:.2f} µs each ({h['texels_read']:,} rays, the technique's other "
+                     "passes included).")
     if len(city) == 2:
         L += ["", "## Ray throughput on city (the same shadow rays, from arrays)", "",
               "| light | rays | flattened, one by one Mrays/s | flattened, packets Mrays/s | instanced, one by one Mrays/s | instanced / flattened (one by one) | blocked (flat / instanced) |",

@@ -58,7 +58,7 @@ def test_plan_and_techniques_json():
     names = {x["name"] for x in t}
     assert {"hard", "reference"} <= names
     hard = next(x for x in t if x["name"] == "hard")
-    assert {q["name"] for q in hard["parameters"]} == {"view", "cube", "shadow_map_size", "bias", "slope_bias", "receiver_bias", "plane_slope_bias", "conservative", "omni"}
+    assert {q["name"] for q in hard["parameters"]} == {"view", "cube", "shadow_map_size", "bias", "slope_bias", "receiver_bias", "plane_slope_bias", "conservative", "map_texels", "omni"}
 
 
 def _bad_mesh(tmp_path):

@@ -60,3 +60,73 @@ def test_unknown_parameter_lists_known():
         wsoft.render(scene, "nope", width=8, height=8, device="cpu")
     with pytest.raises(wsoft.ParameterError, match="not a valid int"):
         wsoft.render(scene, "hard", width=8, height=8, device="cpu", shadow_map_size="big")
+
+
+# ------------------------------------------------------------------------------- map_texels=read
+
+
+@pytest.mark.parametrize("file,light", [("cutout.usda", None), ("multi_light.usda", "Rect"), ("multi_light.usda", "Sun"),
+                                        ("room_lamp.usda", None)])
+def test_read_texels_map_casts_the_rasterized_maps_shadow(device, file, light):
+    """map_texels=read (one ray per texel a receiver reads) against the rasterized map: the same
+    binary shadow but where a texel centre lies on a triangle's edge (cutouts alpha-tested; a
+    perspective, an orthographic view and a cube map's faces)."""
+    scene = wsoft.load_scene(scene_path(file))
+    kw = dict(width=96, height=72, device=device, light=light, shadow_map_size=512)
+    read = wsoft.render(scene, "hard", map_texels="read", **kw)
+    full = wsoft.render(scene, "hard", map_texels="all", **kw)
+    cov = full["A"] > 0
+    assert (full.V[cov] == 0).sum() > 50
+    assert np.mean(read.V[cov] != full.V[cov]) < 0.002
+    maps = {n: c for n, c in read.stats["counters"]["passes"].items() if c.get("drawn_by") == "rays"}
+    assert maps and all(0 < c["texels_read"] <= cov.sum() for c in maps.values())
+    assert not any("_read" in n for n in full.stats["passes"])
+
+
+def test_read_texels_map_holds_the_rasterized_depths_at_the_texels_read(device):
+    """At every texel a receiver reads, the read map's depth is the rasterized map's (to float
+    rounding; a texel whose centre lies on an edge may differ); every other texel is DEPTH_CLEAR;
+    the texels read are exactly the receivers' texels, as the view places them."""
+    from wsoft.lightspace.fit import fit_light_view
+    from wsoft.lightspace.view import DEPTH_CLEAR
+    from wsoft.raster.camera import camera_gpu
+    from wsoft.raster.depth_map import rasterize
+    from wsoft.raster.gbuffer import render_gbuffer
+    from wsoft.raster.raycast import raycast_read, read_texels
+    from wsoft.pipeline import frame_setup
+    from wsoft.scene.device import upload_scene
+
+    scene = wsoft.load_scene(scene_path("cutout.usda"))
+    ds = upload_scene(scene, device)
+    gb = render_gbuffer(ds, camera_gpu(frame_setup(scene, 120, 90).camera), 120, 90, 1, True)
+    covered = gb.prim.numpy() >= 0
+    rec = gb.pos.numpy()[covered]
+    view = fit_light_view(scene.lights[0], rec, *scene.bounds, 256)
+    read = raycast_read(ds, view, gb, alpha_tested=True)
+    full = rasterize(ds, view, alpha_tested=True).depth.numpy().reshape(-1)
+    a = read.depth.numpy().reshape(-1)
+    x, y = view.texel_coords(rec)  # float64 on the host: a point within rounding of a texel's edge may fall on either side
+    inside = (x >= 0) & (x < view.width) & (y >= 0) & (y < view.height)
+    host = np.unique(np.floor(y[inside]).astype(int) * view.width + np.floor(x[inside]).astype(int))
+    want = read_texels(gb, view)
+    assert read.texels_read == len(want) > 1000
+    assert len(np.setxor1d(want, host)) <= 0.005 * len(want)  # receivers on the fitted window's edge
+    others = np.ones(a.size, bool)
+    others[want] = False
+    assert np.all(a[others] == DEPTH_CLEAR)
+    both = (a[want] != DEPTH_CLEAR) & (full[want] != DEPTH_CLEAR)
+    assert np.mean((a[want] != DEPTH_CLEAR) != (full[want] != DEPTH_CLEAR)) < 0.005  # coverage: edge texels only
+    assert np.abs(a[want][both] - full[want][both]).max() <= 1e-5 * np.abs(full[want][both]).max()
+
+
+def test_map_texels_auto_reads_on_a_stage_of_many_placed_triangles(device):
+    """auto: rays for the texels read on the instanced forest (56 million placed triangles against
+    a small frame's samples), the rasterizer on box_plane; read refuses conservative rasterization."""
+    forest = wsoft.load_scene(scene_path("forest.usdc"), instancing=True)
+    f = wsoft.render(forest, "hard", width=40, height=30, device=device, shadow_map_size=256, light="/World/Lights/Sun")
+    assert [c["drawn_by"] for n, c in f.stats["counters"]["passes"].items() if n.startswith("light_depth")] == ["rays"]
+    box = wsoft.load_scene(scene_path("box_plane.usda"))
+    b = wsoft.render(box, "hard", width=40, height=30, device=device, shadow_map_size=256)
+    assert any(n.startswith("light_depth[") for n in b.stats["passes"]) and not any("_read" in n for n in b.stats["passes"])
+    with pytest.raises(wsoft.ParameterError, match="map_texels=read"):
+        wsoft.render(box, "hard", width=8, height=8, device=device, map_texels="read", conservative=True)

@@ -417,3 +417,16 @@ def test_plan_lists_the_shadow_controls(tmp_path):
     assert "shadow:color: (0.5, 0, 0): applied to R G B, not to V" in t.stdout
     assert "shadow:falloff: 0.5, falloffGamma 1: not applied" in t.stdout
     assert "vsm: not applicable to /World/Light: inputs:shadow:distance = 2.5 cannot be honoured" in t.stdout
+
+
+def test_hard_read_texels_map_passes_through_excluded_prims():
+    """hard's map of the texels receivers read (one ray each) holds the light's casters only, as its
+    rasterized map does: A left out casts nothing, B still shadows, and the two maps agree."""
+    st = two_blockers()
+    link(st, "/World/Light", exclude=["/World/A"])
+    scene = wsoft.load_scene(st)
+    read, full = render(scene, "hard", map_texels="read"), render(scene, "hard", map_texels="all")
+    assert read.V[umbra(read, shadow_x(-1.2, 1.0, 3.0))].min() > 0.95
+    assert read.V[umbra(read, shadow_x(1.2, 1.0, 3.0))].mean() < 0.2
+    cov = full["A"] > 0
+    assert np.mean(read.V[cov] != full.V[cov]) < 0.002

@@ -365,7 +365,7 @@ class RenderContext:
         return view
 
     def light_depth(self, light: Light, size: int, conservative: bool = False, soft: bool = False, inner: bool = False,
-                    opaque: bool = False, faces: str = "all", view: str = "fitted", guard: float = 2.0) -> Key:
+                    opaque: bool = False, faces: str = "all", view: str = "fitted", guard: float = 2.0, read: int | None = None) -> Key:
         """Resource: a :class:`~wsoft.raster.depth_map.DepthMap` of the :meth:`light_view` ``view``
         (``fitted`` or ``stable``) of ``light`` (alpha-tested only if the scene has
         cutouts); ``inner``: the map of depths that certainly block a whole texel (inner coverage);
@@ -374,7 +374,13 @@ class RenderContext:
         closed surfaces or ``open`` surfaces (:func:`~wsoft.scene.device.face_surfaces`). Only the
         triangles that cast ``light``'s shadow are drawn (its ``collection:shadowLink``,
         :meth:`Scene.casting_triangles`); the key is the light's own, so lights with different links
-        never share a map."""
+        never share a map. ``read`` (an int r, not with ``conservative``, ``inner``, ``opaque`` or a
+        face subset): only the texels the G-buffer's samples read and those within r texels of them
+        are drawn, one ray each (:func:`~wsoft.raster.raycast.raycast_read`), the others left
+        ``DEPTH_CLEAR``; counters ``drawn_by`` (``rays``), ``texels_read`` and ``read_radius``."""
+        if read is not None and (conservative or inner or opaque or faces != "all"):
+            raise DeclarationError("a depth map of the texels receivers read is drawn at texel centres, alpha-tested, every face: "
+                                   "not conservative, inner, opaque or of some faces")
         sk = self.scene_arrays()
         casting = self.scene.casting_triangles(light)  # None: every triangle (no list, no extra work)
         vk = self.light_view(light, size, soft, view, guard)
@@ -382,6 +388,9 @@ class RenderContext:
         flavour = (("_alpha" if alpha else "") + ("_inner" if inner else "_conservative" if conservative else "")
                    + ("" if faces == "all" else f"_{faces}"))
         variant = vk.variant if isinstance(light, CubeFace) else _view_variant(size, soft, view)
+        if read is not None:
+            flavour += f"_read{int(read)}"
+            return self._read_depth(light, Key("light_depth", self.label(light), variant=variant, flavour=flavour), sk, vk, alpha, int(read))
         key = Key("light_depth", self.label(light), variant=variant, flavour=flavour)
         name = str(key)
 
@@ -397,6 +406,21 @@ class RenderContext:
             return {key: dm}
 
         return self.add(Pass(name, (sk, vk), (key,), run, kind="light_map", light=self.label(light)))
+
+    def _read_depth(self, light: Light, key: Key, sk: Key, vk: Key, alpha: bool, radius: int) -> Key:
+        """:meth:`light_depth` with ``read``: the map at the texels the G-buffer's samples read (within ``radius``)."""
+        from wsoft.raster.raycast import raycast_read
+
+        gk = self.gbuffer()
+        name = str(key)
+
+        def run(res):
+            dm = raycast_read(res[sk], res[vk], res[gk], alpha, light.shadow_excluded, radius)
+            c = self.pass_counters(name)
+            c.update(drawn_by="rays", texels_read=dm.texels_read, read_radius=radius)
+            return {key: dm}
+
+        return self.add(Pass(name, (sk, vk, gk), (key,), run, kind="light_map", light=self.label(light)))
 
     def paraboloid_depth(self, light: Light, size: int, guard: float) -> Key:
         """Resource: a :class:`~wsoft.lightspace.paraboloid.ParaboloidMap` of ``light``, the
@@ -606,10 +630,10 @@ class TechniqueContext:
         return key
 
     def light_depth(self, light: Light, size: int, conservative: bool = False, soft: bool = False, inner: bool = False,
-                    opaque: bool = False, faces: str = "all", view: str = "fitted") -> Key:
+                    opaque: bool = False, faces: str = "all", view: str = "fitted", read: int | None = None) -> Key:
         guard = self.tech.cube_guard_texels()
         self._note_face_view(light, self.ctx.light_view(light, size, soft, view, guard))
-        return self.ctx.light_depth(light, size, conservative, soft, inner, opaque, faces, view, guard)
+        return self.ctx.light_depth(light, size, conservative, soft, inner, opaque, faces, view, guard, read)
 
     def _note_face_view(self, light: Light, key: Key) -> None:
         """Remember the views of a cube map's faces this technique reads (its counters count their texels)."""

@@ -98,6 +98,7 @@ class DepthMap:
     private_maps: int = 0  # CPU worker maps merged into ``depth`` (temporaries, freed)
     big_triangles: int = 0  # CPU: triangles rasterized in the banded second pass
     instances_drawn: int = 0  # instanced scene: instances whose bounds reach the view (drawn)
+    texels_read: int = 0  # > 0: only these texels were drawn, those the receivers read (wsoft.raster.raycast.raycast_read); DEPTH_CLEAR elsewhere
 
     def arrays(self) -> dict[str, wp.array]:
         return {"depth": self.depth}
