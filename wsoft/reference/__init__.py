@@ -150,6 +150,10 @@ def trace_visibility_packets(
     given_up[i] = each
 
 
+# chunks a CPU thread: receivers cost unevenly (lit, penumbra, packets that give up) and chunks
+# balance the threads, but each chunk costs a launch; 8 was the fastest of 2-32 on 2 threads at 320x240
+# (contact and city, 16 samples: bench foundation's ray_throughput rows)
+PER_THREAD = 8
 PACKET_MIN_SAMPLES = 8  # below this a packet's set-up costs more than it saves (measured: bench foundation)
 
 
@@ -207,7 +211,7 @@ def trace_reference(ds: DeviceScene, light: LightGPU, gb, pattern: SamplePattern
             outputs=[vis, err, given_up],
             device=ds.device,
             min_chunk=256,
-            per_thread=32,  # receivers cost unevenly (lit, penumbra, packets that give up): small chunks balance the threads
+            per_thread=PER_THREAD,
         )
         if counters is not None:
             counters["receivers_ray_by_ray"] = int(given_up.numpy().sum())
@@ -219,7 +223,7 @@ def trace_reference(ds: DeviceScene, light: LightGPU, gb, pattern: SamplePattern
         outputs=[vis, err],
         device=ds.device,
         min_chunk=256,
-        per_thread=32,
+        per_thread=PER_THREAD,
     )
     return vis, err
 
