@@ -691,6 +691,23 @@ def _throughput(case: dict, ctx: dict) -> dict:
              "pass_packet": lambda: trace_reference(ds, L, gb, pattern, disk, eps, "packet"),
              "rays_ray": lambda: trace_rays(ds, o, d, t),
              "rays_packet": lambda: trace_ray_packets(ds, o, d, t, n)}
+    if dev == "cpu":  # what generation costs inside the pass, without tracing (bench/generation.py), on one thread
+        import warp as wp
+
+        from wsoft.bench.generation import generate_packets, random_draws
+        from wsoft.parallel import launch_chunked
+        from wsoft.reference import PER_THREAD
+
+        ls = pattern.on(dev, disk)
+        sink = wp.empty(gb.count, dtype=float, device=dev)
+        parts = {"generation": lambda: launch_chunked(generate_packets, gb.count, inputs=[L, ls, gb.gpu(), eps, -1.0], outputs=[sink],
+                                                      device=dev, min_chunk=256, per_thread=PER_THREAD),
+                 "random_draws": lambda: launch_chunked(random_draws, gb.count, inputs=[ls, gb.gpu()], outputs=[sink], device=dev,
+                                                        min_chunk=256, per_thread=PER_THREAD)}
+        with _threads(1):
+            for key, fn in parts.items():
+                w1, _ = _timed(fn)
+                row[f"{key}_1t_ns_per_ray"] = 1e9 * w1 / nrays
     for key, fn in timed.items():
         wall, cpu = _timed(fn)
         row[f"{key}_ms"], row[f"{key}_mrays_s"], row[f"{key}_cpu_over_wall"] = 1e3 * wall, nrays / wall / 1e6, cpu / wall
@@ -831,6 +848,21 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
                          f"{r[f'{kind}_packet_mrays_s'] / r[f'{kind}_ray_mrays_s']:.2f} | "
                          f"{r.get(f'{kind}_ray_1t_mrays_s', float('nan')):.2f} | {r.get(f'{kind}_packet_1t_mrays_s', float('nan')):.2f} | "
                          f"{e1 if e1 is None else f'{e1:.2f}'} | {ratio1} | {r['packets_identical']} |")
+        gen = [r for r in thr if "generation_1t_ns_per_ray" in r and r.get("embree_1t_mrays_s") and "pass_packet_1t_mrays_s" in r]
+        if gen:
+            L += ["", "What the pass spends generating its rays, on one thread (ns of wall time per ray; `bench/generation.py`):",
+                  "`generation`: the pass's kernel with its tracing left out (the stratified sample, the light point, the direction,",
+                  "the plane and light-side tests); `random draws`: only its two random draws a sample, a chain of dependent draws",
+                  "per receiver that the reference's samples fix bit for bit; `tracing in the pass`: the pass less `generation`.",
+                  "For the pass to match Embree, generation must fit in `Embree` less `tracing in the pass`.", "",
+                  "| scene | light | samples | pass | generation | random draws | tracing in the pass | Embree | room for generation |",
+                  "|---|---|---|---|---|---|---|---|---|"]
+            for r in gen:
+                p1 = 1e3 / r["pass_packet_1t_mrays_s"]
+                e1 = 1e3 / r["embree_1t_mrays_s"]
+                g = r["generation_1t_ns_per_ray"]
+                L.append(f"| {r['scene']} | {r['light'].split('/')[-1]} | {r['samples']} | {p1:.1f} | {g:.1f} | {r['random_draws_1t_ns_per_ray']:.1f} | "
+                         f"{p1 - g:.1f} | {e1:.1f} | {e1 - (p1 - g):.1f} |")
         pk = list({r["scene"]: r for r in thr if "packed_bvh" in r}.values())
         if pk:
             L += ["", "The packets' BVH: Warp's, repacked once per scene (both children's boxes in one 64-byte record, depth first; the",

@@ -52,12 +52,17 @@ def kernel_modules() -> dict[str, object]:
     """Warp module name -> module, for every module of the package that owns at least one kernel."""
     kernels = []
     root = Path(wsoft.__file__).parent
-    for path in sorted(root.rglob("*.py")):  # every file: namespace packages (wsoft.raster) included
-        parts = list(path.relative_to(root.parent).with_suffix("").parts)
+    bench = Path(importlib.import_module("wsoft.bench").__path__[0])  # bench/ in a checkout, wsoft/bench installed
+    files = [(p, p.relative_to(root.parent)) for p in sorted(root.rglob("*.py"))]  # every file: namespace packages (wsoft.raster) included
+    if not bench.is_relative_to(root):
+        files += [(p, Path("wsoft", "bench") / p.relative_to(bench)) for p in sorted(bench.rglob("*.py"))]
+    for path, rel in files:
+        parts = list(rel.with_suffix("").parts)
         if parts[-1] == "__init__":
             parts.pop()
         name = ".".join(parts)
-        if name.startswith(SKIP_PREFIXES):
+        bench_kernels = name.startswith("wsoft.bench.") and "@wp.kernel" in path.read_text()  # the benchmarks' own kernels
+        if name.startswith(SKIP_PREFIXES) and not bench_kernels:
             continue
         mod = importlib.import_module(name)
         kernels += [v for v in vars(mod).values() if isinstance(v, wp.Kernel)]

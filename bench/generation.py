@@ -1,0 +1,96 @@
+"""What the reference's ray generation costs, apart from tracing: the packet pass's kernel
+(:func:`~wsoft.reference.trace_visibility_packets`) with its tracing left out, and its random
+draws alone.
+
+* :func:`generate_packets` builds every receiver's packets as the pass does (the stratified
+  sample, the light point and its direction, the test against the receiver's plane and the
+  light's side) and traces none: every ray counts as unblocked.
+* :func:`random_draws` makes only the pass's random draws: per receiver the pattern's stream from
+  :func:`~wsoft.lightspace.samples.sampling_begin`, two draws a sample, one after another (each
+  draw's state is the previous draw's output: a chain no receiver can split).
+
+``bench foundation``'s ``ray_throughput`` rows time both beside the pass (one thread): the pass
+less the first is what tracing costs inside the pass; the second is the floor under any
+generation that keeps the reference's samples, bit for bit.
+"""
+
+from __future__ import annotations
+
+import warp as wp
+
+import wsoft.parallel  # noqa: F401  (Warp configured before the kernels are defined)
+from wsoft.lightspace.bitmask import popcount
+from wsoft.lightspace.light import LightGPU, light_point, lit_along
+from wsoft.lightspace.samples import LightSamples, sample_coords, sampling_begin
+from wsoft.raster.gbuffer import GBufferGPU, gb_covered, gb_pixel
+from wsoft.raster.shadow_rays import receiver_begin, shadow_ray_length
+from wsoft.reference import visible_fraction
+from wsoft.reference.packets import PACKET, packet_f
+
+
+@wp.kernel
+def generate_packets(
+    offset: int,
+    light: LightGPU,
+    ls: LightSamples,
+    gb: GBufferGPU,
+    eps: float,
+    dmax: float,
+    # outputs
+    vis: wp.array[float],
+):
+    """The packet pass's rays, generated and not traced (V: the fraction of them its plane and the
+    light's side let through, plus a sum of the rays that keeps their computation)."""
+    i = wp.tid() + offset
+    if not gb_covered(gb, i):
+        vis[i] = 1.0
+        return
+    p = gb.pos[i]
+    n = gb.nrm[i]
+    off, o, state, base, rot = receiver_begin(gb, ls, eps, i)
+    visible = int(0)
+    keep = float(0.0)
+    first = int(0)
+    while first < ls.count:
+        dx = packet_f()
+        dy = packet_f()
+        dz = packet_f()
+        tm = packet_f()
+        mask = wp.uint32(0)
+        for k in range(wp.min(PACKET, ls.count - first)):
+            c, state = sample_coords(ls, state, base, rot, first + k)
+            r = light_point(light, p, c)
+            d = wp.vec3(r[0], r[1], r[2])
+            if lit_along(light, n, d):
+                dx[k] = d[0]
+                dy[k] = d[1]
+                dz[k] = d[2]
+                tm[k] = shadow_ray_length(r[3], dmax, off)
+                mask = mask | (wp.uint32(1) << wp.uint32(k))
+        for k in range(PACKET):
+            keep += dx[k] + dy[k] + dz[k] + tm[k]
+        visible += popcount(mask)
+        first += PACKET
+    v, e = visible_fraction(visible, ls.count)
+    vis[i] = v + keep * 1.0e-30
+
+
+@wp.kernel
+def random_draws(
+    offset: int,
+    ls: LightSamples,
+    gb: GBufferGPU,
+    # outputs
+    vis: wp.array[float],
+):
+    """Only the pass's random draws: two a sample from the receiver's stream (their sum is written)."""
+    i = wp.tid() + offset
+    if not gb_covered(gb, i):
+        vis[i] = 1.0
+        return
+    xy = gb_pixel(gb, i)
+    state, base, rot = sampling_begin(ls, i, xy[0], xy[1])
+    keep = float(0.0)
+    for _s in range(ls.count):
+        keep += wp.randf(state) + wp.randf(state)
+    vis[i] = keep
