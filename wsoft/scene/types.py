@@ -418,7 +418,9 @@ class Scene:
         distant light's view tests for casters crossing its region
         (:func:`~wsoft.lightspace.fit.distant_caster_depth`). Of an instanced scene: the soup's,
         plus the 12 triangles of every instance's world bounds (:meth:`Instances.corners`: every
-        instanced triangle lies inside its box)."""
+        instanced triangle lies inside its box). Built once (see :meth:`changed`); read-only."""
+        if "_caster_mesh" in self.__dict__:
+            return self.__dict__["_caster_mesh"]
         pts = np.asarray(self.points, np.float32)
         tris = np.asarray(self.triangles).reshape(-1, 3)
         if self.instanced:
@@ -426,6 +428,7 @@ class Scene:
             boxes = (np.arange(len(corners) // 8, dtype=np.int64)[:, None, None] * 8 + np.array(BOX_TRIANGLES, np.int64)[None]).reshape(-1, 3)
             tris = np.concatenate([tris.astype(np.int64), boxes + len(pts)])
             pts = np.concatenate([pts, corners]).astype(np.float32)
+        self.__dict__["_caster_mesh"] = (pts, tris)
         return pts, tris
 
     @property
@@ -542,7 +545,7 @@ class Scene:
     def changed(self) -> None:
         """Forget device copies and derived values after the arrays were edited in place (and the
         stage :meth:`flattened` would load again: it flattens the edited arrays instead)."""
-        for k in ("_device_cache", "bounds", "caster_points", "_dynamic_subset", "_casting", "_flattened", "_source", "_adjacency", "_translated"):
+        for k in ("_device_cache", "bounds", "caster_points", "_dynamic_subset", "_casting", "_flattened", "_source", "_adjacency", "_translated", "_caster_mesh"):
             self.__dict__.pop(k, None)
         if self.instances is not None:
             self.instances.__dict__.pop("world_bounds", None)
