@@ -230,7 +230,9 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
           f"Every light's frames in {ROUNDS} alternating rounds in one process (medians): `hard` at its defaults (`map_texels=auto`: "
           "where the light's casting triangles, instances placed, outnumber the frame's samples 16 to one, only the texels the "
           "receivers read are drawn, one ray each, `wsoft.raster.raycast`), `hard` rasterizing the whole map (`map_texels=all`), "
-          "and the reference at 4 samples and at the case's samples. *Technique ms*: the frame's passes but the G-buffer's.", "",
+          "and the reference at 4 samples and at the case's samples. *Technique ms*: the frame's passes but the G-buffer's. Where "
+          "`hard`'s map is drawn by the rasterizer, its two columns are the same setting: their difference is the rounds' spread "
+          "(`rounds_technique_ms` in the rows).", "",
           "| scene | mode | light | hard map drawn by | texels read | hard technique ms | hard, whole map rasterized, technique ms | reference 4 samples technique ms | "
           "hard / reference 4 | reference 16 frame ms | hard mean V | pixels where the two hard maps differ | reference 16 mean V | NaN |",
           "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
