@@ -2,9 +2,9 @@
 (:func:`~wsoft.reference.trace_visibility_packets`) with its tracing left out, and its random
 draws alone.
 
-* :func:`generate_packets` builds every receiver's packets as the pass does (the stratified
-  sample, the light point and its direction, the test against the receiver's plane and the
-  light's side) and traces none: every ray counts as unblocked.
+* :func:`generate_packets` builds every receiver's packets with the pass's own
+  :func:`~wsoft.reference.packet_rays` (the stratified sample, the light point and its direction,
+  the test against the receiver's plane and the light's side) and traces none.
 * :func:`random_draws` makes only the pass's random draws: per receiver the pattern's stream from
   :func:`~wsoft.lightspace.samples.sampling_begin`, two draws a sample, one after another (each
   draw's state is the previous draw's output: a chain no receiver can split).
@@ -20,12 +20,12 @@ import warp as wp
 
 import wsoft.parallel  # noqa: F401  (Warp configured before the kernels are defined)
 from wsoft.lightspace.bitmask import popcount
-from wsoft.lightspace.light import LightGPU, light_point, lit_along
-from wsoft.lightspace.samples import LightSamples, sample_coords, sampling_begin
+from wsoft.lightspace.light import LightGPU
+from wsoft.lightspace.samples import LightSamples, sampling_begin
 from wsoft.raster.gbuffer import GBufferGPU, gb_covered, gb_pixel
-from wsoft.raster.shadow_rays import receiver_begin, shadow_ray_length
-from wsoft.reference import visible_fraction
-from wsoft.reference.packets import PACKET, packet_f
+from wsoft.raster.shadow_rays import receiver_begin
+from wsoft.reference import packet_rays, visible_fraction
+from wsoft.reference.packets import PACKET
 
 
 @wp.kernel
@@ -52,21 +52,7 @@ def generate_packets(
     keep = float(0.0)
     first = int(0)
     while first < ls.count:
-        dx = packet_f()
-        dy = packet_f()
-        dz = packet_f()
-        tm = packet_f()
-        mask = wp.uint32(0)
-        for k in range(wp.min(PACKET, ls.count - first)):
-            c, state = sample_coords(ls, state, base, rot, first + k)
-            r = light_point(light, p, c)
-            d = wp.vec3(r[0], r[1], r[2])
-            if lit_along(light, n, d):
-                dx[k] = d[0]
-                dy[k] = d[1]
-                dz[k] = d[2]
-                tm[k] = shadow_ray_length(r[3], dmax, off)
-                mask = mask | (wp.uint32(1) << wp.uint32(k))
+        dx, dy, dz, tm, mask, state = packet_rays(light, ls, state, base, rot, p, n, off, dmax, first)
         for k in range(PACKET):
             keep += dx[k] + dy[k] + dz[k] + tm[k]
         visible += popcount(mask)

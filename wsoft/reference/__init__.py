@@ -91,6 +91,30 @@ def trace_visibility(
     stderr[i] = e
 
 
+@wp.func
+def packet_rays(light: LightGPU, ls: LightSamples, state: wp.uint32, base: int, rot: wp.vec4, p: wp.vec3, n: wp.vec3, off: float,
+                dmax: float, first: int):
+    """A receiver's packet of samples ``first ..`` (at most :data:`PACKET`): the rays' unit
+    directions (``dx``, ``dy``, ``dz``), lengths (``tm``), the mask of those traced (a ray behind the
+    receiver's tangent plane or the light's back is not) and the advanced random state."""
+    dx = packet_f()
+    dy = packet_f()
+    dz = packet_f()
+    tm = packet_f()
+    mask = wp.uint32(0)
+    for k in range(wp.min(PACKET, ls.count - first)):
+        c, state = sample_coords(ls, state, base, rot, first + k)
+        r = light_point(light, p, c)
+        d = wp.vec3(r[0], r[1], r[2])
+        if lit_along(light, n, d):  # behind the tangent plane (the surface's own sheet) or the light's back: not traced
+            dx[k] = d[0]
+            dy[k] = d[1]
+            dz[k] = d[2]
+            tm[k] = shadow_ray_length(r[3], dmax, off)
+            mask = mask | (wp.uint32(1) << wp.uint32(k))
+    return dx, dy, dz, tm, mask, state
+
+
 @wp.kernel
 def trace_visibility_packets(
     offset: int,
@@ -126,21 +150,7 @@ def trace_visibility_packets(
     first = int(0)
     each = int(0)
     while first < samples:
-        dx = packet_f()
-        dy = packet_f()
-        dz = packet_f()
-        tm = packet_f()
-        mask = wp.uint32(0)
-        for k in range(wp.min(PACKET, samples - first)):
-            c, state = sample_coords(ls, state, base, rot, first + k)
-            r = light_point(light, p, c)
-            d = wp.vec3(r[0], r[1], r[2])
-            if lit_along(light, n, d):  # behind the tangent plane (the surface's own sheet) or the light's back: not traced
-                dx[k] = d[0]
-                dy[k] = d[1]
-                dz[k] = d[2]
-                tm[k] = shadow_ray_length(r[3], dmax, off)
-                mask = mask | (wp.uint32(1) << wp.uint32(k))
+        dx, dy, dz, tm, mask, state = packet_rays(light, ls, state, base, rot, p, n, off, dmax, first)
         live, each = trace_receiver_packet(mesh, pb, cut, has_cutouts, o, dx, dy, dz, tm, mask, each)
         visible += popcount(live)
         first += PACKET

@@ -131,8 +131,8 @@ class Hard(Technique):
             return p.map_texels == "read"
         if p.conservative:
             return False
-        casting = ctx.scene.casting_triangles(light)
-        triangles = ctx.scene.total_triangles if casting is None or ctx.scene.instanced else len(casting)
+        casting = ctx.scene.casting_mask(light)
+        triangles = ctx.scene.total_triangles if casting is None or ctx.scene.instanced else int(casting.sum())
         return triangles > READ_FACTOR * ctx.width * ctx.height * ctx.pixel_samples
 
     def add_paraboloid_passes(self, ctx, light):
