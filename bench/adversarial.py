@@ -34,10 +34,13 @@ def technique_args(technique: str, map_size: int = MAP) -> list[str]:
     return [a for k, v in params.items() for a in ("--set", f"{k}={v}")]
 
 
-def run_cli(stage: str, technique: str, out_dir: str, name: str, map_size: int = MAP) -> Result:
-    """``wsoft render STAGE -t TECHNIQUE`` in-process, as a user runs it; the EXR read back."""
+def run_cli(stage: str, technique: str, out_dir: str, name: str, map_size: int = MAP, args: tuple[str, ...] = (),
+            judged_time: float | None = None) -> Result:
+    """``wsoft render STAGE -t TECHNIQUE [ARGS]`` in-process, as a user runs it; the EXR read back (of the
+    frame at ``judged_time`` when ``ARGS`` render a sequence)."""
     from wsoft.cli import run_captured
     from wsoft.io import read_exr
+    from wsoft.pipeline.sequence import frame_path
 
     exr = os.path.join(out_dir, f"{name}-{technique}.exr")
     stats = os.path.join(out_dir, f"{name}-{technique}.json")
@@ -45,12 +48,14 @@ def run_cli(stage: str, technique: str, out_dir: str, name: str, map_size: int =
         with contextlib.suppress(FileNotFoundError):
             os.remove(p)
     rc, _, err = run_captured(["render", stage, "-t", technique, "--width", W, "--height", H, "--device", "cpu",
-                               *technique_args(technique, map_size), "--out", exr, "--stats", stats])
+                               *technique_args(technique, map_size), *args, "--out", exr, "--stats", stats])
     lines = [ln for ln in err.splitlines() if ln.strip()]
     res = Result(rc=rc, stderr=err, warnings=[ln[len("warning: "):] for ln in lines if ln.startswith("warning: ")])
     errs = [ln for ln in lines if ln.startswith("wsoft: error: ")]
     res.error = errs[0][len("wsoft: error: "):] if errs else ""
     if rc == 0:
+        if judged_time is not None:
+            exr, stats = frame_path(exr, judged_time), frame_path(stats, judged_time)
         with open(stats) as f:
             res.stats = json.load(f)
         res.channels = read_exr(exr)
@@ -95,7 +100,8 @@ class Corpus:
         key = (name, technique)
         if key not in self.results:
             case = self.by_name.get(name)
-            self.results[key] = run_cli(self.stage(name), technique, self.folder, name, case.map_size if case else MAP)
+            self.results[key] = run_cli(self.stage(name), technique, self.folder, name, case.map_size if case else MAP,
+                                        case.args if case else (), case.judged_time if case else None)
         return self.results[key]
 
     def frame(self, name: str, technique: str) -> dict | None:
