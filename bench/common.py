@@ -12,6 +12,21 @@ import numpy as np
 from wsoft.bench.harness import ground_truth, measure_render, reference
 
 
+def install_command(extra: str) -> str:
+    """The command that installs wsoft's optional dependencies ``extra`` the way this wsoft is
+    installed: ``pip install -e '.[extra]'`` in the source folder of an editable install (or of a
+    source tree that is not installed), else ``pip install 'wsoft[extra]'``."""
+    import json
+    from importlib.metadata import PackageNotFoundError, distribution
+
+    try:
+        text = distribution("wsoft").read_text("direct_url.json")
+    except PackageNotFoundError:
+        return f"pip install -e '.[{extra}]' in the wsoft source folder"
+    editable = bool(text) and bool(json.loads(text).get("dir_info", {}).get("editable"))
+    return f"pip install -e '.[{extra}]' in the wsoft source folder" if editable else f"pip install 'wsoft[{extra}]'"
+
+
 def render_references(case: dict) -> list[dict]:
     """The reference :func:`render_row` measures ``case`` against, as :func:`~wsoft.bench.harness.reference`'s
     arguments (a sweep module's ``references``: error-only jobs a distributed sweep runs apart)."""
@@ -210,6 +225,23 @@ def lowest_mae(renders: list[dict]) -> dict[tuple[str, str], dict]:
 LIGHT_LINES = ("-", "--", ":", "-.")  # the first, second, ... light of a panel
 
 
+def log_ticks(ax) -> None:
+    """Labelled ticks on both log axes of ``ax`` (call it after plotting): the powers of ten where
+    at least two lie in view, else about four ticks spread over the view and rounded to two
+    significant digits (a range narrower than a decade shows no power of ten)."""
+    import matplotlib.ticker
+
+    for axis, lim in ((ax.xaxis, ax.get_xlim()), (ax.yaxis, ax.get_ylim())):
+        lo, hi = sorted(lim)
+        axis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+        if not lo > 0.0 or math.floor(math.log10(hi)) - math.ceil(math.log10(lo)) >= 1:
+            continue
+        ticks = sorted({float(f"{v:.2g}") for v in np.geomspace(lo, hi, 6)[1:-1]})
+        ticks = [t for t in ticks if lo <= t <= hi] or [float(f"{math.sqrt(lo * hi):.3g}")]
+        axis.set_major_locator(matplotlib.ticker.FixedLocator(ticks))
+        axis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}"))
+
+
 def error_vs_time(renders: list[dict], md: Path, ctx: dict, title: str) -> list[str]:
     """One panel per scene: MAE against frame time, a line per (light, device, technique) over its
     sweep. Each technique in its colour and marker of the one palette (:mod:`wsoft.palette`; a
@@ -268,8 +300,7 @@ def error_vs_time(renders: list[dict], md: Path, ctx: dict, title: str) -> list[
         ax.set_xlabel("frame time (ms)", fontsize=8)
         ax.set_ylabel("MAE of V", fontsize=8)
         ax.tick_params(labelsize=7)
-        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
-        ax.yaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+        log_ticks(ax)
     handles = [Line2D([], [], color=styles[s]["color"], marker=styles[s]["marker"], markersize=5, linewidth=1.0, label=s[1]) for s in series]
     handles += [Line2D([], [], color="grey", marker="o", markerfacecolor="none" if i else "grey", linestyle="none", label=f"on {d}")
                 for i, d in enumerate(devices) if len(devices) > 1]

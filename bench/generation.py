@@ -5,9 +5,10 @@ draws alone.
 * :func:`generate_packets` builds every receiver's packets with the pass's own
   :func:`~wsoft.reference.packet_rays` (the stratified sample, the light point and its direction,
   the test against the receiver's plane and the light's side) and traces none.
-* :func:`random_draws` makes only the pass's random draws: per receiver the pattern's stream from
-  :func:`~wsoft.lightspace.samples.sampling_begin`, two draws a sample, one after another (each
-  draw's state is the previous draw's output: a chain no receiver can split).
+* :func:`random_draws` makes only the pass's random draws: per receiver the key from
+  :func:`~wsoft.lightspace.samples.sampling_begin`, two counter-based draws a sample
+  (:func:`~wsoft.lightspace.samples.counter_draw`: each a hash of the key, the sample and the
+  dimension, none depending on another).
 
 ``bench foundation``'s ``ray_throughput`` rows time both beside the pass (one thread): the pass
 less the first is what tracing costs inside the pass; the second is the floor under any
@@ -21,7 +22,7 @@ import warp as wp
 import wsoft.parallel  # noqa: F401  (Warp configured before the kernels are defined)
 from wsoft.lightspace.bitmask import popcount
 from wsoft.lightspace.light import LightGPU
-from wsoft.lightspace.samples import LightSamples, sampling_begin
+from wsoft.lightspace.samples import LightSamples, counter_draw, sampling_begin
 from wsoft.raster.gbuffer import GBufferGPU, gb_covered, gb_pixel
 from wsoft.raster.shadow_rays import receiver_begin
 from wsoft.reference import packet_rays, visible_fraction
@@ -34,7 +35,6 @@ def generate_packets(
     light: LightGPU,
     ls: LightSamples,
     gb: GBufferGPU,
-    eps: float,
     dmax: float,
     # outputs
     vis: wp.array[float],
@@ -47,7 +47,7 @@ def generate_packets(
         return
     p = gb.pos[i]
     n = gb.nrm[i]
-    off, o, state, base, rot = receiver_begin(gb, ls, eps, i)
+    off, o, state, base, rot = receiver_begin(gb, ls, i)
     visible = int(0)
     keep = float(0.0)
     first = int(0)
@@ -69,7 +69,7 @@ def random_draws(
     # outputs
     vis: wp.array[float],
 ):
-    """Only the pass's random draws: two a sample from the receiver's stream (their sum is written)."""
+    """Only the pass's random draws: two a sample from the receiver's key (their sum is written)."""
     i = wp.tid() + offset
     if not gb_covered(gb, i):
         vis[i] = 1.0
@@ -77,6 +77,6 @@ def random_draws(
     xy = gb_pixel(gb, i)
     state, base, rot = sampling_begin(ls, i, xy[0], xy[1])
     keep = float(0.0)
-    for _s in range(ls.count):
-        keep += wp.randf(state) + wp.randf(state)
+    for s in range(ls.count):
+        keep += counter_draw(state, s, 0) + counter_draw(state, s, 1)
     vis[i] = keep

@@ -37,9 +37,10 @@ SWEEPS = {"foundation": "wsoft.bench.foundation", "filtered": "wsoft.bench.filte
           "adversarial": "wsoft.bench.adversarial", "usd-pipeline": "wsoft.bench.usd_pipeline",
           "instancing": "wsoft.bench.instancing", "stsv": "wsoft.bench.stsv", "modern": "wsoft.bench.modern",
           "temporal": "wsoft.bench.temporal", "cube": "wsoft.bench.cube", "distributed": "wsoft.bench.distributed",
-          "auto": "wsoft.bench.auto"}
+          "auto": "wsoft.bench.auto", "skinning": "wsoft.bench.skinning",
+          "scaling": "wsoft.bench.scaling"}
 SWEEP_ALIASES = {"usd_pipeline": "usd-pipeline"}  # other spellings `wsoft bench` accepts (words joined by "-" in SWEEPS)
-REFERENCE_VERSION = 4  # bump when the reference changes (2: rows render one named light; 3: the receiver's horizon, ray offsets from the frame's extent; 4: the shaded R, G, B for ꟻLIP)
+REFERENCE_VERSION = 6  # a key of the reference cache: bump it when the reference's V, V_stderr or shaded R, G, B change
 _SCENE_DIR: Path | None = None
 
 
@@ -47,9 +48,11 @@ def scenes_dir() -> Path:
     """Where scenes are looked up: ``--scenes`` / ``$WSOFT_SCENES``, else the bundled stages."""
     if _SCENE_DIR is not None:
         return _SCENE_DIR
-    env = os.environ.get("WSOFT_SCENES")
-    if env:
-        return Path(env)
+    from wsoft.env import scenes_dir as env_scenes
+
+    env = env_scenes()
+    if env is not None:
+        return env
     from wsoft import usd_scenes
 
     return usd_scenes.folder()
@@ -77,7 +80,9 @@ def scene_file(name: str) -> str:
 
 
 def cache_dir() -> Path:
-    d = Path(os.environ.get("WSOFT_CACHE_DIR", Path.home() / ".cache" / "wsoft")) / "references"
+    from wsoft.env import cache_dir as env_cache
+
+    d = env_cache() / "references"
     d.mkdir(parents=True, exist_ok=True)
     return d
 
@@ -287,16 +292,25 @@ def run_in_process(name: str, mod, todo: list[dict], ctx: dict, jsonl: Path) -> 
 
 def run_sweep(name: str, *, quick: bool = False, device: list[str] | None = None, out_dir: str = "reports", fresh: bool = False,
               scenes: str | None = None, workers: int | None = None, scheduler: str | None = None, resources: dict | None = None,
-              threads_per_worker: int = 1, cache_dir: str | None = None) -> int:
+              threads_per_worker: int = 1, cache_dir: str | None = None, save: str | None = None, baseline: str | None = None,
+              time_threshold: float = 0.10, page=None) -> int:
     """Run sweep ``name`` (see the module docstring). ``workers`` (an embedded Dask cluster of that many
     processes, ``threads_per_worker`` threads each) or ``scheduler`` (a running Dask scheduler's
     address) send its rows to Dask workers (:mod:`wsoft.bench.dist`); ``resources``: what each
     embedded worker declares. ``cache_dir``: the references' cache (``$WSOFT_CACHE_DIR``), a folder
-    every worker sees."""
+    every worker sees. The regression gate (:mod:`wsoft.bench.regress`): ``save`` keeps the rows as
+    baseline ``save`` (``<out_dir>/baselines/NAME/``); ``baseline`` (a saved name, a baseline folder or
+    a rows file) compares them with it, writes ``<out_dir>/<sweep>-regress.md`` and returns 1 on a
+    regression (a slowdown beyond ``1 + time_threshold`` that the rounds' spread confirms, an error
+    grown beyond its floor and standard errors, a vanished row, a NaN). ``page``: called as
+    ``page(stem, rows, out_dir, baseline_rows)`` after the report, returning the path it wrote (the
+    command line passes :func:`wsoft.bench.html_report.write_html`: ``<out_dir>/<stem>.html``)."""
+    from wsoft.bench import regress
     from wsoft.errors import ParameterError
     from wsoft.parallel import resolve_device
 
     name = sweep_name(name)
+    gate = regress.before_sweep(save, baseline, out_dir, time_threshold)
     mod = importlib.import_module(SWEEPS[name])
     if scenes and not Path(scenes).is_dir():  # a bad --scenes is an error before anything runs (or is remembered)
         raise ParameterError(f"--scenes {scenes}: no such folder")
@@ -335,5 +349,12 @@ def run_sweep(name: str, *, quick: bool = False, device: list[str] | None = None
         (f" --workers {workers}" if workers is not None else "") + (f" --scheduler {scheduler}" if scheduler else "")
     md = out / f"{stem}.md"
     mod.report(rows, md, ctx | {"command": cmd})
-    print(f"wrote {md} ({len(rows)} rows){f'; {failed} rows failed' if failed else ''}", file=sys.stderr)
-    return 1 if failed else 0
+    written = [md]
+    if page is not None:
+        base_rows = None
+        if gate is not None and stem in gate.files:
+            base_rows = [r for r in finished_rows(gate.files[stem]) if r.get("key") in keys]
+        written.append(page(stem, rows, out, base_rows))
+    print(f"wrote {' and '.join(map(str, written))} ({len(rows)} rows){f'; {failed} rows failed' if failed else ''}", file=sys.stderr)
+    regressed = regress.after_sweep(stem, jsonl, keys, out, save, gate, time_threshold) if (save or gate) else 0
+    return 1 if failed or regressed else 0

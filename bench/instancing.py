@@ -170,14 +170,13 @@ def _rays(scene, ds, light, w, h, samples, dev) -> dict:
     from wsoft.lightspace.light import disk_shaped, light_gpu
     from wsoft.raster.camera import camera_gpu
     from wsoft.raster.gbuffer import render_gbuffer
-    from wsoft.raster.shadow_rays import ray_epsilon
     from wsoft.reference import reference_pattern, shadow_rays, trace_ray_packets, trace_rays
     from wsoft.pipeline import frame_setup
 
     cam = camera_gpu(frame_setup(scene, w, h).camera)
     gb = render_gbuffer(ds, cam, w, h, 1, scene.has_cutouts)
     pattern = reference_pattern(samples, 0, True)
-    o, d, t = shadow_rays(ds, light_gpu(light, scene.diagonal), gb, pattern, disk_shaped(light), ray_epsilon(gb, light))
+    o, d, t = shadow_rays(ds, light_gpu(light, scene.diagonal), gb, pattern, disk_shaped(light))
     out = {"rays": int(o.shape[0])}
     for name, fn in (("one_by_one", lambda: trace_rays(ds, o, d, t)), ("packets", lambda: trace_ray_packets(ds, o, d, t, samples))):
         if name == "packets" and ds.instances is not None:

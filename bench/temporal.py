@@ -3,7 +3,8 @@ flicker against the reference, its mean and worst error over the frames, and its
 
 For each stage of :data:`SCENES` (a camera flying and turning over ``city`` under the sun, the sun
 turning over ``lightmapped_bridge`` while its character walks, a rect light sliding over
-``penumbra_ramp``, and ``penumbra_ramp`` standing still for a stochastic technique's crawl) and each
+``penumbra_ramp``, ``penumbra_ramp`` standing still for a stochastic technique's crawl, and the
+skinned ``walker`` stepping under a rect light: a moving character's contact shadow) and each
 light it names, every frame of :data:`FRAMES` is one frame graph holding every registered technique
 that supports the light at its defaults (its map at :data:`MAP`), the shadow-map techniques again
 with ``view=stable`` (a texel grid that stays put), ``hard`` and ``pcss`` also with
@@ -33,8 +34,9 @@ import numpy as np
 
 from wsoft.bench.harness import ground_truth, load, reference, scene_file
 
-SCENES = {"city_flyby": ("/World/Lights/Sun",), "bridge_sun_sweep": ("/World/Lights/Sun",), "ramp_slide": None, "ramp_static": None}
-FRAMES = {"city_flyby": "1:24", "bridge_sun_sweep": "1:47:2", "ramp_slide": "1:47:2", "ramp_static": "1:24"}
+SCENES = {"city_flyby": ("/World/Lights/Sun",), "bridge_sun_sweep": ("/World/Lights/Sun",), "ramp_slide": None, "ramp_static": None,
+          "walker": None}
+FRAMES = {"city_flyby": "1:24", "bridge_sun_sweep": "1:47:2", "ramp_slide": "1:47:2", "ramp_static": "1:24", "walker": "1:47:2"}
 QUICK_SCENES = {"ramp_slide": "1:3", "ramp_static": "1:3"}
 SIZE = (256, 192)
 QUICK_SIZE = (64, 48)

@@ -147,8 +147,9 @@ EYE_PARAMS = {"izb": {"aa": "none"}, "essm": {"anisotropic": False}, "ssm": {"sm
 def test_a_bake_of_an_eye_views_own_points_is_the_eye_view(name):
     """The bake G-buffer runs a technique's passes unchanged: baking the points an eye view's pixels
     see (their positions and normals, in the same order and the same 48 x 48 packing, every pixel
-    covered) gives that eye view's V bit for bit, at each technique's defaults (the reference's
-    random streams included), but for what reads pixel neighbours (``essm``'s anisotropic footprint,
+    covered) gives that eye view's V bit for bit (``pwedge`` to 1e-5: its rays start a few ulps off
+    the surface, of the triangle's corners in the eye view and of the points in a bake), at each
+    technique's defaults (the reference's random streams included), but for what reads pixel neighbours (``essm``'s anisotropic footprint,
     ``ssm``'s level-of-quality smoothing and ``rtdenoise``'s denoiser, off here) or casts eye rays
     (``izb``'s anti-aliasing, off)."""
     import warp as wp
@@ -175,7 +176,10 @@ def test_a_bake_of_an_eye_views_own_points_is_the_eye_view(name):
         res, _ = ctx.graph.execute([key], "cpu")
     v = res[key].vis.numpy().reshape(48, 48)
     assert (f.V < 0.99).sum() > 20  # a shadow in view
-    np.testing.assert_array_equal(v, f.V)
+    if name == "pwedge":  # its wedge tests start a few ulps off the surface: of the triangle's corners in the eye view, of the points in a bake
+        np.testing.assert_allclose(v, f.V, rtol=0, atol=1e-5)
+    else:
+        np.testing.assert_array_equal(v, f.V)
 
 
 def test_a_bake_gbuffer_has_no_pixel_neighbours():

@@ -15,7 +15,7 @@ from wsoft.stages.bundled import SCENES as GENERATORS
 
 # no random numbers: the same on every numpy (a Generator's streams may change between versions)
 PLAIN = ("box_plane", "contact", "multi_light", "cutout", "penumbra_ramp", "tower", "tunnel_fan", "fence_perforated",
-         "wedge_overlap", "ramp_slide", "ramp_static", "room_lamp", "corridor_torch")
+         "wedge_overlap", "ramp_slide", "ramp_static", "room_lamp", "corridor_torch", "walker")
 
 
 def test_every_bundled_stage_has_a_generator():

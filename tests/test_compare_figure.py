@@ -43,7 +43,7 @@ def test_the_grid_of_a_compare_names_each_technique_its_time_and_error(tmp_path)
     assert e["mae_penumbra"] > 0.0  # a penumbra to see
 
     img = np.asarray(Image.open(path).convert("RGB"))
-    fw, fh, ncol, nrow = grid_size(3, W, H)
+    fw, fh, ncol, nrow = grid_size(3, W, H, tiles=3)  # the shaded image, the ꟻLIP map, V against the reference's
     assert (ncol, nrow) == (3, 1) and _near(img.shape[1::-1], (fw * 110, fh * 110))
     assert img.shape[1] > 3 * W and img.shape[0] > 2 * H  # every tile at least the frame's own pixels
     for tech in ("hard", "pcss"):  # each technique's cell is framed in its palette colour
@@ -115,7 +115,7 @@ def test_the_cli_writes_the_grid_and_a_short_table_first(tmp_path):
                   "--out-dir", str(out))
     assert p.returncode == 0, p.stderr
     png = out / "box_plane-compare.png"
-    assert _near(Image.open(png).size, [s * 110 for s in grid_size(3, 48, 36)[:2]])
+    assert _near(Image.open(png).size, [s * 110 for s in grid_size(3, 48, 36, tiles=3)[:2]])  # shaded, ꟻLIP, V
     md = (out / "box_plane-compare.md").read_text()
     short = md.index("| technique | frame ms | MAE | penumbra MAE |")
     assert short < md.index("![each technique beside the reference](box_plane-compare.png)") < md.index("## Time (ms)")

@@ -241,6 +241,8 @@ def test_every_technique_renders_it_finite_with_its_shadow_in_place(box_scenes, 
     p = dict(cls.quick_params)
     if cls.size_param:
         p[cls.size_param] = 256
+    if technique == "rtdenoise":  # its quick single sample's overlap swings 0.47-0.69 over seeds here; 4 samples: 0.73-0.83
+        p["samples"] = 4
     f = wsoft.render(scene, technique, width=48, height=36, device="cpu", **p)
     v, r = f["V"], ref["V"]
     g = (ref["A"] > 0) & (np.abs(ref["P.Z"]) < 1e-3)

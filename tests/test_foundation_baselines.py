@@ -9,7 +9,7 @@ import ast
 
 import pytest
 
-import wsoft.bench.foundation as fnd
+import wsoft.bench.foundation_raster as fnd
 
 
 def _imports(src: str) -> list[str]:

@@ -502,7 +502,6 @@ def test_none_differs_from_the_reference_only_where_their_ray_conventions_do():
     the offset of an edge) and must agree everywhere else."""
     from wsoft.bench.harness import load
     from wsoft.lightspace.light import light_gpu
-    from wsoft.raster.shadow_rays import ray_epsilon
     from wsoft.reference import reference_pattern, shadow_rays
 
     scene = load("tower")
@@ -520,7 +519,7 @@ def test_none_differs_from_the_reference_only_where_their_ray_conventions_do():
     b_izb = _brute(ds, smp["origin"], smp["dir"], smp["tmax"], smp["state"])[:n]
     vis_izb = np.where(state == 1, 1 - b_izb, 0).astype(np.float32)
     covered = np.flatnonzero(gb.prim.numpy() >= 0)
-    o, d, t = shadow_rays(ds, light_gpu(light, scene.diagonal), gb, reference_pattern(1, 0, False), True, ray_epsilon(gb, light))
+    o, d, t = shadow_rays(ds, light_gpu(light, scene.diagonal), gb, reference_pattern(1, 0, False), True)
     tr = t.numpy()
     b_ref = _brute(ds, o, d, t, wp.array(np.where(tr > 0, 1, 0).astype(np.int32), dtype=wp.int32, device="cpu"))
     vis_ref = np.zeros(n, np.float32)

@@ -16,7 +16,7 @@ BENCH = ROOT / "bench"
 
 # lowest first: a module may import its own layer or lower ones, never a higher one
 LAYERS = [
-    ("core", ("wsoft.errors", "wsoft.params", "wsoft.parallel", "wsoft.graph", "wsoft.io", "wsoft.palette")),
+    ("core", ("wsoft.errors", "wsoft.env", "wsoft.params", "wsoft.parallel", "wsoft.graph", "wsoft.io", "wsoft.palette")),
     ("stages", ("wsoft.stages", "wsoft.usd_scenes")),
     ("scene", ("wsoft.scene",)),
     ("lightspace", ("wsoft.lightspace",)),
@@ -255,6 +255,15 @@ def test_launches_name_inputs_and_outputs():
                     if not {"inputs", "outputs"} <= kw:
                         bad.append(f"{path.relative_to(ROOT)}:{node.lineno} {f}")
     assert not bad, "launches without inputs=/outputs=:\n" + "\n".join(bad)
+
+
+MAX_LINES = 700
+
+
+def test_no_module_is_over_700_lines():
+    """Every module of wsoft/ and bench/ holds at most 700 lines: a longer one is split by subject."""
+    long = [f"{p.relative_to(ROOT)}: {n} lines" for p in sources() if (n := len(p.read_text().splitlines())) > MAX_LINES]
+    assert not long, f"modules over {MAX_LINES} lines:\n" + "\n".join(long)
 
 
 def test_every_package_is_installed():

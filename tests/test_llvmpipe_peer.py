@@ -46,7 +46,7 @@ def test_the_peers_map_is_wsofts(which):
     """Perspective (a rect light) with an alpha-tested cutout, orthographic (a distant light), and
     instances (two prototypes, one a cutout, rotated, scaled and mirrored) drawn by instanced rendering."""
     llvmpipe = _peer_or_skip()
-    from wsoft.bench.foundation import _depth_pass_inputs
+    from wsoft.bench.foundation_llvmpipe import _depth_pass_inputs
     from wsoft.bench.harness import load
 
     if which == "instanced cutout":
@@ -110,7 +110,8 @@ def test_missing_moderngl_gives_the_reason(monkeypatch):
     """Without moderngl the peer says so (and how to install it), and the foundation row is skipped with that reason."""
     import sys
 
-    from wsoft.bench import foundation, llvmpipe
+    from wsoft.bench import foundation_llvmpipe as foundation
+    from wsoft.bench import llvmpipe
 
     monkeypatch.setitem(sys.modules, "moderngl", None)  # import moderngl raises ImportError
     monkeypatch.setattr(llvmpipe, "_CONTEXT", {})
@@ -169,7 +170,7 @@ def test_only_the_rows_asked_for_run(monkeypatch, tmp_path):
 def test_large_triangles_are_the_banded_passes():
     """The fill row's `large` set is what the CPU rasterizer draws in its banded pass for large triangles (its own
     count), but for far faces of closed surfaces, which it culls first (and llvmpipe draws)."""
-    from wsoft.bench.foundation import _depth_pass_inputs, _large_triangles
+    from wsoft.bench.foundation_llvmpipe import _depth_pass_inputs, _large_triangles
     from wsoft.bench.harness import load
     from wsoft.raster.depth_map import rasterize
 

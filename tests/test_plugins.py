@@ -134,3 +134,30 @@ def test_a_fresh_process_finds_the_installed_plugin(site):
     assert p.returncode == 0 and "tent_pcf: percentage-closer filtering" in p.stdout, p.stderr
     p = subprocess.run([sys.executable, "-m", "wsoft", "render", "--help"], capture_output=True, text=True, env=env, timeout=300)
     assert p.returncode == 0 and "tent_pcf" in p.stdout
+
+
+def test_the_plugin_draws_a_cube_map_around_a_light_that_surrounds_its_receivers(site, tmp_path):
+    """The README's plugin has LightViewParams' ``cube``: a sphere light inside a closed lamp shade
+    gets a cube map, every receiver in shadow, no warning about receivers left unshadowed."""
+    from wsoft.stages.adversarial import b_lamp_sphere
+
+    scene = wsoft.load_scene(b_lamp_sphere(str(tmp_path)))
+    f = wsoft.render(scene, "tent_pcf", width=48, height=36, device="cpu", shadow_map_size=512)
+    assert len(f.stats["counters"]["techniques"]["tent_pcf"]["Light"]["cube_faces"]) == 6
+    assert not [w for w in f.stats.get("warnings", []) if "unshadowed" in w]
+    assert f.V[f["A"] > 0].max() <= 0.03
+
+
+def test_a_plugin_that_draws_light_maps_without_cube_is_told_so_when_it_registers(site):
+    """Params that do not subclass LightViewParams (no ``cube``) and no ``cube_refusal``: the plugin
+    is kept, with one warning line naming it and the parameter it lacks."""
+    source = readme_block("tent_pcf.py").replace("class TentPCFParams(LightViewParams):", "class TentPCFParams:").replace(
+        "view=p.view", "view=\"fitted\"").replace('name = "tent_pcf"', 'name = "flat_pcf"')
+    install(site, "wsoft-flat-pcf", "flat_pcf", source, {"flat_pcf": "flat_pcf:TentPCF"})
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        techniques = reload_plugins()
+    lines = [str(w.message) for w in caught if issubclass(w.category, PluginWarning)]
+    assert len(lines) == 1 and "flat_pcf = flat_pcf:TentPCF" in lines[0] and "lacks the parameter cube" in lines[0]
+    assert "LightViewParams" in lines[0] and "flat_pcf" in techniques
+    sys.modules.pop("flat_pcf", None)

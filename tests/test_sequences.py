@@ -29,6 +29,18 @@ def _timed(stage, first: float = 1, last: float = 4):
     return stage
 
 
+def _still_box_plane(folder) -> str:
+    """``box_plane.usda`` (nothing animated, no time range) under a root layer that authors the time
+    range 1..4: a still stage a sequence may render."""
+    from pxr import Usd
+
+    st = Usd.Stage.CreateNew(os.path.join(str(folder), "still_box_plane.usda"))
+    st.GetRootLayer().subLayerPaths.append(scene_path("box_plane.usda"))
+    _timed(st)
+    st.GetRootLayer().Save()
+    return st.GetRootLayer().realPath
+
+
 def _moving_light_stage(path: str, kind: str = "point"):
     """A plate over the ground under a light sliding 0.4 along x per frame (frames 1-4), camera still."""
     st = _timed(make_stage(path=path))
@@ -146,25 +158,26 @@ def test_flicker_arithmetic():
     assert temporal_std([r0, r1], np.ones((2, 2), bool)) == pytest.approx(np.std(np.stack([r0, r1]), axis=0, ddof=1).mean())
 
 
-def test_a_stage_without_time_samples_renders_the_same_frames_and_says_so():
-    seq = render_sequence(scene_path("box_plane.usda"), ["hard", ("reference", {"samples": 4})], frames=[1, 2, 3], width=32, height=24)
-    assert any("no time sample" in w and "3 frames" in w for w in seq.warnings)
+def test_a_still_stage_with_a_time_range_renders_the_same_frames_and_says_so(tmp_path):
+    p = _still_box_plane(tmp_path)
+    seq = render_sequence(p, ["hard", ("reference", {"samples": 4})], frames=[1, 2, 3], width=32, height=24)
+    assert any("nothing on the stage varies over time" in w and "3 frames" in w for w in seq.warnings)
     assert [s["scene"] for s in seq.stats] == ["built", "reused", "reused"]
     for fs in seq.frames[1:]:
         assert np.array_equal(fs["hard"].V, seq[0]["hard"].V)
     assert not np.array_equal(seq[1]["reference"].V, seq[0]["reference"].V)  # other light samples per frame
-    still = render_sequence(scene_path("box_plane.usda"), ("reference", {"samples": 4}), frames="1:2", width=32, height=24, reseed=False)
+    still = render_sequence(p, ("reference", {"samples": 4}), frames="1:2", width=32, height=24, reseed=False)
     assert np.array_equal(still[0].V, still[1].V)
 
 
 @pytest.mark.slow
-def test_the_reference_crawls_by_its_standard_error_on_a_static_sequence():
+def test_the_reference_crawls_by_its_standard_error_on_a_static_sequence(tmp_path):
     """On a still stage the reference at N samples with new samples each frame changes only by its
     noise: its flicker against a fixed-seed ground truth and its temporal std match what its own
     standard errors predict, and shrink with more samples."""
-    out = {}
+    out, p = {}, _still_box_plane(tmp_path)
     for n in (4, 64):
-        seq = compare_sequence(scene_path("box_plane.usda"), [("reference", {"samples": n})], frames="1:4", samples=64, width=48, height=36)
+        seq = compare_sequence(p, [("reference", {"samples": n})], frames="1:4", samples=64, width=48, height=36)
         m = seq.summary["temporal"]["reference"]["Light"]
         se = np.mean([np.mean(fs["reference"]["V_stderr"][fs["reference"]["A"] > 0]) for fs in seq.frames])
         out[n] = (m, se)

@@ -35,8 +35,15 @@ def _pan_stage(path: str, frames: int = 3):
 
 
 @pytest.mark.slow
-def test_accumulation_lowers_the_error_of_a_still_frame_and_says_so():
-    seq = compare_sequence(scene_path("box_plane.usda"), [("rtdenoise", {"samples": 1, "history": 8}), ("rtdenoise", {"samples": 1})],
+def test_accumulation_lowers_the_error_of_a_still_frame_and_says_so(tmp_path):
+    from pxr import Usd
+
+    still = Usd.Stage.CreateNew(str(tmp_path / "still.usda"))  # box_plane with a time range 1..6: nothing moves
+    still.GetRootLayer().subLayerPaths.append(scene_path("box_plane.usda"))
+    still.SetStartTimeCode(1)
+    still.SetEndTimeCode(6)
+    still.GetRootLayer().Save()
+    seq = compare_sequence(str(tmp_path / "still.usda"), [("rtdenoise", {"samples": 1, "history": 8}), ("rtdenoise", {"samples": 1})],
                            frames=[1, 2, 3, 4, 5, 6], samples=64, width=64, height=48)
     acc = [fs["rtdenoise(samples=1,history=8)"].stats["error"]["mae_penumbra"] for fs in seq.frames]
     one = [fs["rtdenoise(samples=1)"].stats["error"]["mae_penumbra"] for fs in seq.frames]

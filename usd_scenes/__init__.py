@@ -46,6 +46,7 @@ ABOUT = {
     "plants": "15 instanced plants of overlapping leaves (ESSM's Plants analog)",
     "ramp_slide": "penumbra_ramp under a sliding area light",
     "ramp_static": "penumbra_ramp with nothing moving: a technique's own flicker",
+    "walker": "a UsdSkel figure stepping and waving under a rect light: skinned casters, a foot's contact shadow",
     "room_lamp": "a sphere light hanging in a furnished closed room: receivers on every side of it",
     "tower": "a thin lattice tower under a point light: sub-pixel hard shadows",
     "tunnel_fan": "a fan's shadows streaming along a tunnel: surfaces grazing eye and light",

@@ -320,7 +320,7 @@ def _sanitise(path: str) -> str:
 
 def bake(scene, technique, *, light: str | None = None, frames=None, out: str | None = None, texture_size: int | None = None,
          texture_dir: str | None = None, device: str | None = None, crease_angle: float = CREASE_ANGLE, stats: dict | None = None,
-         progress=None, subdiv_level: int | None = None, **params):
+         progress=None, subdiv_level: int | None = None, material_purpose: str | None = None, **params):
     """Bake ``technique``'s visibility of the stage ``scene`` into a new ``Sdf.Layer`` of ``over``\\ s
     (see the module's documentation) and return it.
 
@@ -345,7 +345,8 @@ def bake(scene, technique, *, light: str | None = None, frames=None, out: str | 
     at each cage vertex's refined position (a vertex of the refined surface) with the refined
     surface's normal there (area-weighted over its refined triangles). A texture bake
     (``texture_size``) needs the cage itself (its texels lie on the cage's faces): with
-    ``subdiv_level > 0`` it is an error."""
+    ``subdiv_level > 0`` it is an error. ``material_purpose``: the purpose material bindings resolve
+    for, ``full`` or ``preview`` (None: a :class:`~wsoft.scene.types.Scene`'s own, else ``full``)."""
     from pxr import Sdf, Tf, Usd, UsdGeom, UsdUtils, Vt
 
     version = sys.modules["wsoft"].__version__  # the package (loaded before any of its modules), not an upward import
@@ -364,6 +365,8 @@ def bake(scene, technique, *, light: str | None = None, frames=None, out: str | 
         raise ParameterError(f"texture size {texture_size} out of range [1, {MAX_TEXTURE_SIZE}]")
     if subdiv_level is None:
         subdiv_level = scene.subdiv_level if isinstance(scene, Scene) else 0
+    if material_purpose is None:  # a Scene's loads keep its material purpose
+        material_purpose = scene.material_purpose if isinstance(scene, Scene) else "full"
     if texture_size is not None and subdiv_level:
         raise ParameterError(f"a texture bake reads the control cage's faces: texture_size {texture_size} needs subdiv_level 0, "
                              f"not {subdiv_level}")
@@ -424,7 +427,7 @@ def bake(scene, technique, *, light: str | None = None, frames=None, out: str | 
 
     for fi, t in enumerate(times_load):
         f0, c0 = time.perf_counter(), time.process_time()
-        sc = load_scene(stage, time=t, subdiv_level=subdiv_level)
+        sc = load_scene(stage, time=t, subdiv_level=subdiv_level, material_purpose=material_purpose)
         for w in sc.warnings:
             note(w)
         report["notes"] += [n for n in sc.notes if n not in report["notes"]]

@@ -26,6 +26,8 @@ from typing import Callable
 
 import warp as wp
 
+from wsoft.env import threads as env_threads
+from wsoft.env import warp_verbose
 from wsoft.errors import ParameterError
 
 _POOL: ThreadPoolExecutor | None = None
@@ -36,13 +38,19 @@ _LOAD_LOCK = threading.Lock()
 _LOADS: list[tuple[float, float, float]] = []
 _LOADS_LOCK = threading.Lock()
 _COMPILE_LISTENERS: list[Callable[[str, str], None]] = []
-# seconds to compile one module, per device kind, for uncached_seconds' estimate. Measured on 2 busy
-# cores with a cold cache: every module for CPU 0.8 s a module (32 s), a `hard` render 6 s while 24
-# modules it might need were uncached (0.25 s each); PTX for every module ~1.5 min an architecture
-SECONDS_PER_MODULE = {"cpu": 0.5, "cuda": 1.5}
+# The estimate of uncached_seconds, per device kind. CPU: the compiling thread's CPU time with a cold
+# kernel cache (its wall time on an idle core; on a busy machine the wall time is longer: 17 s for
+# 6.9 s of CPU at a load of 9 on 2 cores), measured with Warp 1.19: a `hard` render compiles 9 modules
+# in 6.9 s, the RENDER_MODULES among them (with the rasterizer's specialised kernels) in about 6.4 s;
+# `pcss` 10 modules in 7.6 s, `essm` 12 in 16.3 s; wsoft's 40 modules 60 s, 1.5 s a module. CUDA: PTX
+# for every module took ~1.5 min an architecture; the render's 9 modules at 1.5 s each
+COMPILE_SECONDS = {"cpu": {"render": 6.4, "module": 1.5}, "cuda": {"render": 13.5, "module": 1.5}}
+RENDER_MODULES = ("wsoft.raster.gbuffer", "wsoft.lightspace.fit", "wsoft.raster.rasterizer", "wsoft.raster.depth_map",
+                  "wsoft.raster.horizon", "wsoft.raster.shade")
+"""The Warp modules every render compiles (with the rasterizer's specialised kernels, made at its first use)."""
 
 # Warp's per-module compile messages are noise for users; WSOFT_WARP_VERBOSE=1 shows them.
-if os.environ.get("WSOFT_WARP_VERBOSE", "") != "1":
+if not warp_verbose():
     wp.config.log_level = 30  # warnings and errors only
 # wsoft never differentiates through its kernels: skip adjoint code (halves compile time)
 wp.config.enable_backward = False
@@ -57,7 +65,7 @@ def init_warp() -> None:
     global _INIT
     if _INIT:
         return
-    if os.environ.get("WSOFT_WARP_VERBOSE", "") == "1":
+    if warp_verbose():
         wp.init()
     else:
         import sys
@@ -151,14 +159,46 @@ def uncached_modules(device: str, skip: tuple[str, ...] = ()) -> list:
     return out
 
 
-def uncached_seconds(device: str, skip: tuple[str, ...] = ()) -> float:
-    """A rough estimate of the seconds :func:`uncached_modules` take to compile; 0 (no estimate)
-    where this Warp's cache layout is not the one :func:`uncached_modules` reads."""
+def referenced_modules(techniques) -> set[str]:
+    """The wsoft modules the code of ``techniques`` (names of ``wsoft.techniques``) refers to: each
+    technique's own modules and those its functions and classes come from, as imported so far (no
+    module is imported here); ``reference`` adds :mod:`wsoft.reference` and :mod:`wsoft.metrics`
+    (a comparison's metric passes)."""
+    import inspect
+    import sys
+
+    out: set[str] = set()
+    own = tuple(f"wsoft.techniques.{t}" for t in techniques)
+    for name, mod in list(sys.modules.items()):
+        if mod is None or not (name in own or name.startswith(tuple(o + "." for o in own))):
+            continue
+        out.add(name)
+        for v in list(vars(mod).values()):
+            ref = v.__name__ if inspect.ismodule(v) else getattr(v, "__module__", None)
+            if isinstance(ref, str) and ref.startswith("wsoft."):
+                out.add(ref)
+    if "reference" in techniques:
+        out |= {n for n in list(sys.modules) if n == "wsoft.reference" or n.startswith(("wsoft.reference.", "wsoft.metrics"))}
+    return out
+
+
+def uncached_seconds(device: str, skip: tuple[str, ...] = (), techniques=None) -> float:
+    """A rough estimate of the seconds a first render compiles for (:data:`COMPILE_SECONDS`): the
+    render's own modules (:data:`RENDER_MODULES`) when they are not cached, and a module's average
+    for each other uncached wsoft module of :func:`uncached_modules` (those ``techniques`` refer to,
+    :func:`referenced_modules`, where it names them). 0 (no estimate) where this Warp's cache layout
+    is not the one :func:`uncached_modules` reads."""
     try:
-        n = len(uncached_modules(device, skip))
+        mods = [m.name for m in uncached_modules(device, skip)]
     except (ImportError, AttributeError, TypeError, KeyError):
         return 0.0
-    return n * SECONDS_PER_MODULE["cpu" if device.startswith("cpu") else "cuda"]
+    cost = COMPILE_SECONDS["cpu" if device.startswith("cpu") else "cuda"]
+    base = any(m in RENDER_MODULES for m in mods)
+    others = [m for m in mods if m.startswith("wsoft.") and m not in RENDER_MODULES]
+    if techniques is not None:
+        wanted = referenced_modules(techniques)
+        others = [m for m in others if m in wanted]
+    return base * cost["render"] + len(others) * cost["module"]
 
 
 def compile_time(t0: float, t1: float) -> tuple[float, float]:
@@ -181,10 +221,11 @@ def compile_time(t0: float, t1: float) -> tuple[float, float]:
 
 
 def cpu_threads() -> int:
-    """Threads used for CPU launches: ``WSOFT_THREADS`` or the cores this process may use."""
-    env = os.environ.get("WSOFT_THREADS")
-    if env:
-        return max(1, int(env))
+    """Threads used for CPU launches: ``WSOFT_THREADS`` (:func:`wsoft.env.threads`; a malformed
+    value is an error) or the cores this process may use."""
+    n = env_threads()
+    if n is not None:
+        return n
     try:
         return max(1, len(os.sched_getaffinity(0)))
     except AttributeError:  # pragma: no cover - non-Linux

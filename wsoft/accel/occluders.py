@@ -12,7 +12,7 @@ import numpy as np
 import warp as wp
 
 from wsoft.accel.dcs_bins import build_bins, grid_view
-from wsoft.lightspace.light import LightGPU, light_bound
+from wsoft.lightspace.light import LightGPU, light_bound, reached_receivers
 from wsoft.accel.stsv import planes_t, triangle_volumes
 from wsoft.lightspace.fit import fit_light_view
 from wsoft.parallel import launch_chunked
@@ -31,6 +31,36 @@ def count_crossings(bvh: wp.uint64, tri_pts: wp.array[wp.vec3], o: wp.vec3, d: w
         h = ray_triangle(o, d, tri_pts[3 * k], tri_pts[3 * k + 1], tri_pts[3 * k + 2])
         if h[0] != 0.0 and h[1] > 0.0 and h[1] < tm:
             n += 1
+    return n
+
+
+MAX_PARTS = 8  # distinct parts count_parts tells apart; more are counted once per crossing
+parts_t = wp.types.vector(length=MAX_PARTS, dtype=wp.int32)
+
+
+@wp.func
+def count_parts(bvh: wp.uint64, tri_pts: wp.array[wp.vec3], part: wp.array[wp.int32], o: wp.vec3, d: wp.vec3, tm: float) -> int:
+    """How many distinct parts (``part[k]`` of opaque triangle ``k``: its connected piece of mesh,
+    :func:`~wsoft.scene.adjacency.triangle_parts`) the segment ``o + t d``, ``t in (0, tm)``,
+    crosses: a closed box crossed through two faces is one occluder over the light's point, two
+    boxes one behind the other are two (the stencil count of shadow volumes). The first
+    :data:`MAX_PARTS` parts are told apart; past them each crossing counts."""
+    seen = parts_t()
+    n = int(0)
+    q = wp.bvh_query_ray(bvh, o, d)
+    k = int(0)
+    while wp.bvh_query_next(q, k, tm):
+        h = ray_triangle(o, d, tri_pts[3 * k], tri_pts[3 * k + 1], tri_pts[3 * k + 2])
+        if h[0] != 0.0 and h[1] > 0.0 and h[1] < tm:
+            pk = part[k]
+            new = int(1)
+            for j in range(MAX_PARTS):
+                if j < n and seen[j] == pk:
+                    new = 0
+            if new != 0:
+                if n < MAX_PARTS:
+                    seen[n] = pk
+                n += 1
     return n
 
 
@@ -128,7 +158,7 @@ def receiver_grid(light, gb, scene, size: int):
     """The light-space grid the bins use: a light view fitted to the G-buffer's receivers, resampled
     to ``size x size`` cells, and the receivers' farthest depth in it (slightly widened): (view, zr_max)."""
     prim = gb.prim.numpy()
-    rec = gb.pos.numpy()[prim >= 0]
+    rec = reached_receivers(light, gb.pos.numpy()[prim >= 0])  # a shaped light: the receivers its cone reaches
     lo, hi = scene.bounds
     view = fit_light_view(light, rec, lo, hi, max(256, size))
     grid = grid_view(view, size)

@@ -94,6 +94,17 @@ def mask_rect(m: mask_t, n: int, pattern: int, samples: wp.array[wp.vec2], lo: w
 
 
 @wp.func
+def mask_behind(m: mask_t, n: int, samples: wp.array[wp.vec2], h: wp.vec3) -> mask_t:
+    """Mark the light samples behind the line ``h`` (``h . (x, y, 1) < 0``: behind a receiver's
+    tangent plane, :mod:`wsoft.lightspace.halfspace`): they cannot light it."""
+    for b in range(n * n):
+        q = samples[b]
+        if h[0] * q[0] + h[1] * q[1] + h[2] < 0.0:
+            m = set_bit(m, b)
+    return m
+
+
+@wp.func
 def edge_side(a: wp.vec2, b: wp.vec2, p: wp.vec2) -> float:
     return (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0])
 

@@ -17,7 +17,10 @@ meets the light changes the covered fraction by the area of
 ``a' b'`` subtends at ``c``), divided by the light's area: added where ``c`` is visible past the
 edge (the receiver is outside the edge's hard shadow quad: the edge covers ``R``), subtracted
 where ``c`` is hidden (inside: ``R`` is uncovered). Edges whose projection misses the light have
-``R`` empty, which is why only the receivers inside an edge's *wedge* need it.
+``R`` empty, which is why only the receivers inside an edge's *wedge* need it. Where the
+receiver's tangent plane crosses the light, only the light in front of it counts
+(:mod:`wsoft.lightspace.halfspace`): ``R`` is clipped to the plane's line on the light
+(:func:`receiver_front`) and :func:`front_coverage` is that part's share of the light.
 
 :func:`edge_coverage` computes ``|R| / |light|`` exactly for a rect (the rectangle clipped by the
 three half-planes that bound ``R``, Sutherland-Hodgman, shoelace area) and for a disk (the disk's
@@ -41,15 +44,10 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from wsoft.lightspace.halfspace import NO_CLIP, clip_half, front_part, light_area_in, plane_line, square
 from wsoft.lightspace.light import LINE_WIDTH, LightGPU, is_round, light_gpu, silhouette_disk, silhouette_ellipse, silhouette_rect
 
-poly_t = wp.types.matrix(shape=(8, 2), dtype=wp.float32)  # a convex polygon: a rectangle clipped by at most 3 lines
 INFINITE = wp.constant(1.0e30)
-
-
-@wp.func
-def cross2(a: wp.vec2, b: wp.vec2) -> float:
-    return a[0] * b[1] - a[1] * b[0]
 
 
 @wp.func
@@ -80,83 +78,14 @@ def light_frame(L: LightGPU, p: wp.vec3):
 
 
 @wp.func
-def clip_half(P: poly_t, n: int, h: wp.vec3):
-    """The convex polygon ``P[:n]`` clipped to ``h.x x + h.y y + h.z >= 0``: (polygon, count)."""
-    Q = poly_t()
-    m = int(0)
-    for k in range(n):
-        kb = k + 1
-        if kb == n:
-            kb = 0
-        ax = P[k, 0]
-        ay = P[k, 1]
-        bx = P[kb, 0]
-        by = P[kb, 1]
-        fa = h[0] * ax + h[1] * ay + h[2]
-        fb = h[0] * bx + h[1] * by + h[2]
-        if fa >= 0.0 and m < 8:
-            Q[m, 0] = ax
-            Q[m, 1] = ay
-            m += 1
-        if (fa >= 0.0) != (fb >= 0.0) and m < 8:
-            t = fa / (fa - fb)
-            Q[m, 0] = ax + t * (bx - ax)
-            Q[m, 1] = ay + t * (by - ay)
-            m += 1
-    return Q, m
-
-
-@wp.func
-def polygon_area(P: poly_t, n: int) -> float:
-    """Signed (counter-clockwise positive) area of ``P[:n]``."""
-    s = float(0.0)
-    for k in range(n):
-        kb = k + 1
-        if kb == n:
-            kb = 0
-        s += P[k, 0] * P[kb, 1] - P[kb, 0] * P[k, 1]
-    return 0.5 * s
-
-
-@wp.func
-def sector(p: wp.vec2, q: wp.vec2, r: float) -> float:
-    return 0.5 * r * r * wp.atan2(cross2(p, q), wp.dot(p, q))
-
-
-@wp.func
-def circle_triangle(a: wp.vec2, b: wp.vec2, r: float) -> float:
-    """Signed area of the disk of radius ``r`` about the origin ∩ the triangle (origin, a, b)."""
-    d = b - a
-    qa = wp.dot(d, d)
-    if qa <= 0.0:
-        return 0.0
-    qb = wp.dot(a, d)
-    qc = wp.dot(a, a) - r * r
-    disc = qb * qb - qa * qc
-    if disc <= 0.0:
-        return sector(a, b, r)
-    sq = wp.sqrt(disc)
-    t1 = (-qb - sq) / qa
-    t2 = (-qb + sq) / qa
-    if t2 <= 0.0 or t1 >= 1.0:
-        return sector(a, b, r)
-    p1 = a + d * wp.max(t1, 0.0)
-    p2 = a + d * wp.min(t2, 1.0)
-    area = 0.5 * cross2(p1, p2)
-    if t1 > 0.0:
-        area += sector(a, p1, r)
-    if t2 < 1.0:
-        area += sector(p2, b, r)
-    return area
-
-
-@wp.func
-def beyond_edge_area(a: wp.vec3, b: wp.vec3, ext: wp.vec2, disk: int) -> float:
-    """Area of ``R``: the part of the light (centred on the origin; a rect of half extents
-    ``ext``, or a disk of radius ``ext.x``) beyond the line ``a b`` from the origin and inside the
-    angle ``a b`` subtends there. ``a`` and ``b`` are homogeneous (``x, y, w`` with ``w >= 0``;
-    ``w = 0``: a point at infinity, the projection of a point level with the receiver), so the
-    half-planes come from products of their coordinates and nothing is divided by a small ``w``."""
+def beyond_edge_area(a: wp.vec3, b: wp.vec3, ext: wp.vec2, disk: int, front: wp.vec3) -> float:
+    """Area of ``R`` in front of the receiver's plane: the part of the light (centred on the
+    origin; a rect of half extents ``ext``, or a disk of radius ``ext.x``) beyond the line ``a b``
+    from the origin, inside the angle ``a b`` subtends there and where ``front . (x, y, 1) >= 0``
+    (:func:`~wsoft.lightspace.halfspace.plane_line`). ``a`` and ``b`` are homogeneous (``x, y, w``
+    with ``w >= 0``; ``w = 0``: a point at infinity, the projection of a point level with the
+    receiver), so the half-planes come from products of their coordinates and nothing is divided
+    by a small ``w``."""
     cr = a[0] * b[1] - a[1] * b[0]
     if cr == 0.0:
         return 0.0
@@ -164,36 +93,48 @@ def beyond_edge_area(a: wp.vec3, b: wp.vec3, ext: wp.vec2, disk: int) -> float:
     if cr < 0.0:
         sg = -1.0
     line = wp.cross(a, b)  # line . (x, y, 1) = 0 through both; its value at the origin is cr
-    P = poly_t()
-    P[0, 0] = -ext[0]
-    P[0, 1] = -ext[1]
-    P[1, 0] = ext[0]
-    P[1, 1] = -ext[1]
-    P[2, 0] = ext[0]
-    P[2, 1] = ext[1]
-    P[3, 0] = -ext[0]
-    P[3, 1] = ext[1]
-    n = int(4)
+    P, n = square(ext)
     P, n = clip_half(P, n, wp.vec3(-a[1] * sg, a[0] * sg, 0.0))
     P, n = clip_half(P, n, wp.vec3(b[1] * sg, -b[0] * sg, 0.0))
     P, n = clip_half(P, n, line * (-sg))
-    if n < 3:
-        return 0.0
-    if disk == 0:
-        return wp.abs(polygon_area(P, n))
-    s = float(0.0)
-    for k in range(n):
-        kb = k + 1
-        if kb == n:
-            kb = 0
-        s += circle_triangle(wp.vec2(P[k, 0], P[k, 1]), wp.vec2(P[kb, 0], P[kb, 1]), ext[0])
-    return wp.abs(s)
+    P, n = clip_half(P, n, front)
+    return light_area_in(P, n, ext, disk)
 
 
 @wp.func
-def edge_coverage(c: wp.vec3, u: wp.vec3, v: wp.vec3, ext: wp.vec2, disk: int, smax: float, o: wp.vec3, a: wp.vec3, b: wp.vec3) -> float:
-    """``|R| / |light|`` for the edge ``a b`` seen from ``o`` (the module docstring); 0 where its
-    projection misses the light or the edge lies wholly behind ``o`` or beyond the light."""
+def coverage_scale(ext: wp.vec2, disk: int) -> wp.vec2:
+    """How :func:`edge_coverage` scales the light's plane along ``u`` and ``v``: a rect by its
+    larger half extent, a disk by its two semi-axes (an ellipse becomes the unit disk)."""
+    if disk != 0:
+        return ext
+    s = wp.max(ext[0], ext[1])
+    return wp.vec2(s, s)
+
+
+@wp.func
+def receiver_front(c: wp.vec3, u: wp.vec3, v: wp.vec3, ext: wp.vec2, disk: int, nrm: wp.vec3, q: wp.vec3) -> wp.vec3:
+    """The front side of a receiver's tangent plane (normal ``nrm``, through ``q``) as a line over
+    the light's plane in :func:`edge_coverage`'s coordinates (:func:`~wsoft.lightspace.halfspace.plane_line`)."""
+    sc = coverage_scale(ext, disk)
+    return plane_line(nrm, q, c, u, v, sc[0], sc[1])
+
+
+@wp.func
+def front_coverage(ext: wp.vec2, disk: int, front: wp.vec3) -> float:
+    """The fraction of the light in front of ``front`` (:func:`receiver_front`'s line)."""
+    sc = coverage_scale(ext, disk)
+    if sc[0] <= 0.0 or sc[1] <= 0.0:
+        return 1.0
+    return front_part(wp.vec2(ext[0] / sc[0], ext[1] / sc[1]), disk, front)
+
+
+@wp.func
+def edge_coverage(c: wp.vec3, u: wp.vec3, v: wp.vec3, ext: wp.vec2, disk: int, smax: float, o: wp.vec3, a: wp.vec3, b: wp.vec3,
+                  front: wp.vec3) -> float:
+    """``|R| / |light|`` for the edge ``a b`` seen from ``o`` (the module docstring), ``R`` taken
+    in front of the line ``front`` (:func:`receiver_front`; :data:`~wsoft.lightspace.halfspace.NO_CLIP`:
+    all of it); 0 where its projection misses the light or the edge lies wholly behind ``o`` or
+    beyond the light."""
     nrm = wp.cross(u, v)
     den = wp.dot(nrm, c - o)
     if den == 0.0 or ext[0] <= 0.0 or ext[1] <= 0.0:
@@ -248,18 +189,15 @@ def edge_coverage(c: wp.vec3, u: wp.vec3, v: wp.vec3, ext: wp.vec2, disk: int, s
     co = c - o
     cu = wp.dot(co, u)
     cv = wp.dot(co, v)
-    scale = wp.max(ext[0], ext[1])
     # a disk's axes scaled apart: an ellipse becomes the unit disk (an affine map keeps the area ratio)
-    su = scale
-    sv = scale
-    if disk != 0:
-        su = ext[0]
-        sv = ext[1]
+    sc = coverage_scale(ext, disk)
+    su = sc[0]
+    sv = sc[1]
     # homogeneous light-plane coordinates about the centre: (q . u - s c_u, q . v - s c_v, s)
     ha = wp.vec3((wp.dot(qa, u) - s0 * cu) / su, (wp.dot(qa, v) - s0 * cv) / sv, s0)
     hb = wp.vec3((wp.dot(qb, u) - s1 * cu) / su, (wp.dot(qb, v) - s1 * cv) / sv, s1)
     e2 = wp.vec2(ext[0] / su, ext[1] / sv)
-    area = beyond_edge_area(ha, hb, e2, disk)
+    area = beyond_edge_area(ha, hb, e2, disk, front)
     full = 4.0 * e2[0] * e2[1]
     if disk != 0:
         full = wp.pi * e2[0] * e2[0]
@@ -277,7 +215,7 @@ def coverage_kernel(
 ):
     i = wp.tid()
     c, u, v, ext, disk, smax = light_frame(L, o[i])
-    out[i] = edge_coverage(c, u, v, ext, disk, smax, o[i], a[i], b[i])
+    out[i] = edge_coverage(c, u, v, ext, disk, smax, o[i], a[i], b[i], NO_CLIP)
 
 
 def edge_coverages(light, o: np.ndarray, a: np.ndarray, b: np.ndarray, scene_diagonal: float = 100.0, device: str = "cpu") -> np.ndarray:

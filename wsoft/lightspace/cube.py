@@ -36,6 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
+from wsoft.lightspace.light import reached_receivers
 from wsoft.lightspace.view import LightView, frame_extent_of_bounds, to_frame
 from wsoft.scene.types import LIGHT_CYLINDER, LIGHT_POINT, LIGHT_SPHERE, Light
 
@@ -161,6 +162,7 @@ class CubeDecision:
     half_angle: float
     faces: tuple[int, ...]
     probe: str
+    cone: float = 180.0  # shaping:cone:angle (degrees off its axis; 180: no cone): receivers it does not reach are left out
 
     def cube(self, mode: str) -> bool:
         """Does a technique with ``cube=mode`` draw a cube map of this light?"""
@@ -174,13 +176,18 @@ class CubeDecision:
             return "one frustum (a rect, disk or distant light emits through one hemisphere or cone)"
         spread = ("receivers beside or behind its centre" if self.half_angle >= 180.0
                   else f"receivers up to {self.half_angle:.0f} degrees off one axis")
+        if self.cube(mode) and self.cone < 180.0:
+            spread = f"its cone (shaping:cone:angle {self.cone:g}) reaches {spread}"
         if self.cube(mode):
             reason = "cube=always" if self.half_angle <= CUBE_THRESHOLD_DEG else f"{spread} (one frustum holds {CUBE_THRESHOLD_DEG:g} at most)"
             return f"cube map, {len(self.faces)} of 6 faces ({', '.join(FACE_NAMES[k] for k in self.faces)}): {reason}"
         if mode == "never" and self.half_angle > CUBE_THRESHOLD_DEG:
             return f"one frustum (cube=never), with {spread}: those beyond 80 degrees are left lit, with a warning"
         if not self.faces:
-            return "one frustum (no receiver in view)"
+            return "one frustum (no receiver in view" + (f" that its {self.cone:g}-degree cone reaches)" if self.cone < 180.0 else ")")
+        if self.cone < 180.0:
+            return (f"one frustum: its cone (shaping:cone:angle {self.cone:g}) reaches receivers up to {self.half_angle:.0f} "
+                    f"degrees off one axis (one frustum holds {CUBE_THRESHOLD_DEG:g}); those outside it have none of its light")
         return f"one frustum: {spread}"
 
 
@@ -188,11 +195,13 @@ def cube_decision(light: Light, receivers: np.ndarray, probe: str) -> CubeDecisi
     """Decide from ``receivers`` (world points, a low-resolution G-buffer's) whether ``light``'s
     views form a cube map, and which faces hold receivers: a face is kept when a receiver's
     direction lies within its window widened by :data:`GUARD_MAX` (a receiver near an edge the
-    probe saw on one side may have neighbours on the other)."""
+    probe saw on one side may have neighbours on the other). A shaped light decides from the
+    receivers its cone reaches (:func:`~wsoft.lightspace.light.reached_receivers`): a narrow cone's
+    receivers fit one frustum."""
     eligible = light.kind in CUBE_KINDS
-    rec = np.asarray(receivers, np.float64).reshape(-1, 3)
+    rec = reached_receivers(light, np.asarray(receivers, np.float64).reshape(-1, 3))
     if not eligible:
-        return CubeDecision(light.path, False, 0.0, (), probe)
+        return CubeDecision(light.path, False, 0.0, (), probe, light.shaping.cone_deg)
     angle = frustum_half_angle(light, rec)
     frame = cube_frame(light)
     faces = []
@@ -204,7 +213,28 @@ def cube_decision(light: Light, receivers: np.ndarray, probe: str) -> CubeDecisi
             inside = (z > 0.0) & (np.abs(v[:, 0]) <= (1.0 + GUARD_MAX) * z) & (np.abs(v[:, 1]) <= (1.0 + GUARD_MAX) * z)
             if inside.any():
                 faces.append(k)
-    return CubeDecision(light.path, True, angle, tuple(faces), probe)
+    return CubeDecision(light.path, True, angle, tuple(faces), probe, light.shaping.cone_deg)
+
+
+def outside_view_remedy(light: Light, decision: CubeDecision | None, unmapped: list[str], no_cube: str = "") -> str:
+    """What a user can do about receivers ``light``'s single-frustum view leaves out (``decision``:
+    its :class:`CubeDecision`; ``unmapped``: the techniques that draw no light map and so shadow
+    every receiver): a rect or disk light's map is one frustum (no cube map is built for a light
+    that emits through one hemisphere); a sphere, point or cylinder light's view was one frustum
+    where the technique asked for one (``cube=never``) or the decision found no need of a cube map;
+    ``no_cube``: why the technique builds no cube map at all (its ``cube_refusal``), if so."""
+    others = f"{', '.join(unmapped)} draw no light map and shadow them" if unmapped else "no technique shadows them"
+    if light.kind not in CUBE_KINDS:
+        return (f"wsoft draws a {light.kind_name} light's map in one frustum (cube maps are built for sphere, point and cylinder "
+                f"lights only): {others}")
+    if no_cube:
+        return f"{no_cube}: {others}"
+    has = "a technique whose Params subclass wsoft.params.LightViewParams has the parameter cube"
+    if decision is not None and decision.cube("auto"):
+        return (f"this view is one frustum (cube=never, or a technique without the parameter): cube=auto draws a "
+                f"{decision.why('auto')} ({has}), or {others}")
+    why = decision.why("auto") if decision is not None else "one frustum"
+    return f"cube=auto decided on {why}: cube=always draws a cube map that holds them ({has}), or {others}"
 
 
 def guard_window(guard_texels: float, size: int) -> float:

@@ -395,6 +395,58 @@ def _local_fit_stats(pts: wp.array, origin: np.ndarray, axes: np.ndarray, facing
     return res
 
 
+_NEAREST: list = []  # (caster points, origin, axis, depth of the nearest in front): the last few lights' scans
+
+
+def nearest_caster_depth(pts: np.ndarray, origin: np.ndarray, axis: np.ndarray) -> float:
+    """The depth along ``axis`` from ``origin`` of the nearest of the caster points ``pts`` in front
+    of it (inf: none): a scan of every point, kept for the same points array and light (a scene's
+    :attr:`~wsoft.scene.types.Scene.caster_points` is one array), so a still light scans once."""
+    o = np.asarray(origin, np.float64)
+    a = np.asarray(axis, np.float64)
+    for p, oo, aa, d in _NEAREST:
+        if p is pts and np.array_equal(oo, o) and np.array_equal(aa, a):
+            return d
+    p32 = np.asarray(pts, np.float32).reshape(-1, 3)
+    z = (p32 - o.astype(np.float32)) @ a.astype(np.float32)
+    front = z[z > 0.0]
+    d = float(front.min()) if front.size else math.inf
+    _NEAREST.insert(0, (pts, o, a, d))
+    del _NEAREST[8:]
+    return d
+
+
+def local_near(ext: float, zmin: float | None, all_casters, origin: np.ndarray, axes: np.ndarray) -> tuple[float, float]:
+    """A local light's near plane and the depth of the nearest caster vertex in front of it
+    (:func:`nearest_caster_depth` of ``all_casters()``, the scene's caster points; inf: none). The
+    near plane: 1e-4 of the frame's extent, or half the depth of the nearest receiver (``zmin``;
+    None: no receiver in front) or of the nearest caster vertex when either lies nearer, so that a
+    caster just in front of the light (a grille, a lamp's diffuser) is mapped, not clipped; a
+    caster brings it no nearer than 2 float32 ulps of the light's largest coordinate, the rounding
+    of a view depth there."""
+    near = max(1e-4 * ext, 1e-7)
+    if zmin is not None:
+        near = min(near, 0.5 * zmin)
+    nearest = math.inf
+    if all_casters is not None:
+        pts = all_casters()
+        if len(pts):
+            nearest = nearest_caster_depth(pts, origin, np.asarray(axes, np.float64)[:, 2])
+    if nearest < 2.0 * near:
+        floor = 2.0 * float(np.spacing(np.float32(np.abs(np.asarray(origin, np.float64)).max())))
+        near = min(near, max(0.5 * nearest, floor))
+    return near, nearest
+
+
+def near_caster_warning(light: Light, depth: float) -> str:
+    """The warning of a soft view whose light has a caster nearer than the light's own size
+    (:attr:`~wsoft.lightspace.view.LightView.nearest_caster` below :meth:`Light.extent`)."""
+    return (f"light {light.path}: a caster lies {depth:.3g} in front of it, nearer than its size ({light.extent():.3g}): seen from "
+            "the light's centre it hides the casters behind it and reaches across the map, while it blocks only part of the light, "
+            "so a shadow map's soft shadow of this light is wrong around it (too light where it hides a caster, too dark where "
+            "its penumbra is estimated from its depth); trace rays (reference, dcs, rtdenoise) or move the caster away from the light")
+
+
 def _far_light_depths(casters: np.ndarray, origin: np.ndarray, axes: np.ndarray, zr_min: float, zr_max: float, near: float,
                       ext: float) -> tuple[float, float]:
     """(near, far) of a far local light's view (:func:`fit_light_view`): near just before the
@@ -492,6 +544,7 @@ def fit_light_view(
         lead = 1e-3 * ext
         origin = center + axes[:, 2] * (zc - lead)
         near = 0.0
+        nearest = math.inf
         far = (zr_max - zc) + 2.0 * lead
         persp, outside, behind = False, 0, 0
     else:
@@ -524,9 +577,7 @@ def fit_light_view(
         b, t = max(b, -MAX_TAN), min(t, MAX_TAN)
         outside = s["outside"]
         behind = st["behind"]
-        near = max(1e-4 * ext, 1e-7)
-        if s["n"]:
-            near = min(near, 0.5 * s["zmin"])
+        near, nearest = local_near(ext, s["zmin"] if s["n"] else None, all_casters, origin, axes)
         far = (s["zmax"] if s["n"] else ext) * 1.01 + 1e-3 * ext
         if s["n"] and all_casters is not None and far_light(light, rlo, rhi):
             near, far = _far_light_depths(all_casters(), origin, axes, s["zmin"], s["zmax"], near, ext)
@@ -540,5 +591,5 @@ def fit_light_view(
     return LightView(
         light_path=light.path, persp=persp, origin=origin, axes=axes, window=window,
         near=float(near), far=float(far), width=size, height=size, receivers_outside=outside, receivers_behind=behind, extent=ext,
-        growth=float(growth),
+        growth=float(growth), nearest_caster=nearest,
     )

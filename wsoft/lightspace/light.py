@@ -38,6 +38,10 @@ class LightGPU:
     cos_max: float  # distant: cosine of the cone half angle
     far: float  # distant: length of shadow rays (4 scene diagonals, at most 1e30)
     aspect: wp.vec3  # disk / sphere: semi-axes along ax, ay, az over radius (the largest); (1, 1, 1) when round
+    cone_cos: float  # ShapingAPI: cosine of the cone's angle off -Z (-2: no cone)
+    soft_cos: float  # ShapingAPI: cosine of the angle inside which the cone's soft edge ends (= cone_cos: a hard edge)
+    focus: float  # ShapingAPI: off-axis cosine power (0: none)
+    focus_tint: wp.vec3  # ShapingAPI: the colour the focus fades toward
 
 
 def light_gpu(light: Light, scene_diagonal: float) -> LightGPU:
@@ -52,7 +56,71 @@ def light_gpu(light: Light, scene_diagonal: float) -> LightGPU:
     g.cos_max = float(math.cos(math.radians(0.5 * light.angle_deg)))
     g.far = float(min(4.0 * scene_diagonal, 1.0e30))  # reaches every caster; finite in float32 arithmetic
     g.aspect = wp.vec3(*light.aspect)
+    coned = light.shaping.coned
+    g.cone_cos = float(math.cos(math.radians(light.shaping.cone_deg))) if coned else -2.0
+    g.soft_cos = float(math.cos(math.radians(light.shaping.cone_deg * (1.0 - light.shaping.softness)))) if coned else -2.0
+    g.focus = float(light.shaping.focus) if light.kind != LIGHT_DISTANT else 0.0
+    g.focus_tint = wp.vec3(*light.shaping.focus_tint)
     return g
+
+
+@wp.func
+def shaping_weight(L: LightGPU, d: wp.vec3) -> wp.vec3:
+    """The ``UsdLux.ShapingAPI`` factor on the light's emission (per colour channel) along the unit
+    direction ``d`` from a point of the light toward a receiver, ``c = dot(d, -az)`` the cosine off
+    its primary axis: 0 beyond the cone (``c < cos(angle)``); inside it, ``smoothstep`` from
+    ``cos(angle)`` to ``cos(angle (1 - softness))`` (the soft edge; softness 0: 1 throughout);
+    times ``f + (1 - f) focusTint`` with ``f = max(c, 0)^focus`` (focus 0: f = 1)."""
+    c = -wp.dot(d, L.az)
+    w = float(1.0)
+    if L.cone_cos > -1.5:
+        if c < L.cone_cos:
+            return wp.vec3(0.0)
+        if L.soft_cos > L.cone_cos:
+            w = wp.smoothstep(L.cone_cos, L.soft_cos, c)
+    if L.focus > 0.0:
+        f = wp.pow(wp.max(c, 0.0), L.focus)
+        return w * (wp.vec3(f) + (1.0 - f) * L.focus_tint)
+    return wp.vec3(w)
+
+
+def shaping_weights(light: Light, d: np.ndarray) -> np.ndarray:
+    """:func:`shaping_weight` on the host, for unit directions ``d`` ([N, 3], from the light toward
+    receivers): [N, 3] factors."""
+    d = np.asarray(d, np.float64).reshape(-1, 3)
+    c = -(d @ np.asarray(light.frame, np.float64)[:, 2])
+    w = np.ones(len(d))
+    if light.shaping.coned:
+        lo = math.cos(math.radians(light.shaping.cone_deg))
+        hi = math.cos(math.radians(light.shaping.cone_deg * (1.0 - light.shaping.softness)))
+        if hi > lo:
+            t = np.clip((c - lo) / (hi - lo), 0.0, 1.0)
+            w = t * t * (3.0 - 2.0 * t)
+        w = np.where(c < lo, 0.0, w)
+    if light.shaping.focus > 0.0 and light.kind != LIGHT_DISTANT:
+        f = np.maximum(c, 0.0) ** light.shaping.focus
+        return w[:, None] * (f[:, None] + (1.0 - f[:, None]) * np.asarray(light.shaping.focus_tint, np.float64)[None])
+    return np.repeat(w[:, None], 3, axis=1)
+
+
+def reach_mask(light: Light, points: np.ndarray) -> np.ndarray:
+    """Which of ``points`` ([N, 3], world) a shaped light's cone reaches (bool [N]): those within its
+    cone's angle off its −Z axis, widened by the angle its bounding ball (:meth:`Light.extent`)
+    spans seen from the point (so every point some part of the light's cone reaches is kept; a
+    point at or inside that ball is reached). Every point for a light without a cone. Compared in
+    cosines: ``cos(off) >= cos(cone + widen)``, with ``sin(widen) = r / d``."""
+    pts = np.asarray(points, np.float64).reshape(-1, 3)
+    if not light.shaping.coned:
+        return np.ones(len(pts), bool)
+    v = pts - np.asarray(light.position, np.float64)[None]
+    d2 = np.einsum("ij,ij->i", v, v)
+    r = light.extent()
+    cos_c, sin_c = math.cos(math.radians(light.shaping.cone_deg)), math.sin(math.radians(light.shaping.cone_deg))
+    along = -(v @ np.asarray(light.frame, np.float64)[:, 2])  # d cos(off)
+    inside = d2 <= r * r
+    wrap = (cos_c <= 0.0) & (r * r >= sin_c * sin_c * d2)  # cone + widen reaches 180 degrees
+    bound = cos_c * np.sqrt(np.maximum(d2 - r * r, 0.0)) - sin_c * r  # d cos(cone + widen)
+    return inside | wrap | (along >= bound - 1e-9 * np.sqrt(d2))
 
 
 @wp.func
@@ -378,3 +446,26 @@ def light_side(L: LightGPU, p: wp.vec3, n: wp.vec3) -> int:
     if s <= -r:
         return -1
     return 0
+
+
+@wp.func
+def light_reaches(L: LightGPU, p: wp.vec3) -> bool:
+    """:func:`reach_mask` on the device: does the light's cone reach ``p`` (always, without a cone)?"""
+    if L.cone_cos < -1.5:
+        return True
+    v = p - L.position
+    d2 = wp.dot(v, v)
+    r = bound_radius(L)
+    if d2 <= r * r:
+        return True
+    sin_c = wp.sqrt(wp.max(1.0 - L.cone_cos * L.cone_cos, 0.0))
+    if L.cone_cos <= 0.0 and r * r >= sin_c * sin_c * d2:
+        return True
+    bound = L.cone_cos * wp.sqrt(d2 - r * r) - sin_c * r
+    return -wp.dot(v, L.az) >= bound - 1.0e-6 * wp.sqrt(d2)
+
+
+def reached_receivers(light: Light, points: np.ndarray) -> np.ndarray:
+    """The rows of ``points`` ([N, 3]) a shaped light's cone reaches (:func:`reach_mask`): the
+    receivers its light views are fitted to (all of them for a light without a cone)."""
+    return points if not light.shaping.coned else points[reach_mask(light, points)]

@@ -25,8 +25,16 @@ Kinds:
 
 Decorrelation between pixels:
 
-* ``per_pixel`` — a new set for every pixel, generated on the device from the pixel's own random
-  stream (``regular``, ``jittered``, ``random``, ``stratified``): the reference's sampling.
+* ``per_pixel`` — a new set for every pixel, generated on the device (``regular``, ``jittered``,
+  ``random``, ``stratified``): the reference's sampling. Draws are counter-based: coordinate
+  ``dim`` of sample ``s`` of receiver ``index`` is a hash of (seed, index, s, dim)
+  (:func:`counter_draw`, nested PCG hashes, :func:`pcg_hash`), so a packet's rays are generated
+  side by side, none waiting on another's draw. ``jittered`` and ``stratified`` at a square count
+  ``m^2``: sample ``s`` in stratum ``(s mod m, s div m)``, jittered by its dimensions 0 and 1;
+  ``stratified`` at other counts: the rank-1 lattice shifted toroidally by the receiver's
+  dimensions 2 and 3 of sample 0 (one shift per receiver); ``random``: dimensions 0 and 1.
+  ``rtdenoise``, and ``dcs`` and ``pwedge`` with ``decorrelate=per_pixel``, draw the same way,
+  through :func:`sampling_begin` and :func:`sample_coords`.
 * ``rotate`` — the precomputed set turned per pixel by a random angle about the light's centre
   (a disk light) or, on a rectangle where a turned set would leave the light, shifted by a random
   toroidal offset (the Cranley-Patterson rotation, the square's uniformity-preserving analogue).
@@ -51,6 +59,7 @@ DEVICE_KINDS = ("regular", "jittered", "random", "stratified")  # can be generat
 PAPER_MIN_DISTANCE = {16: 0.2456139, 64: 0.1076681}  # Forest et al. 2009, Poisson-disk minimum distances
 GOLDEN = 0.6180339887498949  # the rank-1 lattice's generator (golden ratio conjugate)
 ROTATION_SALT = wp.constant(0x2545F491)  # seeds the per-pixel rotation stream apart from the sampling stream
+PCG_INCREMENT = wp.constant(wp.uint32(2891336453))  # pcg_hash's LCG increment (above the int32 range)
 
 
 @wp.func
@@ -111,18 +120,42 @@ class LightSamples:
 
 
 @wp.func
+def pcg_hash(v: wp.uint32) -> wp.uint32:
+    """The PCG-RXS-M-XS permutation of a 32-bit word (Jarzynski and Olano 2020, "Hash functions
+    for GPU rendering"): one LCG step, then an output permutation."""
+    state = v * wp.uint32(747796405) + PCG_INCREMENT
+    word = ((state >> ((state >> wp.uint32(28)) + wp.uint32(4))) ^ state) * wp.uint32(277803737)
+    return (word >> wp.uint32(22)) ^ word
+
+
+@wp.func
+def pixel_key(seed: int, index: int) -> wp.uint32:
+    """A receiver's key for its counter-based draws: the hash of (``seed``, ``index``)."""
+    return pcg_hash(pcg_hash(wp.uint32(seed)) + wp.uint32(index))
+
+
+@wp.func
+def counter_draw(key: wp.uint32, s: int, dim: int) -> float:
+    """Dimension ``dim`` of sample ``s`` of the receiver with ``key`` (:func:`pixel_key`): a uniform
+    float in [0, 1) (24 bits) from the nested hash of (key, s, dim), depending on no other draw."""
+    h = pcg_hash(pcg_hash(key + wp.uint32(s)) + wp.uint32(dim))
+    return float(h >> wp.uint32(8)) * (1.0 / 16777216.0)
+
+
+@wp.func
 def sampling_begin(ls: LightSamples, index: int, px: int, py: int):
-    """Start a pixel's samples: (random state, first table index, rotation (cos, sin, dx, dy)).
-    ``index``: the receiver's own index (seeds its stream); ``px, py``: its pixel (interleaving)."""
-    state = wp.rand_init(ls.seed, index)
+    """Start a pixel's samples: (its key or random state, first table index, rotation (cos, sin,
+    dx, dy)). ``index``: the receiver's own index (seeds its draws); ``px, py``: its pixel
+    (interleaving). Per-pixel sets: the key of :func:`counter_draw`, and for ``stratified`` the
+    lattice's shift (dimensions 2 and 3 of sample 0)."""
     rot = wp.vec4(1.0, 0.0, 0.0, 0.0)
     base = int(0)
     if ls.per_pixel != 0:
-        if ls.kind == 3:  # stratified: the lattice's shift comes first in the stream
-            sx = wp.randf(state)
-            sy = wp.randf(state)
-            rot = wp.vec4(1.0, 0.0, sx, sy)
-        return state, base, rot
+        key = pixel_key(ls.seed, index)
+        if ls.kind == 3:  # stratified
+            rot = wp.vec4(1.0, 0.0, counter_draw(key, 0, 2), counter_draw(key, 0, 3))
+        return key, base, rot
+    state = wp.rand_init(ls.seed, index)
     n = ls.interleave
     base = ((py % n) * n + (px % n)) * ls.count
     if ls.rotate != 0:
@@ -139,20 +172,20 @@ def sampling_begin(ls: LightSamples, index: int, px: int, py: int):
 
 @wp.func
 def sample_coords(ls: LightSamples, state: wp.uint32, base: int, rot: wp.vec4, s: int):
-    """Light coordinates of sample ``s`` of a pixel started by :func:`sampling_begin`, and the
-    advanced random state."""
+    """Light coordinates of sample ``s`` of a pixel started by :func:`sampling_begin`, and
+    ``state`` passed on unchanged: per-pixel sets draw sample ``s`` from the pixel's key and ``s``
+    alone (:func:`counter_draw`, dimensions 0 and 1), so any sample is computed without the others."""
     u = wp.vec2(0.0, 0.0)
     if ls.per_pixel != 0:
         if ls.kind == 0:  # regular
             u = stratified_sample(s, ls.count, ls.grid, wp.vec2(0.5, 0.5), wp.vec2(0.0, 0.0))
-        elif ls.kind == 2:  # random
-            a = wp.randf(state)
-            b = wp.randf(state)
-            u = wp.vec2(a, b)
-        else:  # jittered, stratified
-            ja = wp.randf(state)
-            jb = wp.randf(state)
-            u = stratified_sample(s, ls.count, ls.grid, wp.vec2(ja, jb), wp.vec2(rot[2], rot[3]))
+        else:  # random; jittered and stratified (jitter in the stratum, or the lattice's shift in rot)
+            a = counter_draw(state, s, 0)
+            b = counter_draw(state, s, 1)
+            if ls.kind == 2:
+                u = wp.vec2(a, b)
+            else:
+                u = stratified_sample(s, ls.count, ls.grid, wp.vec2(a, b), wp.vec2(rot[2], rot[3]))
         return to_light_coords(u, ls.disk), state
     u = ls.table[base + s]
     if ls.rotate != 0 and ls.disk == 0:

@@ -43,7 +43,7 @@ import numpy as np
 
 from wsoft.lightspace.fit import (
     _caster_growth, _far_light_depths, _fit_points, _frame_bounds, _local_fit_stats, distant_axes, distant_caster_depth,
-    local_axes, omni_axes, receiver_bounds,
+    local_axes, local_near, omni_axes, receiver_bounds,
 )
 from wsoft.lightspace.view import MAX_TAN, LightView, far_light, frame_extent_of_bounds, to_frame
 from wsoft.scene.types import LIGHT_CYLINDER, LIGHT_DISTANT, LIGHT_POINT, LIGHT_SPHERE, Light
@@ -207,9 +207,7 @@ def _stable_local(light, axes, rec, pts, rlo, rhi, size, margin, margin_texels, 
     b, t = max(b, -MAX_TAN), min(t, MAX_TAN)
     l, r, tx, ix = snapped_window(l, r, size, margin_texels, MAX_TAN)
     b, t, ty, iy = snapped_window(b, t, size, margin_texels, MAX_TAN)
-    near = max(1e-4 * ext, 1e-7)
-    if s["n"]:
-        near = min(near, 0.5 * s["zmin"])
+    near, nearest = local_near(ext, s["zmin"] if s["n"] else None, all_casters, origin, axes)
     far = (s["zmax"] if s["n"] else ext) * 1.01 + 1e-3 * ext
     step = None
     if s["n"] and all_casters is not None and far_light(light, rlo, rhi):
@@ -224,4 +222,4 @@ def _stable_local(light, axes, rec, pts, rlo, rhi, size, margin, margin_texels, 
         snap["depth_step"] = step
     return LightView(light_path=light.path, persp=True, origin=origin, axes=axes, window=(l, r, b, t), near=float(near), far=float(far),
                      width=size, height=size, receivers_outside=own_s["outside"], receivers_behind=own["behind"], extent=ext,
-                     growth=float(growth), snap=snap)
+                     growth=float(growth), snap=snap, nearest_caster=nearest)

@@ -34,11 +34,12 @@ MAX_HALF_ANGLE = 80.0  # degrees: the widest half-angle a perspective light view
 MAX_TAN = math.tan(math.radians(MAX_HALF_ANGLE))
 
 
-def outside_view_warning(light: Light, what: str) -> str:
+def outside_view_warning(light: Light, what: str, remedy: str) -> str:
     """The warning for receivers a light's single-frustum view leaves out (``what``: how many of
-    what, "12 of 3000 visible samples"): they are left unshadowed."""
+    what, "12 of 3000 visible samples"): they are left unshadowed; ``remedy``: what the user can do
+    (:func:`~wsoft.lightspace.cube.outside_view_remedy`)."""
     return (f"light {light.path}: {what} lie outside its single-frustum view (more than {MAX_HALF_ANGLE:g} degrees off its axis) and are "
-            f"left unshadowed; a light that surrounds its receivers needs a cube map, which this technique does not build")
+            f"left unshadowed; {remedy}")
 
 
 def to_frame(p: np.ndarray, origin: np.ndarray, axes: np.ndarray, threads: bool = True) -> np.ndarray:
@@ -141,6 +142,7 @@ class LightView:
     # window centre in whole texels from its anchor (snap_offset), depth step; None: a fitted view
     snap: dict | None = None
     face: int = -1  # a cube map's face (wsoft.lightspace.cube.FACE_NAMES); -1: a single view
+    nearest_caster: float = math.inf  # a local light's view: depth of the nearest caster vertex in front of it (inf: none known)
 
     def gpu(self) -> ViewGPU:
         g = ViewGPU()

@@ -153,7 +153,11 @@ def add_error_pass(ctx, technique_label: str, channels: Key, reference: Key, lig
 
     def run(res):
         ch, ref = res[channels], res[reference]
-        out = visibility_error(ch[f"V.{label}"], ref[f"V.{label}"], ref.get(f"V_stderr.{label}"), ref["A"], facing=facing_light(ch, light))
+        reach = ch.get(f"reach.{label}")  # a shaped light: pixels its cone does not reach have no shadow of it (docs/outputs.md)
+        cover = ref["A"] if reach is None else np.where(reach > 0, ref["A"], 0.0)
+        out = visibility_error(ch[f"V.{label}"], ref[f"V.{label}"], ref.get(f"V_stderr.{label}"), cover, facing=facing_light(ch, light))
+        if reach is not None:
+            out["unreached_pixels"] = int(np.count_nonzero((np.asarray(ref["A"]) > 0) & ~(reach > 0)))
         if res[flip] is not None:
             out.update(res[flip]["error"])
         return {key: out}

@@ -33,7 +33,7 @@ def ground_truth_frame(scene: Scene, samples: int, *, width, height, camera, lig
 def compare_sequence(scene, techniques, *, frames, samples: int = 256, ground_truth=None, width: int | None = None,
                      height: int | None = None, camera=None, light=None, device: str | None = None, pixel_samples: int = 1,
                      render_settings: str | None = None, instancing: str = "auto", reseed: bool = True, progress=None,
-                     subdiv_level: int | None = None) -> Sequence:
+                     subdiv_level: int | None = None, material_purpose: str | None = None) -> Sequence:
     """Render ``techniques`` at every time code of ``frames`` beside a ground truth and measure each
     frame's error (as :func:`wsoft.compare`) and the sequence's temporal error.
 
@@ -46,14 +46,14 @@ def compare_sequence(scene, techniques, *, frames, samples: int = 256, ground_tr
     ``flicker_noise``; for a technique with standard errors, its own ``own_noise`` and
     ``flicker_excess``) and, on a static sequence (the stage authors no time sample),
     ``temporal_std`` (a stochastic technique's crawl) beside the reference's own.
-    ``ground_truths`` holds each frame's :class:`~wsoft.metrics.GroundTruth`. ``subdiv_level``:
-    as :func:`~wsoft.pipeline.sequence.render_sequence` takes it."""
+    ``ground_truths`` holds each frame's :class:`~wsoft.metrics.GroundTruth`. ``subdiv_level`` and
+    ``material_purpose``: as :func:`~wsoft.pipeline.sequence.render_sequence` takes them."""
     from wsoft.metrics import compare
     from wsoft.pipeline import as_techniques, is_several
 
     techs = as_techniques(list(techniques) if is_several(techniques) else [techniques], {})
-    loader, seq, history = start_sequence(scene, frames, render_settings, instancing, techs, reseed, subdiv_level, width=width, height=height,
-                                          camera=camera, light=light, device=device, pixel_samples=pixel_samples)
+    loader, seq, history = start_sequence(scene, frames, render_settings, instancing, techs, reseed, subdiv_level, material_purpose,
+                                          width=width, height=height, camera=camera, light=light, device=device, pixel_samples=pixel_samples)
     times = seq.times
     truths: list = []
     for i, t in enumerate(times):

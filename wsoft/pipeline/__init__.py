@@ -4,7 +4,7 @@ Follow a render from here: :func:`render` loads the stage (:mod:`~wsoft.pipeline
 resolves the camera and image (:mod:`~wsoft.pipeline.framing`) and builds the graph
 (:mod:`~wsoft.pipeline.build`): a :class:`~wsoft.pipeline.context.RenderContext` whose providers
 register the shared passes once, and each technique's passes per shadow-casting light it
-supports, through a :class:`~wsoft.pipeline.context.TechniqueContext`; ``shade`` lights every
+supports, through a :class:`~wsoft.pipeline.technique_context.TechniqueContext`; ``shade`` lights every
 G-buffer sample with a technique's visibilities and ``resolve`` turns them into per-pixel
 channels. Only passes feeding the requested channels run; the frames' stats
 (:mod:`~wsoft.pipeline.frames`) say which ran, of what kind, and which several techniques shared.

@@ -1,5 +1,5 @@
 """Building one frame graph for one or several techniques on a scene: each technique's passes per
-shadow-casting light it supports (through a :class:`~wsoft.pipeline.context.TechniqueContext`),
+shadow-casting light it supports (through a :class:`~wsoft.pipeline.technique_context.TechniqueContext`),
 capped by the receiver's horizon, then ``shade`` (a Warp kernel, :mod:`wsoft.raster.shade`: every
 G-buffer sample lit with a technique's visibilities) and ``resolve`` (per-sample results to
 per-pixel channels); :func:`execute` runs what the requested channels need."""
@@ -15,12 +15,13 @@ import warp as wp
 
 from wsoft.errors import ParameterError, SceneError
 from wsoft.graph import Key, Pass, Resources
+from wsoft.lightspace.light import reach_mask
 from wsoft.lightspace.view import MAX_HALF_ANGLE
 from wsoft.pipeline.context import RenderContext, TechniqueContext
 from wsoft.pipeline.framing import frame_setup, local_origin
 from wsoft.pipeline.loading import flatten_for, instancing_plan
 from wsoft.raster.shade import shade as shade_samples
-from wsoft.scene.types import LIGHT_SPHERE, Light, Scene
+from wsoft.scene.types import LIGHT_DISTANT, LIGHT_SPHERE, Light, Scene
 
 
 CHOOSERS: dict = {}
@@ -115,7 +116,7 @@ def build_graph(scene: Scene, technique, *, width: int | None = None, height: in
         if scene.unshadowed_lights:
             why = f" ({len(scene.unshadowed_lights)} light(s) have shadow:enable = false)"
         elif scene.skipped_lights:
-            why = f" (not handled: {', '.join(s.path + ' ' + s.kind for s in scene.skipped_lights)})"
+            why = f" (skipped: {'; '.join(f'{s.path} {s.kind}: {s.reason}' for s in scene.skipped_lights)})"
         raise SceneError(f"no shadow-casting light{why}", file=scene.path)
     techs = as_techniques(technique, params or {})
     labels = technique_labels(techs)
@@ -212,6 +213,8 @@ def visibility_of(ctx: RenderContext, tctx: TechniqueContext, light: Light) -> K
         ctx.warn(ctx.graph.producers[vk], distance_caveat_warning(tech, light))
     if tech.ellipsoid_caveat and light.kind == LIGHT_SPHERE and light.elliptical:
         ctx.warn(ctx.graph.producers[vk], ellipsoid_caveat_warning(tech, light))
+    if light.kind == LIGHT_DISTANT and tech.distant_angle_limit is not None and light.angle_deg > tech.distant_angle_limit:
+        ctx.warn(ctx.graph.producers[vk], distant_angle_warning(tech, light))
     return ctx.clip_to_front(tctx, light, vk)
 
 
@@ -221,6 +224,14 @@ def ellipsoid_caveat_warning(tech, light: Light) -> str:
     semi = " x ".join(f"{a:g}" for a in light.semi_axes)
     return (f"light {light.path}: a SphereLight scaled into an ellipsoid (semi-axes {semi}): {tech.name} models it as "
             f"{tech.ellipsoid_caveat} of radius {light.radius:g} (the reference samples the silhouette ellipse each point sees)")
+
+
+def distant_angle_warning(tech, light: Light) -> str:
+    """The warning of a technique measured to get a DistantLight right only up to its
+    :attr:`~wsoft.techniques.Technique.distant_angle_limit`, for a wider one."""
+    return (f"light {light.path}: DistantLight angle {light.angle_deg:g} degrees is wider than {tech.name} is measured to get right "
+            f"(up to {tech.distant_angle_limit:g}: it sizes the sun by tan(angle / 2), a disk across its axis, not by the cone's solid "
+            "angle); the reference samples the whole cone (`wsoft techniques --json` gives each technique's distant_angle_limit)")
 
 
 def distance_caveat_warning(tech, light: Light) -> str:
@@ -245,8 +256,7 @@ def _add_resolve(ctx: RenderContext, tech, label: str, lights: list[Light], vis_
     crop = ctx.framing.crop if ctx.framing is not None else None
 
     def shade_pass(res):
-        return {rgb_key: shade_samples(res[sk], res[gk], [(L, res[vk].vis, l.shadow_color)
-                                                          for L, l, vk in zip(light_structs, lights, vis_keys)])}
+        return {rgb_key: shade_samples(res[sk], res[gk], [(L, res[vk].vis, l) for L, l, vk in zip(light_structs, lights, vis_keys)])}
 
     def resolve(res):
         """Per-sample results -> per-pixel channels (means over the pixel's covered samples)."""
@@ -264,6 +274,13 @@ def _add_resolve(ctx: RenderContext, tech, label: str, lights: list[Light], vis_
                 e = res[vk].stderr.numpy().reshape(spp, h, w)
                 ee = np.sqrt((e * e * hit).sum(axis=0)) / np.maximum(nhit, 1)
                 ch[f"V_stderr.{ll}"] = ee.astype(np.float32)
+        if any(l.shaping.coned for l in lights):
+            pos = res[gk].host("pos")
+            for ll, l in zip(light_labels, lights):
+                if l.shaping.coned:  # reach.<light>: 1 where the cone reaches a covered sample of the pixel (docs/outputs.md)
+                    reached = np.zeros(hit.shape, bool)
+                    reached[hit] = reach_mask(l, pos[hit])
+                    ch[f"reach.{ll}"] = reached.any(axis=0).astype(np.float32)
         ch["V"] = ch[f"V.{light_labels[0]}"]
         if f"V_stderr.{light_labels[0]}" in ch:
             ch["V_stderr"] = ch[f"V_stderr.{light_labels[0]}"]
@@ -277,7 +294,7 @@ def _add_resolve(ctx: RenderContext, tech, label: str, lights: list[Light], vis_
 
     sname, rname = ("shade", "resolve") if single else (f"shade[{label}]", f"resolve[{label}]")
     ctx.add(Pass(sname, (sk, gk, *vis_keys), (rgb_key,), shade_pass, kind="shade", technique=label))
-    ctx.add(Pass(rname, (ck, *vis_keys, rgb_key), (out,), resolve, kind="resolve", technique=label))
+    ctx.add(Pass(rname, (ck, gk, *vis_keys, rgb_key), (out,), resolve, kind="resolve", technique=label))
     return out
 
 

@@ -1,7 +1,6 @@
 """The render context: the frame graph's shared providers (the scene on the device, the G-buffer,
-light views and depth maps, the receiver's horizon) and what one technique instance sees of them
-(:class:`TechniqueContext`: its keys, pass names and counters, and :meth:`~TechniqueContext.add_pass`,
-which checks each pass against the technique's :class:`~wsoft.techniques.PassSpec`).
+light views and depth maps, the receiver's horizon). What one technique instance sees of them is a
+:class:`~wsoft.pipeline.technique_context.TechniqueContext` (:meth:`RenderContext.technique`).
 
 Providers register their own passes once, so techniques that need the same depth map share it.
 """
@@ -10,9 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import math
 import time
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -20,13 +17,16 @@ import warp as wp
 
 from wsoft.errors import DeclarationError
 from wsoft.graph import FrameGraph, Key, Pass
-from wsoft.lightspace.cube import CUBE_KINDS, FACE_NAMES, CubeDecision, CubeFace, cube_decision, cube_frame, fit_cube_views, select_cube_face, vec6i
-from wsoft.lightspace.light import disk_shaped, light_gpu
-from wsoft.lightspace.fit import fit_light_view
+from wsoft.lightspace.cube import (
+    CUBE_KINDS, FACE_NAMES, CubeDecision, CubeFace, cube_decision, cube_frame, fit_cube_views, outside_view_remedy, select_cube_face, vec6i,
+)
+from wsoft.lightspace.light import disk_shaped, light_gpu, reached_receivers
+from wsoft.lightspace.fit import fit_light_view, near_caster_warning
 from wsoft.lightspace.stable import fit_stable_view
-from wsoft.lightspace.view import DEPTH_CLEAR, far_light, outside_view_warning
+from wsoft.lightspace.view import far_light, outside_view_warning
 from wsoft.params import VIEWS
 from wsoft.pipeline.framing import Framing
+from wsoft.pipeline.technique_context import TechniqueContext, Visibility
 from wsoft.raster.camera import camera_gpu
 from wsoft.raster.gbuffer import GBuffer, render_gbuffer
 from wsoft.raster.horizon import clip_to_front, front_counts, front_fraction
@@ -38,20 +38,6 @@ from wsoft.scene.types import LIGHT_DISTANT, Camera, Light, Scene
 SCENE = Key("scene")
 GBUFFER = Key("gbuffer")
 GBUFFER_CHANNELS = Key("gbuffer_channels")
-
-
-@dataclass
-class Visibility:
-    """Per G-buffer sample visibility of one light (flat float32), optional standard error."""
-
-    vis: wp.array
-    stderr: wp.array | None = None
-
-    def arrays(self) -> dict[str, wp.array]:
-        out = {"vis": self.vis}
-        if self.stderr is not None:
-            out["stderr"] = self.stderr
-        return out
 
 
 FAR_DEPTH_LIMIT = 1e-4
@@ -161,7 +147,7 @@ class RenderContext:
         def run(res):
             gb: GBuffer = res[gk]
             prim = gb.prim.numpy()
-            rec = gb.pos.numpy()[prim >= 0]
+            rec = reached_receivers(face, gb.pos.numpy()[prim >= 0])
             views, facts = fit_cube_views(face, rec, faces, size, guard, casters=self.scene.caster_points if soft else None)
             c = self.pass_counters(name)
             c.update(cube_faces=[FACE_NAMES[k] for k in faces], receivers_per_face=facts["receivers"], guard=facts["guard"],
@@ -269,7 +255,7 @@ class RenderContext:
         def run(res):
             gb: GBuffer = res[gk]
             prim = gb.prim.numpy()
-            rec = gb.pos.numpy()[prim >= 0]
+            rec = reached_receivers(light, gb.pos.numpy()[prim >= 0])
             lo, hi = self.scene.bounds
             distant = light.kind == LIGHT_DISTANT  # its depth range starts at the nearest caster over the receivers
             region = self._fit_region(light) if whole_sequence else None
@@ -292,8 +278,13 @@ class RenderContext:
                     self.warn(name, f"light {light.path} is {view.far:.3g} from the receivers: float32 depths there are {spacing:.3g} apart, "
                               f"{spacing / view.extent:.2g} of the frame's extent (more than {FAR_DEPTH_LIMIT:g}): its shadow-map depths "
                               "and biases lose precision (shadows may thin or vanish); a DistantLight models a light this far")
+            if soft and view.persp and view.nearest_caster < light.extent():
+                self.warn(name, near_caster_warning(light, view.nearest_caster))
             if view.receivers_outside:
-                self.warn(name, outside_view_warning(light, f"{view.receivers_outside} of {len(rec)} visible samples"))
+                from wsoft.techniques import unmapped_techniques
+
+                self.warn(name, outside_view_warning(light, f"{view.receivers_outside} of {len(rec)} visible samples",
+                                                     outside_view_remedy(light, self.cube_decision(light), unmapped_techniques())))
             return {key: view}
 
         return self.add(Pass(name, (gk,) if sk is None else (gk, sk), (key,), run, kind="light_map", light=self.label(light)))
@@ -441,7 +432,7 @@ class RenderContext:
         def run(res):
             gb: GBuffer = res[gk]
             prim = gb.prim.numpy()
-            view = fit_paraboloid_view(light, gb.pos.numpy()[prim >= 0], size, guard, self.scene.diagonal)
+            view = fit_paraboloid_view(light, reached_receivers(light, gb.pos.numpy()[prim >= 0]), size, guard, self.scene.diagonal)
             dm = draw_paraboloid(res[sk], view, alpha, casting)
             c = self.pass_counters(name)
             c.update(hemispheres=[("+z", "-z")[h] for h in view.drawn], receivers_per_hemisphere=view.receivers,
@@ -597,137 +588,3 @@ def light_behind_warning(light: Light, n: int, total: int) -> str:
     d = ", ".join(f"{c:.3g}" for c in np.round(np.asarray(light.direction, np.float64), 6) + 0.0)
     return (f"light {light.path}: {n} of {total} visible samples lie behind its emitting plane (a {light.kind_name} light emits "
             f"from its front only, toward ({d})) and get none of its light (V = 0)")
-
-
-class TechniqueContext:
-    """A :class:`RenderContext` seen by one technique instance (``label`` tells instances apart):
-    its keys, pass names and counters carry the label; the shared providers are the render
-    context's own."""
-
-    def __init__(self, ctx: RenderContext, tech, label: str):
-        self.ctx = ctx
-        self.tech = tech
-        self.label_ = label
-        self.face_views: dict[str, list[Key]] = {}  # light path -> the cube-map face views its passes read
-
-    # the render context's state and providers
-    scene = property(lambda self: self.ctx.scene)
-    device = property(lambda self: self.ctx.device)
-    width = property(lambda self: self.ctx.width)
-    height = property(lambda self: self.ctx.height)
-    pixel_samples = property(lambda self: self.ctx.pixel_samples)
-    camera = property(lambda self: self.ctx.camera)
-
-    def scene_arrays(self) -> Key:
-        return self.ctx.scene_arrays()
-
-    def gbuffer(self) -> Key:
-        return self.ctx.gbuffer()
-
-    def light_view(self, light: Light, size: int, soft: bool = False, view: str = "fitted") -> Key:
-        key = self.ctx.light_view(light, size, soft, view, self.tech.cube_guard_texels())
-        self._note_face_view(light, key)
-        return key
-
-    def light_depth(self, light: Light, size: int, conservative: bool = False, soft: bool = False, inner: bool = False,
-                    opaque: bool = False, faces: str = "all", view: str = "fitted", read: int | None = None) -> Key:
-        guard = self.tech.cube_guard_texels()
-        self._note_face_view(light, self.ctx.light_view(light, size, soft, view, guard))
-        return self.ctx.light_depth(light, size, conservative, soft, inner, opaque, faces, view, guard, read)
-
-    def _note_face_view(self, light: Light, key: Key) -> None:
-        """Remember the views of a cube map's faces this technique reads (its counters count their texels)."""
-        if isinstance(light, CubeFace):
-            self.face_views.setdefault(light.path, []).append(key)
-
-    def front_fraction(self, light: Light, centre: bool = False) -> Key:
-        return self.ctx.front_fraction(light, centre)
-
-    def label(self, light: Light) -> str:
-        return self.ctx.label(light)
-
-    def light_gpu(self, light: Light):
-        return self.ctx.light_gpu(light)
-
-    # -- keys and names ------------------------------------------------------------------------------
-    def visibility_key(self, light: Light) -> Key:
-        return Key("visibility", self.label(light), technique=self.label_)
-
-    def key(self, kind: str, light: Light, variant: str = "") -> Key:
-        """A resource of this technique instance alone."""
-        return Key(kind, self.label(light), technique=self.label_, variant=variant)
-
-    def shared_key(self, kind: str, light: Light, size: int, *params: str) -> Key:
-        """A resource any instance of this technique may share: it depends on the light, the map
-        ``size`` and the named parameters only (non-default values appear in the variant), and on the
-        light view (``view``, :class:`~wsoft.params.LightViewParams`) of a technique that has one."""
-        p = self.tech.params
-        d = self.tech.defaults()
-        if "view" in d and "view" not in params:
-            params = params + ("view",)
-        extra = ",".join(f"{n}={getattr(p, n)}" for n in params if getattr(p, n) != d[n])
-        return Key(kind, self.label(light), variant=f"@{size}" + (f"{{{extra}}}" if extra else ""))
-
-    def pass_name(self, base: str, light: Light, suffix: str = "") -> str:
-        """``base[light]suffix``, or ``base[label:light]suffix`` for a labelled instance."""
-        inner = self.label(light) if self.label_ == self.tech.name else f"{self.label_}:{self.label(light)}"
-        return f"{base}[{inner}]{suffix}"
-
-    def frame_seed(self, seed: int) -> int:
-        """The seed of this frame's random samples: ``seed`` in a single frame; in a sequence that
-        reseeds (:class:`~wsoft.pipeline.history.History`), ``seed`` plus the frame's index, so the
-        noise of a stochastic estimate changes from frame to frame as it does on screen."""
-        return self.ctx.history.seed(seed) if self.ctx.history is not None else int(seed)
-
-    def previous(self, light: Light) -> dict | None:
-        """What this technique kept for ``light`` in the previous frame of its sequence (:meth:`keep`),
-        or None: a single frame, or the first frame of a sequence."""
-        h = self.ctx.history
-        return h.previous(self.label_, self.label(light)) if h is not None else None
-
-    def keep(self, light: Light, state: dict) -> None:
-        """Keep ``state`` for ``light`` for the next frame of the sequence (nothing in a single frame)."""
-        if self.ctx.history is not None:
-            self.ctx.history.keep(self.label_, self.label(light), state)
-
-    @property
-    def origin(self):
-        """The render's local origin in world space (None: world space; :func:`~wsoft.pipeline.framing.local_origin`)."""
-        return self.ctx.origin
-
-    @property
-    def in_sequence(self) -> bool:
-        """Is this frame part of a sequence (a history is kept)?"""
-        return self.ctx.history is not None
-
-    def visibility(self, vis: wp.array, stderr: wp.array | None = None) -> Visibility:
-        return Visibility(vis, stderr)
-
-    def counters(self, light: Light) -> dict:
-        """This technique's counters for ``light`` (``stats["counters"]["techniques"][label][light]``)."""
-        t = self.ctx.counters["techniques"].setdefault(self.label_, {})
-        return t.setdefault(self.label(light), {})
-
-    def add_pass(self, name: str, inputs, outputs, run, *, stage: str, kind: str | None = None, light: Light | None = None) -> Key:
-        """Register a pass of this technique, of its declared ``stage`` (:class:`~wsoft.techniques.PassSpec`:
-        the kinds of ``inputs`` and ``outputs`` must be the declared ones, else a
-        :class:`~wsoft.errors.DeclarationError`); ``name`` from :meth:`pass_name`, ``kind`` defaults
-        to ``reference`` for the reference and ``technique`` otherwise."""
-        check_declared(self.tech, name, stage, inputs, outputs)
-        if kind is None:
-            kind = "reference" if self.tech.name == "reference" else "technique"
-        shared = all(not k.technique for k in outputs)
-        return self.ctx.add(Pass(name, tuple(inputs), tuple(outputs), run, kind=kind, stage=stage,
-                                 technique="" if shared else self.label_, light=self.label(light) if light is not None else ""))
-
-
-def check_declared(tech, name: str, stage: str, inputs, outputs) -> None:
-    """Raise a :class:`~wsoft.errors.DeclarationError` unless the pass ``name`` of ``tech`` reads and
-    writes the kinds of resource its :class:`~wsoft.techniques.PassSpec` of ``stage`` declares
-    (every declared read, optional ones or not, nothing else; exactly the declared writes)."""
-    spec = tech.pass_spec(stage)
-    got_in, got_out = {k.kind for k in inputs}, {k.kind for k in outputs}
-    need, may = set(spec.reads), set(spec.reads) | set(spec.optional)
-    if not need <= got_in <= may or got_out != set(spec.writes):
-        raise DeclarationError(f"technique {tech.name!r}: pass {name!r} reads {', '.join(sorted(got_in)) or 'nothing'} and writes "
-                               f"{', '.join(sorted(got_out))}; its stage {stage!r} declares {spec.text()}")

@@ -137,6 +137,7 @@ def frames_of(built: Built, res: Resources, records: list[dict], total_ms: float
         "device": ctx.device,
         "threads": cpu_threads() if ctx.device == "cpu" else None,
         "scene": {"path": scene.path, "triangles": scene.total_triangles, "time": scene.time, "up_axis": scene.up_axis,
+                  "skinned_meshes": scene.skinned,
                   "meters_per_unit": scene.meters_per_unit, "instancing": built.instancing},
         "width": ctx.framing.out_size[0] if ctx.framing is not None else ctx.width,  # the written image (the data window)
         "height": ctx.framing.out_size[1] if ctx.framing is not None else ctx.height,
@@ -158,6 +159,8 @@ def frames_of(built: Built, res: Resources, records: list[dict], total_ms: float
             continue
         mine = [r for r in records if r["name"] in closures[label]]
         timings = {r["name"]: round(r["ms"], 3) for r in mine}
+        if scene.skinned:  # UsdSkel's posing ran at load, before the graph: reported apart from the passes' total
+            timings["skin"] = scene.skin_ms
         kinds: dict[str, float] = {}
         for r in mine:
             kinds[r["kind"]] = round(kinds.get(r["kind"], 0.0) + r["ms"], 3)

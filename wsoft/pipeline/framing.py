@@ -5,7 +5,7 @@ defaults (:func:`frame_setup`)."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 

@@ -1,9 +1,9 @@
 """What a sequence carries from one frame to the next (:class:`History`), handed to each frame's
 render (``wsoft.render(..., history=h)``): the frame's index, with which techniques that draw new
-noise every frame seed their samples (:meth:`~wsoft.pipeline.context.TechniqueContext.frame_seed`),
+noise every frame seed their samples (:meth:`~wsoft.pipeline.technique_context.TechniqueContext.frame_seed`),
 and per technique label and light label the state a time-aware technique kept for the next frame
-(:meth:`~wsoft.pipeline.context.TechniqueContext.keep`, read back with
-:meth:`~wsoft.pipeline.context.TechniqueContext.previous`): its accumulated signal, its G-buffer's
+(:meth:`~wsoft.pipeline.technique_context.TechniqueContext.keep`, read back with
+:meth:`~wsoft.pipeline.technique_context.TechniqueContext.previous`): its accumulated signal, its G-buffer's
 points and normals, the camera, so that it can reproject them."""
 
 from __future__ import annotations

@@ -16,19 +16,22 @@ AUTO_KEEP_TRIANGLES = 4_000_000  # instancing=auto keeps instances when they pla
 
 
 def load_stage(path, *, time: float | None = None, render_settings: str | None = None, instancing: str = "auto",
-               subdiv_level: int = 0) -> Scene:
+               subdiv_level: int = 0, material_purpose: str = "full") -> Scene:
     """Load a stage for rendering. ``instancing``: ``keep`` — PointInstancers and instanceable prims
     stay instances (prototypes once; techniques that read the triangle soup get it flattened by
     the frame graph, :func:`instancing_plan`); ``flatten`` — one triangle soup (every instance's
     copy); ``auto`` (default) — keep them when they place more than :data:`AUTO_KEEP_TRIANGLES`
     triangles (a stage that would not fit flattened), else flatten (the soup lets the reference
     trace in packets, faster on CPU than rays through the top level). ``subdiv_level``: how many
-    times subdivision surfaces are refined (0: their control cages; see :func:`load_scene`)."""
+    times subdivision surfaces are refined (0: their control cages; see :func:`load_scene`);
+    ``material_purpose``: ``full`` or ``preview``, the purpose material bindings resolve for (see
+    :func:`load_scene`)."""
     if instancing not in INSTANCING_MODES:
         raise ParameterError(f"instancing {instancing!r} is not one of {', '.join(INSTANCING_MODES)}")
     if instancing == "flatten":
-        return load_scene(path, time=time, render_settings=render_settings, subdiv_level=subdiv_level)
-    scene = load_scene(path, time=time, render_settings=render_settings, instancing=True, subdiv_level=subdiv_level)
+        return load_scene(path, time=time, render_settings=render_settings, subdiv_level=subdiv_level, material_purpose=material_purpose)
+    scene = load_scene(path, time=time, render_settings=render_settings, instancing=True, subdiv_level=subdiv_level,
+                       material_purpose=material_purpose)
     if instancing == "auto" and scene.instanced and scene.instances.instanced_triangles <= AUTO_KEEP_TRIANGLES:
         return scene.flattened()
     return scene
@@ -38,7 +41,8 @@ def with_render_settings(scene, render_settings: str | None, time_code: float | 
     """``scene`` (a :class:`Scene` or what :func:`load_scene` opens) loaded with the render
     settings ``render_settings`` (None: as it is, or the stage's own). A :class:`Scene` loaded
     with other settings is loaded again from what it was loaded from: the open ``Usd.Stage``
-    itself (its load rules and population mask kept), else its file, at its ``subdiv_level``."""
+    itself (its load rules and population mask kept), else its file, at its ``subdiv_level`` and
+    ``material_purpose``."""
     if not isinstance(scene, Scene):
         return load_stage(scene, time=time_code, render_settings=render_settings)
     if render_settings is None:
@@ -48,9 +52,11 @@ def with_render_settings(scene, render_settings: str | None, time_code: float | 
         return scene
     source, time = scene.__dict__.get("_loaded_from", (None, scene.time))
     if source is not None and (not isinstance(source, str) or os.path.isfile(source)):  # the settings' includedPurposes may change the geometry
-        return load_scene(source, time=time, render_settings=str(render_settings), subdiv_level=scene.subdiv_level)  # an open stage as it is
+        return load_scene(source, time=time, render_settings=str(render_settings), subdiv_level=scene.subdiv_level,
+                          material_purpose=scene.material_purpose)  # an open stage as it is
     if os.path.isfile(scene.path):
-        return load_scene(scene.path, time=scene.time, render_settings=str(render_settings), subdiv_level=scene.subdiv_level)
+        return load_scene(scene.path, time=scene.time, render_settings=str(render_settings), subdiv_level=scene.subdiv_level,
+                          material_purpose=scene.material_purpose)
     raise ParameterError(f"this scene was loaded with render settings {have or '(none)'} and has no file to load again; "
                          f"pass render_settings={str(render_settings)!r} to load_scene", file=scene.path)
 

@@ -4,9 +4,13 @@ it is not applicable to a light)."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from wsoft.lightspace.cube import CUBE_KINDS
+from wsoft.lightspace.cube import CUBE_KINDS, outside_view_remedy
+from wsoft.lightspace.fit import local_axes
+from wsoft.lightspace.view import MAX_HALF_ANGLE, to_frame
 from wsoft.pipeline.build import build_graph
 from wsoft.pipeline.framing import frame_setup
 from wsoft.pipeline.loading import instancing_plan, load_stage, too_big_to_flatten
@@ -45,10 +49,14 @@ def shadow_controls(scene: Scene, light: Light) -> dict:
 def emission(scene: Scene, light: Light) -> dict:
     """Where a light emits, as ``wsoft plan`` lists it: ``side`` (``front``: a rect or disk light,
     from its front only, along ``direction``, its transformed local −Z; ``all around``: a sphere or
-    point light; ``along``: a distant light's ``direction``) and, for a one-sided light, how many of
+    point light; ``along``: a distant light's ``direction``; ``shaped``: a ``UsdLux.ShapingAPI`` cone
+    of ``cone`` degrees off ``direction``, its ``softness``, ``focus`` and ``focus_tint``) and, for a one-sided light, how many of
     the scene's mesh points (:attr:`Scene.caster_points`) lie on or behind its plane, where it gives
     V = 0 (``points_behind`` of ``points``)."""
     d = [float(c) + 0.0 for c in np.round(np.asarray(light.direction, np.float64), 6)]
+    if light.shaping.shaped:  # UsdLux ShapingAPI: emission cut to a cone about -Z and faded off axis
+        return {"side": "shaped", "direction": d, "cone": light.shaping.cone_deg, "softness": light.shaping.softness, "focus": light.shaping.focus,
+                "focus_tint": list(light.shaping.focus_tint), "one_sided": light.one_sided}
     if light.one_sided:
         pts = scene.caster_points
         return {"side": "front", "direction": d, "points_behind": light.points_behind(pts), "points": int(len(pts))}
@@ -57,15 +65,41 @@ def emission(scene: Scene, light: Light) -> dict:
     return {"side": "all around"}
 
 
+def one_frustum_shortfalls(ctx, lights: list[Light]) -> dict[str, str]:
+    """Per rect or disk light (one frustum, never a cube map) whose receivers in front of it lie
+    beyond the widest frustum (:data:`~wsoft.lightspace.view.MAX_HALF_ANGLE`) in the cube-map
+    decision's probe: what the shadow-map techniques leave unshadowed, and what to do (the line the
+    render warns with, :func:`~wsoft.lightspace.cube.outside_view_remedy`)."""
+    from wsoft.techniques import unmapped_techniques
+
+    out = {}
+    rec, probe = ctx.probe_receivers()
+    for l in lights:
+        v = to_frame(rec, np.asarray(l.position, np.float64), local_axes(l))  # its view's frame: z along its emitting -Z
+        v = v[v[:, 2] > 0.0]
+        if not len(v):
+            continue
+        angle = math.degrees(math.atan(float(np.max(np.maximum(np.abs(v[:, 0]), np.abs(v[:, 1])) / v[:, 2]))))
+        if angle > MAX_HALF_ANGLE:
+            out[l.path] = (f"one frustum, its receivers up to {angle:.0f} degrees off its axis ({probe} probe): the shadow-map "
+                           f"techniques leave those beyond {MAX_HALF_ANGLE:g} unshadowed, with a warning; "
+                           + outside_view_remedy(l, None, unmapped_techniques()))
+    return out
+
+
 def plan(scene, techniques: list[str] | None = None, *, width: int | None = None, height: int | None = None, light=None,
          camera=None, auto: dict | None = None) -> dict:
     """What would run on ``scene`` (a :class:`Scene`, or what :func:`wsoft.pipeline.load_stage` loads:
     a USD path or a bundled stage's name): the time code the scene was loaded at (``time``; None: the default time),
-    shadow-casting lights (where each emits, :func:`emission`, with their UsdLux shadow controls,
+    shadow-casting lights (where each emits, :func:`emission`, the RGB radiance it is shaded with,
+    ``radiance``: ``intensity x 2^exposure x color``, colour temperature and ``normalize`` applied,
+    with their UsdLux shadow controls,
     :func:`shadow_controls`), skipped lights, cutout materials, the purposes loaded, the framing
     (``framing``: which render settings prim and camera, where each came from, the resolution,
     conform policy and data window; see :meth:`Framing.describe`), the load's warnings and notes
-    (``notes``: subdivision surfaces read as their cage, or refined; ``subdiv_level``), and per
+    (``notes``: subdivision surfaces read as their cage, or refined; ``subdiv_level``; ``warnings``
+    also holds, as ``TECHNIQUE: line``, what building a technique's passes warns of, such as a
+    DistantLight wider than it models), and per
     technique the passes (with their kinds) or why it is not applicable to a light, and what it
     renders of each cylinder light (``cylinder_lights``: its :attr:`~wsoft.techniques.Technique.cylinder_model`);
     for each sphere, point or cylinder light whether the shadow-map techniques draw it as one frustum or
@@ -85,11 +119,13 @@ def plan(scene, techniques: list[str] | None = None, *, width: int | None = None
         "up_axis": scene.up_axis,
         "meters_per_unit": scene.meters_per_unit,
         "lights": [{"path": l.path, "kind": l.kind_name, "size": l.size_description(), "emits": emission(scene, l),
+                    "radiance": [float(l.intensity * c) for c in l.color],
                     "shadow": shadow_controls(scene, l)} for l in scene.lights],
         "skipped_lights": [{"path": l.path, "kind": l.kind_name, "reason": "shadow:enable = false"} for l in scene.unshadowed_lights]
         + [{"path": s.path, "kind": s.kind, "reason": s.reason} for s in scene.skipped_lights],
         "cutout_materials": [{"path": p, "triangles": n} for p, n in scene.cutout_triangle_counts().items()],
         "dynamic_prims": scene.dynamic_prims(),
+        "skinned": {"meshes": scene.skinned, "skin_ms": scene.skin_ms},
         "baked_light_triangles": 0 if scene.tri_baked is None else int(np.count_nonzero(~np.isnan(scene.tri_baked[:, 0, 0]))),
         "cameras": [c.path for c in scene.cameras],
         "purposes": list(scene.purposes),
@@ -106,8 +142,9 @@ def plan(scene, techniques: list[str] | None = None, *, width: int | None = None
         built = build_graph(scene, (name, auto or {}) if name == "auto" else name, width=width, height=height, camera=camera, light=light,
                             device="cpu", strict=False)
         if "light_views" not in out:  # which lights get a cube map, and why (the same for every technique with cube=auto)
-            out["light_views"] = {l.path: built.ctx.cube_decision(l).why("auto") for l in scene.lights
-                                  if l.kind in CUBE_KINDS and (light is None or getattr(light, "path", light) in (l.path, l.name))}
+            chosen = [l for l in scene.lights if light is None or getattr(light, "path", light) in (l.path, l.name)]
+            out["light_views"] = {l.path: built.ctx.cube_decision(l).why("auto") for l in chosen if l.kind in CUBE_KINDS}
+            out["light_views"].update(one_frustum_shortfalls(built.ctx, [l for l in chosen if l.one_sided]))
         label = built.labels[0]
         if name == "auto":
             out["auto"] = {lb: c["auto"] for lb, c in built.ctx.counters["techniques"].get(label, {}).items() if "auto" in c}
@@ -128,4 +165,6 @@ def plan(scene, techniques: list[str] | None = None, *, width: int | None = None
             if cyl and name in TECHNIQUES and TECHNIQUES[name].cylinder_model:
                 out.setdefault("cylinder_lights", {})[name] = [{"light": c, "model": TECHNIQUES[name].cylinder_model} for c in cyl]
             out.setdefault("pass_kinds", {}).update({p.name: p.kind for p in built.ctx.graph.schedule([built.channels[label]])})
+            for p in built.ctx.graph.schedule([built.channels[label]]):  # what building its passes found (a sun wider than it models)
+                out["warnings"] += [f"{name}: {w}" for w in built.ctx.warnings.get(p.name, []) if f"{name}: {w}" not in out["warnings"]]
     return out

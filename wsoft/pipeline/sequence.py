@@ -1,7 +1,7 @@
 """Sequences: a stage rendered at a run of time codes, one frame each, and what is shared between them.
 
 :func:`render_sequence` renders one or several techniques at every time code of ``frames``
-(``"A:B"``, ``"A:B:STEP"``, ``"A"`` or a list, within the stage's ``startTimeCode``–``endTimeCode``):
+(``"A:B"``, ``"A:B:STEP"``, ``"A"`` or a list, within the stage's time range, :func:`stage_time_codes`):
 each frame is the stage at that time code (animated cameras, lights, transforms, points,
 visibility). The stage is opened once; each frame is read from it at its time code, or, when only
 cameras, lights and render settings are animated (:func:`wsoft.scene.usd.static_geometry`), the
@@ -48,8 +48,12 @@ from wsoft.scene.types import Scene
 
 def stage_time_codes(stage, frames, file: str) -> list[float]:
     """The time codes of ``frames`` (``"a:b"``, ``"a:b:step"``, ``"a"``, a number or a list of
-    numbers) on ``stage``: finite, and within its ``startTimeCode``–``endTimeCode`` when it
-    authors a range; a :class:`ParameterError` naming the file otherwise."""
+    numbers) on ``stage``: finite, and within its time range
+    (:func:`wsoft.scene.usd_time.time_range`: its ``startTimeCode``–``endTimeCode``, else the span
+    of its time samples and spline knots); a :class:`ParameterError` naming the file otherwise, and
+    for a stage with no time range at all (nothing authored over time: every frame the same)."""
+    from wsoft.scene.usd_time import time_range
+
     if isinstance(frames, str):
         try:
             times = parse_frames(frames)
@@ -62,18 +66,24 @@ def stage_time_codes(stage, frames, file: str) -> list[float]:
             raise ParameterError(f"frames {frames!r}: need one or more finite time codes", file=file) from None
         if not times or not all(math.isfinite(t) for t in times):
             raise ParameterError(f"frames {frames!r}: need one or more finite time codes", file=file)
-    if stage.HasAuthoredTimeCodeRange():
-        lo, hi = stage.GetStartTimeCode(), stage.GetEndTimeCode()
-        out = [t for t in times if not lo - 1e-9 <= t <= hi + 1e-9]
-        if out:
-            raise ParameterError(f"frames {min(times):g}..{max(times):g} lie outside the stage's time range "
-                                 f"[{lo:g}, {hi:g}] (startTimeCode, endTimeCode)", file=file)
+    span = f"{min(times):g}..{max(times):g}" if len(times) > 1 else f"{times[0]:g}"
+    rng = time_range(stage)
+    if rng is None:
+        raise ParameterError(f"frames {span}: the stage has no time range (no startTimeCode / endTimeCode, no time sample, "
+                             "spline or value clip): every frame would be the same stage; render it once (--time, or time=), "
+                             "or author startTimeCode and endTimeCode", file=file)
+    out = [t for t in times if not rng.start - 1e-9 <= t <= rng.end + 1e-9]
+    if out:
+        raise ParameterError(f"frames {span} lie outside the stage's time range {rng.describe()}", file=file)
     return times
 
 
 def stage_is_animated(stage) -> bool:
-    """Does any layer the stage uses author a time sample?"""
-    return any(layer.ListAllTimeSamples() for layer in stage.GetUsedLayers())
+    """Does any value on the stage vary over time (:func:`wsoft.scene.usd_time.stage_animation`:
+    time samples, splines, value clips, points moved by velocity)?"""
+    from wsoft.scene.usd_time import stage_animation
+
+    return stage_animation(stage).animated
 
 
 def frame_token(t: float) -> str:
@@ -150,7 +160,8 @@ class _Loader:
     """Reads a stage at time codes: the stage opened once, each frame's scene loaded from it, its
     device copy carried over from the previous frame while the geometry's digest is the same."""
 
-    def __init__(self, scene, render_settings: str | None, instancing: str, subdiv_level: int | None = None):
+    def __init__(self, scene, render_settings: str | None, instancing: str, subdiv_level: int | None = None,
+                 material_purpose: str | None = None):
         from wsoft.scene.usd import diagnostic_lines, open_stage, stage_file
         from wsoft.pipeline.loading import load_stage  # noqa: F401  (imported before frames are timed)
         from pxr import Usd, UsdUtils
@@ -158,6 +169,7 @@ class _Loader:
         self.render_settings = render_settings
         self.instancing = instancing
         self.subdiv_level = subdiv_level if subdiv_level is not None else scene.subdiv_level if isinstance(scene, Scene) else 0
+        self.material_purpose = material_purpose or (scene.material_purpose if isinstance(scene, Scene) else "full")
         self.warnings: list[str] = []
         if isinstance(scene, Scene):
             source = scene.__dict__.get("_loaded_from", (scene.path, None))[0]
@@ -190,7 +202,8 @@ class _Loader:
             self._prev = scene
             return scene, {"time": t, "load_ms": round(1e3 * (t1 - t0), 3), "digest_ms": 0.0, "refit_ms": 0.0, "scene": "reused",
                            "geometry": "static: lights and cameras read again"}
-        scene = load_stage(self.stage, time=t, render_settings=self.render_settings, instancing=self.instancing, subdiv_level=self.subdiv_level)
+        scene = load_stage(self.stage, time=t, render_settings=self.render_settings, instancing=self.instancing, subdiv_level=self.subdiv_level,
+                           material_purpose=self.material_purpose)
         t1 = _time.perf_counter()
         digest, shape = geometry_digest(scene), geometry_digest(scene, points=False)
         t2 = _time.perf_counter()
@@ -218,19 +231,21 @@ def frame_costs(fr) -> dict:
     return {fr.stats["label"]: fr.stats["timings_ms"]["total"]}
 
 
-def _frames_and_loader(scene, frames, render_settings, instancing, subdiv_level=None):
-    loader = _Loader(scene, render_settings, instancing, subdiv_level)
+def _frames_and_loader(scene, frames, render_settings, instancing, subdiv_level=None, material_purpose=None):
+    loader = _Loader(scene, render_settings, instancing, subdiv_level, material_purpose)
     times = stage_time_codes(loader.stage, frames, loader.file)
     if len(times) > 1 and not stage_is_animated(loader.stage):
-        loader.warnings.append(f"{loader.file}: the stage authors no time sample: its {len(times)} frames are the same stage")
+        loader.warnings.append(f"{loader.file}: nothing on the stage varies over time (no time sample, spline or value clip): its "
+                               f"{len(times)} frames are the same stage; --time (time=) renders it once")
     return loader, times
 
 
-def start_sequence(scene, frames, render_settings, instancing, techs: list, reseed: bool, subdiv_level: int | None = None, **view):
+def start_sequence(scene, frames, render_settings, instancing, techs: list, reseed: bool, subdiv_level: int | None = None,
+                   material_purpose: str | None = None, **view):
     """A sequence's loader, its empty :class:`Sequence` and its :class:`History` (with the receivers
     of every frame when a technique asks for ``view=sequence``); ``view``: the render's size, camera,
     light, device and pixel samples; ``subdiv_level``: None, a :class:`Scene`'s own (else 0)."""
-    loader, times = _frames_and_loader(scene, frames, render_settings, instancing, subdiv_level)
+    loader, times = _frames_and_loader(scene, frames, render_settings, instancing, subdiv_level, material_purpose)
     seq = Sequence(times=times, frames=[], warnings=list(loader.warnings))
     history = History(reseed)
     if _wants_sequence_views(techs):
@@ -247,7 +262,8 @@ def note_upload(fr, info: dict) -> None:
 
 def render_sequence(scene, technique, *, frames, width: int | None = None, height: int | None = None, camera=None, light=None,
                     device: str | None = None, pixel_samples: int = 1, render_settings: str | None = None, instancing: str = "auto",
-                    reseed: bool = True, progress=None, subdiv_level: int | None = None, **params) -> Sequence:
+                    reseed: bool = True, progress=None, subdiv_level: int | None = None, material_purpose: str | None = None,
+                    **params) -> Sequence:
     """Render ``technique`` (one, or a list as :func:`wsoft.render` takes it) on ``scene`` (a USD
     path or a bundled stage's name, an open ``Usd.Stage`` or a :class:`Scene`, whose source is read again at each time code)
     at every time code of ``frames`` (see :func:`stage_time_codes`); a :class:`Sequence`.
@@ -255,13 +271,13 @@ def render_sequence(scene, technique, *, frames, width: int | None = None, heigh
     ``progress``: called as ``progress(done, total, time_code)`` after each frame. The other
     arguments as :func:`wsoft.render` takes them; ``subdiv_level``: how many times subdivision
     surfaces are refined (:func:`~wsoft.scene.usd.load_scene`; None: a :class:`Scene`'s own, else
-    0). A stage without time samples renders the same stage at every time code and says so in ``warnings``."""
+    0); ``material_purpose``: ``full`` or ``preview`` (None: a :class:`Scene`'s own, else ``full``). A stage with a time range and nothing varying over time renders the same stage at every time code and says so in ``warnings``."""
     from wsoft.pipeline import as_techniques, is_several, render
 
     techs = as_techniques(technique, params)
     several = is_several(technique)
-    loader, seq, history = start_sequence(scene, frames, render_settings, instancing, techs, reseed, subdiv_level, width=width, height=height,
-                                          camera=camera, light=light, device=device, pixel_samples=pixel_samples)
+    loader, seq, history = start_sequence(scene, frames, render_settings, instancing, techs, reseed, subdiv_level, material_purpose,
+                                          width=width, height=height, camera=camera, light=light, device=device, pixel_samples=pixel_samples)
     for i, t in enumerate(seq.times):
         sc, info = loader.load(t)
         if i == 0:

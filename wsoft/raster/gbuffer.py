@@ -66,18 +66,31 @@ def camera_ray(cam: CameraGPU, width: int, height: int, fx: float, fy: float):
 
 
 @wp.func
-def cast_primary(mesh: wp.uint64, cut: Surfaces, has_cutouts: int, inst: InstancesGPU, cam: CameraGPU, width: int, height: int,
-                 fx: float, fy: float):
+def cast_primary_scaled(mesh: wp.uint64, cut: Surfaces, has_cutouts: int, inst: InstancesGPU, cam: CameraGPU, width: int, height: int,
+                        fx: float, fy: float):
     """The camera ray through image point (``fx``, ``fy``) (:func:`camera_ray`) against the scene
     (the soup's ``mesh``, then the instances of ``inst``, :func:`~wsoft.scene.rays.nearest_hit`): (found
-    0/1, world point, viewer-facing normal, triangle (combined index), u, v, camera distance).
-    Alpha-tested through cutouts; back faces of single-sided meshes skipped."""
+    0/1, world point, viewer-facing normal, triangle (combined index), u, v, camera distance, the
+    point's rounding scale). The point is the one the triangle's corners give at the hit's weights
+    (a few ulps of the triangle's coordinates off its plane, however far the camera), the scale
+    what :func:`~wsoft.scene.offsets.ray_offset` takes. Alpha-tested through cutouts; back faces
+    of single-sided meshes skipped."""
     o, d, t0, t1 = camera_ray(cam, width, height, fx, fy)
-    found, travelled, face, bu, bv, n = nearest_hit(mesh, cut, has_cutouts, inst, o + d * t0, d, t1 - t0, t0)
-    p = o + d * travelled
+    found, travelled, face, bu, bv, n, p, scale = nearest_hit(mesh, cut, has_cutouts, inst, o + d * t0, d, t1 - t0, t0)
+    if found == 0:
+        p = o + d * travelled
     if wp.dot(n, d) > 0.0:
         n = -n
-    return found, p, n, face, bu, bv, wp.length(p - o)
+    return found, p, n, face, bu, bv, wp.length(p - o), scale
+
+
+@wp.func
+def cast_primary(mesh: wp.uint64, cut: Surfaces, has_cutouts: int, inst: InstancesGPU, cam: CameraGPU, width: int, height: int,
+                 fx: float, fy: float):
+    """:func:`cast_primary_scaled` without the scale: (found 0/1, world point, viewer-facing normal,
+    triangle (combined index), u, v, camera distance)."""
+    found, p, n, face, bu, bv, dist, scale = cast_primary_scaled(mesh, cut, has_cutouts, inst, cam, width, height, fx, fy)
+    return found, p, n, face, bu, bv, dist
 
 
 @wp.func
@@ -106,6 +119,7 @@ def trace_gbuffer(
     prim: wp.array[wp.int32],
     uv: wp.array[wp.vec2],
     bary: wp.array[wp.vec2],
+    err: wp.array[float],
 ):
     idx = wp.tid() + offset
     npix = width * height
@@ -114,7 +128,8 @@ def trace_gbuffer(
     row = pix // width
     col = pix - row * width
     so = pixel_sample_offset(s, spp)
-    found, p, n, face, bu, bv, d = cast_primary(mesh, cut, has_cutouts, inst, cam, width, height, float(col) + so[0], float(row) + so[1])
+    found, p, n, face, bu, bv, d, scale = cast_primary_scaled(mesh, cut, has_cutouts, inst, cam, width, height, float(col) + so[0],
+                                                              float(row) + so[1])
     if found == 1:
         pos[idx] = p
         nrm[idx] = n
@@ -122,6 +137,7 @@ def trace_gbuffer(
         prim[idx] = face
         uv[idx] = cut.tri_uv[3 * face] * bu + cut.tri_uv[3 * face + 1] * bv + cut.tri_uv[3 * face + 2] * (1.0 - bu - bv)
         bary[idx] = wp.vec2(bu, bv)
+        err[idx] = scale
     else:
         pos[idx] = wp.vec3(0.0)
         nrm[idx] = wp.vec3(0.0)
@@ -129,6 +145,7 @@ def trace_gbuffer(
         prim[idx] = -1
         uv[idx] = wp.vec2(0.0)
         bary[idx] = wp.vec2(0.0)
+        err[idx] = 0.0
 
 
 @wp.struct
@@ -145,6 +162,7 @@ class GBufferGPU:
     prim: wp.array[wp.int32]
     uv: wp.array[wp.vec2]
     bary: wp.array[wp.vec2]
+    err: wp.array[float]
 
 
 @wp.func
@@ -226,7 +244,11 @@ class GBuffer:
 
     ``pos``/``nrm`` vec3 world position and viewer-facing unit normal; ``dist`` float32 camera
     distance; ``prim`` int32 triangle index (-1 = background); ``uv`` vec2 texture coordinates;
-    ``bary`` vec2 weights (u, v) of the triangle's first two corners (the third is 1 - u - v).
+    ``bary`` vec2 weights (u, v) of the triangle's first two corners (the third is 1 - u - v);
+    ``err`` float32 the scale the sample's rounding is a few ulps of (the largest coordinate of its
+    triangle's corners, :func:`~wsoft.scene.offsets.triangle_scale`; a bake's given points: the
+    largest coordinate of them all; None: each point's own), which sets how far its shadow rays
+    start off the surface (:func:`~wsoft.raster.shadow_rays.receiver_begin`).
     ``grid``: True for an image (neighbouring samples are neighbouring pixels), False for a bake
     G-buffer of independent points (:func:`bake_gbuffer`).
     """
@@ -241,6 +263,7 @@ class GBuffer:
     uv: wp.array
     bary: wp.array
     grid: bool = True
+    err: wp.array | None = None
     _bounds: tuple | None = field(default=None, repr=False, compare=False)
 
     @property
@@ -264,12 +287,18 @@ class GBuffer:
         return self._bounds or None
 
     def arrays(self) -> dict[str, wp.array]:
-        return {"pos": self.pos, "nrm": self.nrm, "dist": self.dist, "prim": self.prim, "uv": self.uv, "bary": self.bary}
+        a = {"pos": self.pos, "nrm": self.nrm, "dist": self.dist, "prim": self.prim, "uv": self.uv, "bary": self.bary}
+        if self.err is not None:
+            a["err"] = self.err
+        return a
 
     def gpu(self) -> GBufferGPU:
         g = GBufferGPU()
         g.width, g.height, g.spp, g.grid = self.width, self.height, self.spp, int(self.grid)
         g.pos, g.nrm, g.dist, g.prim, g.uv, g.bary = self.pos, self.nrm, self.dist, self.prim, self.uv, self.bary
+        if self.err is None:
+            self.err = wp.zeros(self.count, dtype=float, device=self.pos.device)
+        g.err = self.err
         return g
 
     def host(self, name: str) -> np.ndarray:
@@ -320,12 +349,13 @@ def render_gbuffer(ds: DeviceScene, cam: CameraGPU, width: int, height: int, spp
         prim=wp.empty(n, dtype=wp.int32, device=dev),
         uv=wp.empty(n, dtype=wp.vec2, device=dev),
         bary=wp.empty(n, dtype=wp.vec2, device=dev),
+        err=wp.empty(n, dtype=float, device=dev),
     )
     launch_chunked(
         trace_gbuffer,
         n,
         inputs=[ds.mesh.id, ds.cutouts, int(alpha_tested and ds.has_cutouts), ds.inst, cam, width, height, spp],
-        outputs=[g.pos, g.nrm, g.dist, g.prim, g.uv, g.bary],
+        outputs=[g.pos, g.nrm, g.dist, g.prim, g.uv, g.bary, g.err],
         device=dev,
     )
     return g
@@ -339,7 +369,8 @@ def bake_gbuffer(pos: np.ndarray, nrm: np.ndarray, prim: np.ndarray, uv: np.ndar
     The N points are packed row by row into a near-square ``W x H`` image of one layer (W = ceil
     sqrt N), the last row padded with background samples (``prim = -1``, visibility 1), so that
     the per-pixel light-sample patterns (``interleave``, ``rotate``) still vary over two axes;
-    ``grid = False``: no sample is another's neighbour. ``dist`` (camera distance) and ``bary``
+    ``grid = False``: no sample is another's neighbour; ``err``: the largest coordinate of the
+    points (no triangle's corners are at hand). ``dist`` (camera distance) and ``bary``
     are 0: a bake has no camera, and no technique that bakes reads them."""
     n = int(len(pos))
     w = max(1, int(np.ceil(np.sqrt(max(n, 1)))))
@@ -361,4 +392,5 @@ def bake_gbuffer(pos: np.ndarray, nrm: np.ndarray, prim: np.ndarray, uv: np.ndar
         uv=wp.array(padded(np.zeros((n, 2), np.float32) if uv is None else np.asarray(uv, np.float32), 2, 0.0), dtype=wp.vec2, device=device),
         bary=wp.zeros(total, dtype=wp.vec2, device=device),
         grid=False,
+        err=wp.full(total, float(np.abs(np.asarray(pos, np.float32)).max(initial=0.0)), dtype=float, device=device),
     )

@@ -8,7 +8,9 @@ point on or behind its plane gets none of it (V = 0). The reference applies both
 sample (:func:`~wsoft.lightspace.light.lit_along`); a technique's visibility is capped by the light's
 *front fraction* computed here once per light (:func:`front_fraction`), ``V = min(V, front)``
 (:func:`clip_to_front`; a technique that answers for the light's centre alone, ``hard``, is
-zeroed where the centre is behind the plane), so a thin sheet lit from behind (a leaf, a wall, a ground seen from
+zeroed where the centre is behind the plane; the techniques that integrate or filter over the light
+clip it to the plane themselves, :mod:`wsoft.lightspace.halfspace`, and give no more than the
+front fraction), so a thin sheet lit from behind (a leaf, a wall, a ground seen from
 below) is dark for every technique, not lit through its own sheet, and so is everything behind a
 light that faces away.
 

@@ -13,6 +13,7 @@ from wsoft.lightspace.paraboloid import ParaboloidGPU, ParaboloidMap, Paraboloid
 from wsoft.lightspace.view import DEPTH_CLEAR
 from wsoft.parallel import launch_chunked
 from wsoft.scene.device import DeviceScene
+from wsoft.scene.offsets import step_past
 from wsoft.scene.surfaces import Surfaces, surface_present
 
 
@@ -54,8 +55,7 @@ def trace_paraboloid_texels(
         if casts and (alpha == 0 or surface_present(cut, q.face, q.u, q.v, 1.0 - q.u - q.v)):
             out = travelled + q.t
             break
-        step = q.t + 1.0e-5 * (cut.step + q.t)
-        start = start + d * step
+        start, step = step_past(mesh, q.face, q.u, q.v, start, d)
         travelled += step
     depth[i] = out
 

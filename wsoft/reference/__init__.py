@@ -12,13 +12,16 @@ their silhouette rectangle seen from the point (a line light on its segment,
 sample counts only where its ray leaves the receiver's visible side and the light emits back along
 it (a rect or disk light from its front only: :func:`~wsoft.lightspace.light.lit_along`). Rays are
 any-hit against the scene's BVH and alpha-tested through cutout triangles. Randomness is seeded by
-the pattern's seed and the sample index.
+the pattern's seed, the receiver and the sample index (counter-based draws,
+:func:`~wsoft.lightspace.samples.counter_draw`).
 
 Two traversals give the same answer bit for bit (``tests/test_packets.py``; three kinds of
 exception found, all at float precision on a shared edge or a cutout's hole, where the packet
 agrees with the brute force and Warp's per-ray walk does not, :mod:`wsoft.reference.packets`):
 ``packet`` (the default on CPU) traces a receiver's samples in packets of 32 rays through the BVH together
-(:mod:`wsoft.reference.packets`: all start at the receiver and fan out over the light), ``ray``
+(:mod:`wsoft.reference.packets`: all start at the receiver and fan out over the light; where
+Warp's BVH layout is not the one it reads, :func:`~wsoft.reference.layout.bvh_layout_error`,
+``ray`` instead, with one warning), ``ray``
 traces each with Warp's ``mesh_query_ray_anyhit`` (the default on CUDA, where a thread holding
 32 rays would spill its registers, and below 8 samples, where a packet's set-up costs more than
 it saves).
@@ -40,6 +43,7 @@ from wsoft.raster.gbuffer import GBufferGPU, gb_covered
 from wsoft.raster.shadow_rays import receiver_begin, shadow_ray_length
 from wsoft.lightspace.bitmask import popcount
 from wsoft.errors import ParameterError
+from wsoft.reference.layout import PACKETS_MODULE, bvh_layout_error
 from wsoft.reference.packets import PACKET, PackedBVH, packed_bvh, packet_f, trace_receiver_packet
 from wsoft.scene.device import DeviceScene, shadow_surfaces
 from wsoft.scene.rays import Occluders, occluders, unoccluded
@@ -62,7 +66,6 @@ def trace_visibility(
     light: LightGPU,
     ls: LightSamples,
     gb: GBufferGPU,
-    eps: float,
     dmax: float,
     # outputs
     vis: wp.array[float],
@@ -75,7 +78,7 @@ def trace_visibility(
         return
     p = gb.pos[i]
     n = gb.nrm[i]
-    off, o, state, base, rot = receiver_begin(gb, ls, eps, i)
+    off, o, state, base, rot = receiver_begin(gb, ls, i)
     visible = int(0)
     samples = ls.count
     for s in range(samples):
@@ -115,7 +118,7 @@ def packet_rays(light: LightGPU, ls: LightSamples, state: wp.uint32, base: int, 
     return dx, dy, dz, tm, mask, state
 
 
-@wp.kernel
+@wp.kernel(module=PACKETS_MODULE)
 def trace_visibility_packets(
     offset: int,
     mesh: wp.uint64,
@@ -125,7 +128,6 @@ def trace_visibility_packets(
     light: LightGPU,
     ls: LightSamples,
     gb: GBufferGPU,
-    eps: float,
     dmax: float,
     # outputs
     vis: wp.array[float],
@@ -144,7 +146,7 @@ def trace_visibility_packets(
         return
     p = gb.pos[i]
     n = gb.nrm[i]
-    off, o, state, base, rot = receiver_begin(gb, ls, eps, i)
+    off, o, state, base, rot = receiver_begin(gb, ls, i)
     visible = int(0)
     samples = ls.count
     first = int(0)
@@ -181,11 +183,11 @@ def reference_pattern(samples: int, seed: int, jitter: bool) -> SamplePattern:
     return SamplePattern("stratified" if jitter else "regular", samples, seed=seed, per_pixel=True)
 
 
-def trace_reference(ds: DeviceScene, light: LightGPU, gb, pattern: SamplePattern, disk: bool, eps: float, traversal: str = "auto",
+def trace_reference(ds: DeviceScene, light: LightGPU, gb, pattern: SamplePattern, disk: bool, traversal: str = "auto",
                     counters: dict | None = None, excluded: tuple[int, ...] = (), max_distance: float = -1.0) -> tuple[wp.array, wp.array]:
     """Visibility and its standard error per G-buffer sample (flat float32 arrays), with the
-    light samples of ``pattern`` (mapped onto a disk when ``disk``); ``eps``: the rays' offset
-    (:func:`~wsoft.raster.shadow_rays.ray_epsilon`); ``traversal``: ``packet``, ``ray`` or ``auto``
+    light samples of ``pattern`` (mapped onto a disk when ``disk``), each from a few ulps off its surface
+    (:func:`~wsoft.raster.shadow_rays.receiver_begin`); ``traversal``: ``packet``, ``ray`` or ``auto``
     (:func:`resolve_traversal`).
     ``excluded``: prims (indices into the scene's prims) that cast no shadow of this light (its
     ``collection:shadowLink``): rays continue past them (:func:`~wsoft.scene.device.shadow_surfaces`).
@@ -204,6 +206,8 @@ def trace_reference(ds: DeviceScene, light: LightGPU, gb, pattern: SamplePattern
             raise ParameterError("traversal=packet does not reach instances (the stage was loaded with instancing): "
                                  "use traversal=ray or auto, or load it flattened")
         mode = "ray"
+    if mode == "packet" and bvh_layout_error(ds.device) is not None:  # warned once per process
+        mode = "ray"
     pb, pstats = packed_bvh(ds) if mode == "packet" else (None, {})
     if mode == "packet" and pb is None:  # a BVH too deep for the packets' stack
         mode = "ray"
@@ -217,7 +221,7 @@ def trace_reference(ds: DeviceScene, light: LightGPU, gb, pattern: SamplePattern
         launch_chunked(
             trace_visibility_packets,
             n,
-            inputs=[ds.mesh.id, pb, cut, has_cutouts, light, pattern.on(ds.device, disk), gb.gpu(), eps, dmax],
+            inputs=[ds.mesh.id, pb, cut, has_cutouts, light, pattern.on(ds.device, disk), gb.gpu(), dmax],
             outputs=[vis, err, given_up],
             device=ds.device,
             min_chunk=256,
@@ -229,7 +233,7 @@ def trace_reference(ds: DeviceScene, light: LightGPU, gb, pattern: SamplePattern
     launch_chunked(
         trace_visibility,
         n,
-        inputs=[occluders(ds, excluded), light, pattern.on(ds.device, disk), gb.gpu(), eps, dmax],
+        inputs=[occluders(ds, excluded), light, pattern.on(ds.device, disk), gb.gpu(), dmax],
         outputs=[vis, err],
         device=ds.device,
         min_chunk=256,
@@ -248,7 +252,6 @@ def generate_shadow_rays(
     ls: LightSamples,
     gb: GBufferGPU,
     pix: wp.array[wp.int32],
-    eps: float,
     # outputs
     origin: wp.array[wp.vec3],
     dir: wp.array[wp.vec3],
@@ -258,7 +261,7 @@ def generate_shadow_rays(
     i = pix[k]
     p = gb.pos[i]
     n = gb.nrm[i]
-    off, o, state, base, rot = receiver_begin(gb, ls, eps, i)
+    off, o, state, base, rot = receiver_begin(gb, ls, i)
     samples = ls.count
     for s in range(samples):
         c, state = sample_coords(ls, state, base, rot, s)
@@ -286,7 +289,7 @@ def trace_shadow_rays(
         hit[r] = 1
 
 
-def shadow_rays(ds: DeviceScene, light: LightGPU, gb, pattern: SamplePattern, disk: bool, eps: float):
+def shadow_rays(ds: DeviceScene, light: LightGPU, gb, pattern: SamplePattern, disk: bool):
     """Origins, unit directions and lengths of the shadow rays of every covered G-buffer sample:
     the same rays the reference traces with ``pattern``, ``pattern.count`` per sample."""
     import numpy as np
@@ -297,12 +300,12 @@ def shadow_rays(ds: DeviceScene, light: LightGPU, gb, pattern: SamplePattern, di
     o = wp.empty(n, dtype=wp.vec3, device=ds.device)
     d = wp.empty(n, dtype=wp.vec3, device=ds.device)
     t = wp.empty(n, dtype=float, device=ds.device)
-    launch_chunked(generate_shadow_rays, len(covered), inputs=[light, pattern.on(ds.device, disk), gb.gpu(), pix, eps],
+    launch_chunked(generate_shadow_rays, len(covered), inputs=[light, pattern.on(ds.device, disk), gb.gpu(), pix],
                    outputs=[o, d, t], device=ds.device, min_chunk=256)
     return o, d, t
 
 
-@wp.kernel
+@wp.kernel(module=PACKETS_MODULE)
 def trace_shadow_ray_packets(
     offset: int,
     mesh: wp.uint64,
@@ -347,6 +350,9 @@ def trace_ray_packets(ds: DeviceScene, origin: wp.array, dir: wp.array, tmax: wp
     (as :func:`shadow_rays` writes them), traced in packets; equal to :func:`trace_rays`."""
     if ds.instances is not None:
         raise ValueError("packets walk the soup's BVH only: an instanced scene's rays go through trace_rays")
+    why = bvh_layout_error(ds.device)
+    if why is not None:
+        raise ValueError(f"packets cannot read this Warp's BVH: {why}")
     pb, pstats = packed_bvh(ds)
     if pb is None:
         raise ValueError(pstats["error"])

@@ -12,18 +12,17 @@ Alpha-tested cutouts decide at the exact hit, as :func:`~wsoft.scene.surfaces.oc
 The BVH is Warp's own (``wp.Mesh``'s, built once per scene): Warp has no kernel-level access to
 its nodes, so a few ``wp.func_native`` one-liners read them (:func:`bvh_root`, :func:`bvh_lower`
 ..., the layout of ``warp/native/bvh.h``: packed node halves, leaves flagged in the lower half,
-primitive ranges in ``primitive_indices``), and the ray-triangle test is Warp's own
+primitive ranges in ``primitive_indices``; :mod:`wsoft.reference.layout` checks once per process
+that the Warp installed still lays its BVH out so, else the reference traces ray by ray), and the
+ray-triangle test is Warp's own
 (:func:`~wsoft.scene.rays.ray_triangle`, the ``intersect_ray_tri_woop`` that
 ``mesh_query_ray_anyhit`` calls), so a packet's answer is the per-ray answer bit for bit: the same
-triangles hit at the same ``t``. Three kinds of exception found (``tests/test_packets.py``), in
-all of which the packet agrees with the brute force over every triangle and the per-ray walk does
-not: a ray through the shared edge of two triangles hit at the same ``t``, whose boxes Warp's
-per-ray walk drops (city, fence_mesh: one ray each); with cutouts, a ray through the shared edge
-of two triangles of one alpha-tested card, a hole in the first it meets and present in the second
-less than 1e-5 further, which the per-ray walk skips when it steps past the hole (hl2_like, Sky
-light, 64 samples at 640 x 480: one ray in each of 5 pixels); and a ray past a hole that meets the
-next cutout on the edge of its hole, where the per-ray walk's query from just past the first hole
-lands on the present side (greece: one ray).
+triangles hit at the same ``t``. One kind of exception found (``tests/test_packets.py``), in
+which the packet agrees with the brute force over every triangle and the per-ray walk does not:
+a ray through the shared edge of two triangles hit at the same ``t``, whose boxes Warp's per-ray
+walk drops (city, fence_mesh: one ray each). Past a cutout's hole the per-ray walk goes on from a
+few ulps beyond the hole's plane (:func:`~wsoft.scene.offsets.step_past`), so it meets what the
+packet meets behind it.
 
 Warp's per-ray any-hit gives up (reports *unblocked*) when its traversal stack of 32 pending
 nodes is full. :func:`pack_bvh` walks the whole tree once with the packets' own stack of

@@ -104,6 +104,25 @@ def weld_points(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return p[first], inverse.reshape(-1).astype(np.int32)
 
 
+def triangle_parts(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Per triangle of ``triangles`` ([T, 3] indices into ``points``), the connected part of the
+    mesh it belongs to (triangles sharing a corner, corners welded by position,
+    :func:`weld_points`): [T] int32 labels from 0."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    triangles = np.asarray(triangles, np.int64).reshape(-1, 3)
+    T = len(triangles)
+    if T == 0:
+        return np.zeros(0, np.int32)
+    _, corner = weld_points(np.asarray(points)[triangles.reshape(-1)])  # a welded index per corner
+    n = T + int(corner.max()) + 1
+    rows = np.repeat(np.arange(T, dtype=np.int64), 3)
+    graph = coo_matrix((np.ones(3 * T, np.int8), (rows, T + corner.astype(np.int64))), shape=(n, n))
+    _, labels = connected_components(graph, directed=False)
+    return np.unique(labels[:T], return_inverse=True)[1].astype(np.int32)
+
+
 def build_adjacency(points: np.ndarray, triangles: np.ndarray, tris: np.ndarray | None = None) -> Adjacency:
     """Adjacency of the triangles ``triangles`` ([T, 3] indices into ``points``); ``tris`` names
     them in the caller's numbering (default ``arange(T)``)."""

@@ -135,7 +135,6 @@ def upload_scene(scene: Scene, device: str) -> DeviceScene:
     cut = Surfaces()
     cut.tri_cut = arr(tri_cut.astype(np.int32), wp.int32)
     cut.double_sided = arr(comb["ds"].astype(np.int32), wp.int32)
-    cut.step = float(min(1.0, scene.diagonal))  # a scene smaller than a unit steps past a cutout's hole in its own units
     cull = comb["closed"].astype(np.int32)
     # a cutout lets the inside of a closed surface be seen: no culling for prims that have cutouts
     if np.any(tri_cut >= 0):
@@ -280,7 +279,6 @@ def refit_scene(ds: DeviceScene, scene: Scene) -> DeviceScene:
         raise ValueError("refit_scene needs the same points and triangles")
     ds.points.assign(scene.points.astype(np.float32))
     ds.mesh.refit()
-    ds.cutouts.step = float(min(1.0, scene.diagonal))  # as upload_scene sets it
     lo, hi = scene.bounds
     closed_lo, closed_hi = _closed_bounds(scene, ds.cull_host[: scene.triangle_count])
     return dataclasses.replace(ds, closed_lo=closed_lo, closed_hi=closed_hi, diagonal=scene.diagonal, lo=lo, hi=hi, packed=None,

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
+from wsoft.scene.offsets import coordinate_scale
 from wsoft.scene.surfaces import Surfaces, nearest_blocker_from, nearest_from, occluded_from
 
 
@@ -81,19 +82,23 @@ def nearest_blocker_instances(inst: InstancesGPU, cut: Surfaces, has_cutouts: in
 @wp.func
 def nearest_instance_hit(inst: InstancesGPU, cut: Surfaces, has_cutouts: int, origin: wp.vec3, dir: wp.vec3, max_t: float):
     """The nearest surface an eye ray meets among the instances within ``max_t``: (found 0/1, t,
-    combined triangle, u, v, unit world normal of the triangle's front side). As the flat eye ray
-    does: alpha-tested through cutouts, back faces of single-sided meshes skipped. The front side
-    and the normal need no care for mirroring: the ray's side of a prototype triangle is the same
-    in both frames (dot(M d, M^-T n) = dot(d, n)), as is the flattened loader's, which flips a
-    mirrored mesh's winding."""
+    combined triangle, u, v, unit world normal of the triangle's front side, the world hit point
+    from the triangle's corners, its rounding scale in the world: the larger of the point's
+    largest coordinate and the triangle's :func:`~wsoft.scene.offsets.triangle_scale` carried by
+    the instance's scale along the ray). As the flat eye ray does: alpha-tested through cutouts,
+    back faces of single-sided meshes skipped. The front side and the normal need no care for
+    mirroring: the ray's side of a prototype triangle is the same in both frames (dot(M d, M^-T n)
+    = dot(d, n)), as is the flattened loader's, which flips a mirrored mesh's winding."""
     best = max_t
     found = int(0)
     face = int(-1)
     bu = float(0.0)
     bv = float(0.0)
     n = wp.vec3(0.0)
+    pw = wp.vec3(0.0)
+    scale = float(0.0)
     if inst.count == 0:
-        return found, best, face, bu, bv, n
+        return found, best, face, bu, bv, n, pw, scale
     q = wp.bvh_query_ray(inst.tlas, origin, dir)
     i = int(0)
     while wp.bvh_query_next(q, i, best):
@@ -101,7 +106,8 @@ def nearest_instance_hit(inst: InstancesGPU, cut: Surfaces, has_cutouts: int, or
         p = inst.proto[i]
         mesh = inst.proto_mesh[p]
         tri0 = inst.proto_tri0[p]
-        f, t, tri, u, v, nrm = nearest_from(mesh, tri0, cut, has_cutouts, wp.transform_point(m, origin), wp.transform_vector(m, dir), best, 0.0)
+        d = wp.transform_vector(m, dir)
+        f, t, tri, u, v, nrm, po, so = nearest_from(mesh, tri0, cut, has_cutouts, wp.transform_point(m, origin), d, best, 0.0)
         if f == 1:
             best = t
             found = 1
@@ -110,7 +116,9 @@ def nearest_instance_hit(inst: InstancesGPU, cut: Surfaces, has_cutouts: int, or
             bv = v
             # a normal goes to world by the inverse transpose: (to_object)^T
             n = wp.normalize(wp.transform_vector(wp.transpose(m), nrm))
-    return found, best, face, bu, bv, n
+            pw = wp.transform_point(wp.inverse(m), po)
+            scale = wp.max(coordinate_scale(pw), so / wp.max(wp.length(d), 1.0e-30))  # |d| = 1 / the instance's scale along the ray
+    return found, best, face, bu, bv, n, pw, scale
 
 
 @dataclass

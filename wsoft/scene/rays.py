@@ -78,21 +78,24 @@ def nearest_hit(mesh: wp.uint64, cut: Surfaces, has_cutouts: int, inst: Instance
     in the soup's ``mesh`` and then among the instances of ``inst`` (within the soup's hit):
     back faces of single-sided meshes skipped, alpha-tested through cutouts. Returns (found 0/1,
     ``travelled`` plus the distance to the hit, triangle (combined index), u, v, the triangle's
-    geometric normal in the world)."""
-    found, dist, face, bu, bv, n = nearest_from(mesh, 0, cut, has_cutouts, start, dir, reach, travelled)
+    unit geometric normal in the world, the hit point in the world from the triangle's corners, and
+    the scale its rounding is a few ulps of: what :func:`~wsoft.scene.offsets.ray_offset` takes)."""
+    found, dist, face, bu, bv, n, p, scale = nearest_from(mesh, 0, cut, has_cutouts, start, dir, reach, travelled)
     if inst.count > 0:
         within = reach
         if found == 1:
             within = dist - travelled
-        ifound, it, iface, iu, iv, inrm = nearest_instance_hit(inst, cut, has_cutouts, start, dir, within)
+        ifound, it, iface, iu, iv, inrm, ip, iscale = nearest_instance_hit(inst, cut, has_cutouts, start, dir, within)
         if ifound == 1:
             found = 1
             face = iface
             bu = iu
             bv = iv
             n = inrm
+            p = ip
+            scale = iscale
             dist = travelled + it
-    return found, dist, face, bu, bv, n
+    return found, dist, face, bu, bv, n, p, scale
 
 
 @wp.func_native(

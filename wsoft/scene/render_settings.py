@@ -185,6 +185,10 @@ def read_render_settings(reader, requested: str | None = None) -> tuple[RenderSe
     unknown = [t for t in purposes if t not in KNOWN_PURPOSES]
     if unknown:
         reader.warn(prim, f"includedPurposes: unknown purpose(s) {', '.join(unknown)} (known: {', '.join(KNOWN_PURPOSES)})")
+    if len(unknown) == len(purposes):
+        raise reader.err(prim, f"includedPurposes = [{', '.join(purposes)}] includes no purpose wsoft knows, so these render settings "
+                               f"leave nothing to draw (no mesh, no light); include some of {', '.join(KNOWN_PURPOSES)} "
+                               "(unauthored: default, render)")
     return RenderSettings(path=str(prim.GetPath()), source=source, included_purposes=purposes, products=tuple(products),
                           product=output.path if output else None, **values), source
 
@@ -266,6 +270,6 @@ def _read_product(reader, prim) -> RenderProduct:
         source = UsdRender.Var(v).GetSourceNameAttr().Get(reader.timecode)
         if var_name is None and (v.GetName() == VISIBILITY or str(source or "") == VISIBILITY):
             var_name, var_path = v.GetName(), str(v.GetPath())
-    if var_name is not None and (var_name in _CHANNELS or var_name.startswith(("V.", "V_stderr."))):
+    if var_name is not None and (var_name in _CHANNELS or var_name.startswith(("V.", "V_stderr.", "reach."))):
         raise reader.err(reader.stage.GetPrimAtPath(var_path), f"RenderVar name {var_name!r} is already one of the frame's channels; rename the var")
     return RenderProduct(path=str(prim.GetPath()), product_name=str(name or ""), visibility_var=var_name, visibility_var_path=var_path)

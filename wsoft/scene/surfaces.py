@@ -5,13 +5,17 @@
 with the cutouts' alpha textures. Kernels call :func:`surface_present` to alpha-test a point on a
 triangle; scenes without cutouts pass ``has_cutouts = 0`` and never sample. :func:`occluded_from`
 (any-hit), :func:`nearest_blocker_from` (a shadow ray's nearest blocker) and :func:`nearest_from`
-(the eye ray's nearest surface) walk one ``wp.Mesh`` through the cutouts' holes;
-:mod:`wsoft.scene.rays` composes them over the soup and the instances.
+(the eye ray's nearest surface) walk one ``wp.Mesh`` through the cutouts' holes (and, for the eye
+ray, past culled back faces), each step to a few ulps past the surface's plane
+(:func:`~wsoft.scene.offsets.step_past`); :mod:`wsoft.scene.rays` composes them over the soup and
+the instances.
 """
 
 from __future__ import annotations
 
 import warp as wp
+
+from wsoft.scene.offsets import mesh_hit, step_past
 
 
 @wp.struct
@@ -35,7 +39,6 @@ class Surfaces:
     tex_wrap_t: wp.array[wp.int32]
     tex_border: wp.array[wp.float32]  # [X] the value outside the image under the black wrap (the texture's bias)
     tex_data: wp.array[wp.float32]  # all textures, rows bottom-up: each UsdUVTexture's output, scale and bias applied
-    step: float  # a step past a surface an alpha test lets through is 1e-5 of this plus the distance (min(1, the scene's diagonal))
 
 
 @wp.func
@@ -120,8 +123,7 @@ def occluded_from(mesh: wp.uint64, tri0: int, cut: Surfaces, has_cutouts: int, o
             elif surface_present(cut, tri0 + q.face, q.u, q.v, 1.0 - q.u - q.v):  # warp: p = p0*u + p1*v + p2*(1-u-v)
                 blocked = True
             else:
-                step = q.t + 1.0e-5 * (cut.step + q.t)
-                o = o + dir * step
+                o, step = step_past(mesh, q.face, q.u, q.v, o, dir)
                 remaining = remaining - step
     if remaining > 0.0 and not blocked:
         return True
@@ -153,8 +155,7 @@ def nearest_blocker_from(mesh: wp.uint64, tri0: int, cut: Surfaces, has_cutouts:
             elif surface_present(cut, tri0 + q.face, q.u, q.v, 1.0 - q.u - q.v):
                 hit = travelled + q.t
             else:
-                step = q.t + 1.0e-5 * (cut.step + q.t)
-                o = o + dir * step
+                o, step = step_past(mesh, q.face, q.u, q.v, o, dir)
                 travelled += step
                 remaining = remaining - step
     if remaining > 0.0 and hit < 0.0:
@@ -163,32 +164,21 @@ def nearest_blocker_from(mesh: wp.uint64, tri0: int, cut: Surfaces, has_cutouts:
 
 
 @wp.func
-def triangle_normal(mesh: wp.uint64, face: int) -> wp.vec3:
-    """The unit geometric normal of triangle ``face`` of ``mesh`` from its corners, the edges scaled
-    to unit size first: Warp's own hit normal squares coordinates and underflows to zero on
-    triangles 1e-12 units across."""
-    m = wp.mesh_get(mesh)
-    a = m.points[m.indices[3 * face + 0]]
-    e1 = m.points[m.indices[3 * face + 1]] - a
-    e2 = m.points[m.indices[3 * face + 2]] - a
-    big = wp.max(wp.max(wp.max(wp.abs(e1[0]), wp.abs(e1[1])), wp.max(wp.abs(e1[2]), wp.abs(e2[0]))), wp.max(wp.abs(e2[1]), wp.abs(e2[2])))
-    if big <= 0.0:
-        return wp.vec3(0.0)
-    return wp.normalize(wp.cross(e1 / big, e2 / big))
-
-
-@wp.func
 def nearest_from(mesh: wp.uint64, tri0: int, cut: Surfaces, has_cutouts: int, start: wp.vec3, dir: wp.vec3, remaining: float,
                  travelled: float):
     """The nearest surface an eye ray meets in ``mesh`` (face ``f`` is the triangle ``tri0 + f`` of
     ``cut``) along start + s*dir, s in (0, remaining): back faces of single-sided meshes skipped,
-    alpha-tested through cutouts (up to 64 surfaces stepped past). Returns (found 0/1, ``travelled``
-    plus the distance to the hit, triangle, u, v, the triangle's geometric normal in the mesh's frame)."""
+    alpha-tested through cutouts (up to 64 surfaces stepped past, each to the far side of its plane,
+    :func:`~wsoft.scene.offsets.step_past`). Returns (found 0/1, ``travelled`` plus the distance to
+    the hit, triangle, u, v, the triangle's unit geometric normal, the hit point from the triangle's
+    corners and the triangle's :func:`~wsoft.scene.offsets.triangle_scale`, all in the mesh's frame)."""
     found = int(0)
     face = int(-1)
     bu = float(0.0)
     bv = float(0.0)
     n = wp.vec3(0.0)
+    p = wp.vec3(0.0)
+    scale = float(0.0)
     o = start
     for _k in range(64):
         if found == 0 and remaining > 0.0:
@@ -205,16 +195,13 @@ def nearest_from(mesh: wp.uint64, tri0: int, cut: Surfaces, has_cutouts: int, st
                     face = tri
                     bu = q.u
                     bv = q.v
-                    n = q.normal
-                    if wp.length_sq(n) == 0.0:
-                        n = triangle_normal(mesh, q.face)
+                    p, scale, n = mesh_hit(mesh, q.face, q.u, q.v)
                     travelled += q.t
                 else:
-                    step = q.t + 1.0e-5 * (cut.step + q.t)
-                    o = o + dir * step
+                    o, step = step_past(mesh, q.face, q.u, q.v, o, dir)
                     travelled += step
                     remaining -= step
-    return found, travelled, face, bu, bv, n
+    return found, travelled, face, bu, bv, n, p, scale
 
 
 @wp.func

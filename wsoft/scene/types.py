@@ -13,6 +13,7 @@ from functools import cached_property
 import numpy as np
 
 from wsoft.scene.render_settings import RenderSettings
+from wsoft.scene.shaping import Shaping
 
 # light kinds (the integers are what kernels see)
 LIGHT_RECT = 0
@@ -129,6 +130,7 @@ class Light:
     aspect: tuple[float, float, float] = (1.0, 1.0, 1.0)
     """A disk's (X, Y) or sphere's (X, Y, Z) semi-axes along the frame's axes as fractions of
     ``radius``: (1, 1, 1) for a round light, else one of them 1 (``radius`` is the largest)."""
+    shaping: Shaping = field(default_factory=Shaping)  # UsdLux.ShapingAPI: cone, softness, focus, focus tint about −Z
 
     @property
     def distance_limited(self) -> bool:
@@ -372,6 +374,9 @@ class Scene:
     instances: Instances | None = None  # instanced geometry kept instanced (None: everything is in the soup)
     notes: list[str] = field(default_factory=list)  # what the load did that is worth knowing but is no problem (subdivision surfaces read as their cage)
     subdiv_level: int = 0  # how many times subdivision surfaces were refined (0: their control cages; wsoft.scene.subdiv)
+    material_purpose: str = "full"  # the UsdShade purpose material bindings were resolved for (full or preview; else all-purpose)
+    skinned: int = 0  # meshes a UsdSkel skeleton posed at the load's time code (wsoft.scene.usd_skel)
+    skin_ms: float = 0.0  # the load's time posing them (blend shapes, skinning transforms, the skinning kernels)
 
     @property
     def triangle_count(self) -> int:

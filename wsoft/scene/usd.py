@@ -21,16 +21,19 @@ from wsoft.scene.shapes import not_drawn, shape_type
 from wsoft.scene.soup import Soup
 from wsoft.scene.subdiv import check_level
 from wsoft.scene.types import Scene, SkippedLight
-from wsoft.scene.usd_context import StageContext, pxr
+from wsoft.scene.usd_context import MATERIAL_PURPOSES, StageContext, pxr
 from wsoft.scene.usd_instancing import InstanceBuilder, InstanceReader, light_linking_instances
-from wsoft.scene.usd_lights import HANDLED_LIGHTS, UNHANDLED_REASONS, read_camera, read_light, read_shadow_controls
+from wsoft.scene.usd_lights import (
+    EMITS_NOTHING, HANDLED_LIGHTS, UNHANDLED_REASONS, emission_refusal, read_camera, read_light, read_shadow_controls,
+)
 from wsoft.scene.usd_mesh import MeshReader
+from wsoft.scene.usd_time import static_geometry
 
 __all__ = ["diagnostic_lines", "load_scene", "open_stage", "stage_file", "static_geometry", "with_views_at"]
 
 
 def load_scene(path_or_stage, time: float | None = None, render_settings: str | None = None, instancing: bool = False,
-               subdiv_level: int = 0) -> Scene:
+               subdiv_level: int = 0, material_purpose: str = "full") -> Scene:
     """Load a USD stage (a file path, a bundled stage's name such as ``"multi_light"``, or an open
     ``Usd.Stage``) at ``time``. A name without a folder that is not an existing file is the bundled
     stage of that name (:func:`wsoft.usd_scenes.resolve`; an unknown one is an error suggesting the
@@ -82,6 +85,12 @@ def load_scene(path_or_stage, time: float | None = None, render_settings: str | 
     1 to 4 refines them that many times (:mod:`wsoft.scene.subdiv`: creases, corners,
     ``interpolateBoundary`` and holes honoured), each level with 4x the faces, and a note says how
     many faces that made. ``Scene.subdiv_level`` keeps it for loads of the same stage again.
+
+    ``material_purpose``: ``full`` (the default: a renderer's final frames) resolves each prim's
+    material binding for the ``full`` purpose, ``preview`` for the ``preview`` purpose; a prim with
+    no binding of that purpose takes its all-purpose binding (``material:binding``), as
+    ``UsdShade.MaterialBindingAPI.ComputeBoundMaterial`` resolves it. ``Scene.material_purpose``
+    keeps it for loads of the same stage again.
     """
     Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = pxr()
     from pxr import UsdUtils
@@ -92,14 +101,17 @@ def load_scene(path_or_stage, time: float | None = None, render_settings: str | 
         file = stage_file(stage)
         _check_time(time, file)
         subdiv_level = _check_subdiv_level(subdiv_level, file)
+        _check_material_purpose(material_purpose, file)
     else:
         file = usd_scenes.resolve(path_or_stage)
         _check_time(time, file)  # before the stage is opened
         subdiv_level = _check_subdiv_level(subdiv_level, file)
+        _check_material_purpose(material_purpose, file)
         stage = open_stage(file)
-    scene, linked_light = read_stage(stage, file, time, render_settings, instancing=instancing, subdiv_level=subdiv_level)
+    scene, linked_light = read_stage(stage, file, time, render_settings, instancing=instancing, subdiv_level=subdiv_level,
+                                     material_purpose=material_purpose)
     if linked_light is not None:
-        scene, _ = read_stage(stage, file, time, render_settings, subdiv_level=subdiv_level)
+        scene, _ = read_stage(stage, file, time, render_settings, subdiv_level=subdiv_level, material_purpose=material_purpose)
         scene.warnings.append(f"{file}: {linked_light}: collection:shadowLink leaves out casters and the stage has "
                               "instances: loaded flat (instancing off; per-instance shadow linking is not kept instanced)")
     scene.warnings[:0] = diagnostic_lines(delegate.TakeUncoalescedDiagnostics(), file)
@@ -110,7 +122,7 @@ def load_scene(path_or_stage, time: float | None = None, render_settings: str | 
     scene.__dict__["_loaded_from"] = (source, time)
     if instancing:  # how Scene.flattened loads the stage again, flat
         scene.__dict__["_source"] = functools.partial(load_scene, source, time=time, render_settings=render_settings, instancing=False,
-                                                      subdiv_level=subdiv_level)
+                                                      subdiv_level=subdiv_level, material_purpose=material_purpose)
     return scene
 
 
@@ -148,6 +160,11 @@ def _check_subdiv_level(level, file: str) -> int:
         return check_level(level)
     except ValueError as exc:
         raise ParameterError(str(exc), file=file) from None
+
+
+def _check_material_purpose(purpose, file: str):
+    if purpose not in MATERIAL_PURPOSES:
+        raise ParameterError(f"material_purpose {purpose!r} is not one of {', '.join(MATERIAL_PURPOSES)}", file=file)
 
 
 def _usd_error_detail(text: str) -> str:
@@ -195,12 +212,21 @@ def _passed_over(ctx, prim, it) -> bool:
     return False
 
 
+def _dark_light_notes(file: str, skipped) -> list[str]:
+    """One note per light skipped for emitting nothing."""
+    return [f"{file}: {s.path}: {s.kind} skipped, it {s.reason}" for s in skipped if s.reason.startswith(EMITS_NOTHING)]
+
+
 def _read_view_prim(ctx, prim, type_name: str, lights, unshadowed, skipped, cameras, shadow_lights) -> None:
     """A light or camera prim into its list (anything else: nothing)."""
     Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = pxr()
     if type_name in HANDLED_LIGHTS:
         light = read_light(ctx, prim, type_name)
         if light is None:
+            return
+        dark = emission_refusal(light)
+        if dark:  # nothing to shadow: listed with the skipped lights, and a note
+            skipped.append(SkippedLight(str(prim.GetPath()), type_name, dark))
             return
         enabled = UsdLux.ShadowAPI(prim).GetShadowEnableAttr().Get(ctx.timecode)
         (unshadowed if enabled is False else lights).append(light)
@@ -209,6 +235,10 @@ def _read_view_prim(ctx, prim, type_name: str, lights, unshadowed, skipped, came
     elif prim.HasAPI(UsdLux.LightAPI) or type_name.endswith("Light"):
         reason = UNHANDLED_REASONS.get(type_name, f"{type_name or 'this light'} is not handled")
         skipped.append(SkippedLight(str(prim.GetPath()), type_name or "light", reason))
+        line = (f"{ctx.file}: {prim.GetPath()}: {type_name or 'light'} skipped ({reason}): it adds no light and casts no shadow "
+                "in any technique or the reference; `wsoft plan` lists the lights used")
+        if line not in ctx.warnings:
+            ctx.warnings.append(line)
     elif prim.IsA(UsdGeom.Camera):
         cameras.append(read_camera(ctx, prim))
 
@@ -222,45 +252,6 @@ def _finish_views(ctx, stage, cameras, shadow_lights, prims):
     for lp, light in shadow_lights:
         read_shadow_controls(ctx, lp, light, prims)
     return rs
-
-
-def static_geometry(stage) -> bool:
-    """Is nothing a render draws animated on ``stage``: every time sample of its layers authored on a
-    camera, a light or a render settings prim of the root layer stack, with no geometry below them,
-    and no value clips? (Then the geometry read at one time code holds at every other.)"""
-    Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = pxr()
-    from pxr import UsdRender
-
-    stack = {l.identifier for l in stage.GetLayerStack()}
-    for layer in stage.GetUsedLayers():
-        sampled, clipped = [], []
-
-        def visit(path, layer=layer, sampled=sampled, clipped=clipped):
-            if path.IsPropertyPath():
-                if layer.GetNumTimeSamplesForPath(path):
-                    sampled.append(path)
-            elif path.IsPrimPath():
-                spec = layer.GetPrimAtPath(path)
-                if spec is not None and "clips" in spec.ListInfoKeys():
-                    clipped.append(path)
-
-        layer.Traverse(Sdf.Path.absoluteRootPath, visit)
-        if clipped:
-            return False
-        if not sampled:
-            continue
-        if layer.identifier not in stack:  # a referenced layer's paths are not the stage's
-            return False
-        for path in sampled:
-            prim = stage.GetPrimAtPath(path.GetPrimPath())
-            if not prim:
-                continue
-            if not (prim.IsA(UsdGeom.Camera) or prim.HasAPI(UsdLux.LightAPI) or prim.IsA(UsdRender.SettingsBase)
-                    or prim.IsA(UsdRender.Var)):
-                return False
-            if any(d.IsA(UsdGeom.Gprim) or d.IsA(UsdGeom.PointInstancer) for d in Usd.PrimRange(prim)):
-                return False
-    return True
 
 
 def with_views_at(scene: Scene, stage, time: float | None, render_settings: str | None = None) -> Scene:
@@ -286,8 +277,9 @@ def with_views_at(scene: Scene, stage, time: float | None, render_settings: str 
         _read_view_prim(ctx, prim, prim.GetTypeName(), lights, unshadowed, skipped, cameras, shadow_lights)
     rs = _finish_views(ctx, stage, cameras, shadow_lights, scene.prims)
     warnings = list(scene.warnings) + [w for w in ctx.warnings if w not in scene.warnings]  # the lights' and cameras' own at this time too
+    notes = [n for n in scene.notes if EMITS_NOTHING not in n] + _dark_light_notes(file, skipped)
     out = dataclasses.replace(scene, lights=lights, unshadowed_lights=unshadowed, skipped_lights=skipped, cameras=cameras, time=ctx.time,
-                              render_settings=rs, render_settings_source=ctx.render_settings_source, warnings=warnings)
+                              render_settings=rs, render_settings_source=ctx.render_settings_source, warnings=warnings, notes=notes)
     for k in ("_device_cache", "bounds", "caster_points", "_adjacency", "_dynamic_subset"):
         if k in scene.__dict__:
             out.__dict__[k] = scene.__dict__[k]
@@ -295,7 +287,8 @@ def with_views_at(scene: Scene, stage, time: float | None, render_settings: str 
     return out
 
 
-def read_stage(stage, file: str, time: float | None, render_settings: str | None = None, instancing: bool = False, subdiv_level: int = 0):
+def read_stage(stage, file: str, time: float | None, render_settings: str | None = None, instancing: bool = False, subdiv_level: int = 0,
+               material_purpose: str = "full"):
     """The :class:`Scene` of ``stage`` (named ``file``) at ``time``, and with ``instancing`` the first
     shadow-casting light whose ``collection:shadowLink`` an instanced load cannot keep (None: none,
     or a flat load): one traversal with instance proxies, invisible prims and their subtrees
@@ -305,9 +298,10 @@ def read_stage(stage, file: str, time: float | None, render_settings: str | None
     (:mod:`wsoft.scene.usd_instancing`); other gprims (curves, points, NURBS) are warned about and
     cast nothing; lights and cameras go to their lists (:mod:`wsoft.scene.usd_lights`); subdivision
     surfaces are refined ``subdiv_level`` times (0: their cages), with a note
-    (:meth:`MeshReader.subdivision_note <wsoft.scene.usd_mesh.MeshReader.subdivision_note>`)."""
+    (:meth:`MeshReader.subdivision_note <wsoft.scene.usd_mesh.MeshReader.subdivision_note>`);
+    material bindings resolve for ``material_purpose`` (:class:`StageContext`)."""
     Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = pxr()
-    ctx = StageContext(stage, file, time, render_settings)
+    ctx = StageContext(stage, file, time, render_settings, material_purpose)
     meshes = MeshReader(ctx, subdiv_level)
     instancers = InstanceReader(ctx, meshes)
     soup = Soup()
@@ -365,7 +359,10 @@ def read_stage(stage, file: str, time: float | None, render_settings: str | None
         render_settings_source=ctx.render_settings_source,
         purposes=tuple(ctx.purposes),
         instances=inst.instances() if inst is not None and inst.count else None,
-        notes=[n for n in [meshes.subdivision_note()] if n],
+        notes=[n for n in [meshes.subdivision_note()] if n] + _dark_light_notes(file, skipped),
         subdiv_level=subdiv_level,
+        material_purpose=material_purpose,
+        skinned=meshes.skel.count if meshes.skel is not None else 0,
+        skin_ms=round(meshes.skel.seconds * 1e3, 3) if meshes.skel is not None else 0.0,
     )
     return scene, linked_light

@@ -15,6 +15,9 @@ import numpy as np
 
 from wsoft.errors import SceneError
 from wsoft.scene.render_settings import DEFAULT_PURPOSES, read_render_settings
+from wsoft.scene.usd_time import earliest_time, moves_by_velocity
+
+MATERIAL_PURPOSES = ("full", "preview")  # the UsdShade material purposes a load resolves bindings for (load_scene's material_purpose)
 
 
 def pxr():
@@ -28,32 +31,27 @@ def pxr():
 
 
 def earliest_time_sample(stage) -> float | None:
-    """The earliest time sample of any authored attribute of ``stage`` (in stage time: layer
-    offsets and value clips applied), None when it has none. Every prim is visited once (instances'
-    prototypes once each), and only when one of the stage's layers holds time samples at all."""
-    Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = pxr()
-    if not any(layer.ListAllTimeSamples() for layer in stage.GetUsedLayers()):
-        return None
-    best = None
-    for root in [stage.GetPseudoRoot(), *stage.GetPrototypes()]:
-        for prim in Usd.PrimRange(root):
-            for attr in prim.GetAuthoredAttributes():
-                bracket = attr.GetBracketingTimeSamples(-math.inf)  # (first, first); () without samples
-                if bracket and (best is None or bracket[0] < best):
-                    best = bracket[0]
-    return None if best is None else float(best)
+    """The earliest time sample or spline knot of any authored attribute of ``stage`` (in stage
+    time: layer offsets and value clips applied), None when it has none
+    (:func:`wsoft.scene.usd_time.earliest_time`)."""
+    return earliest_time(stage)
 
 
 class StageContext:
     """``stage`` read at ``time`` (None: the start time code when the stage authors a time range,
     else its earliest time sample (:func:`earliest_time_sample`, with a warning naming it), else
     the default time) with the render settings ``render_settings`` (a prim path; None: the
-    stage's own)."""
+    stage's own). Material bindings resolve for ``material_purpose`` (one of
+    :data:`MATERIAL_PURPOSES`; a prim without a binding of that purpose takes its all-purpose one,
+    as ``UsdShade.MaterialBindingAPI.ComputeBoundMaterial`` resolves it)."""
 
-    def __init__(self, stage, file: str, time: float | None, render_settings: str | None = None):
+    def __init__(self, stage, file: str, time: float | None, render_settings: str | None = None, material_purpose: str = "full"):
         Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = pxr()
+        if material_purpose not in MATERIAL_PURPOSES:
+            raise SceneError(f"material purpose {material_purpose!r} is not one of {', '.join(MATERIAL_PURPOSES)}", file=file)
         self.stage = stage
         self.file = file
+        self.material_purpose = material_purpose
         self.warnings: list[str] = []
         if time is not None:
             self.timecode = Usd.TimeCode(float(time))
@@ -61,8 +59,8 @@ class StageContext:
             self.timecode = Usd.TimeCode(stage.GetStartTimeCode())
         elif (first := earliest_time_sample(stage)) is not None:
             self.timecode = Usd.TimeCode(first)
-            self.warn(None, f"time samples but no time range (startTimeCode, endTimeCode): loaded at time code {first:g}, "
-                      "the earliest time sample (--time, or time=, picks another)")
+            self.warn(None, f"time samples or splines but no time range (startTimeCode, endTimeCode): loaded at time code {first:g}, "
+                      "the earliest time sample or spline knot (--time, or time=, picks another)")
         else:
             self.timecode = Usd.TimeCode.Default()
         self.time = None if self.timecode.IsDefault() else float(self.timecode.GetValue())
@@ -76,6 +74,13 @@ class StageContext:
     def warn(self, prim, msg: str):
         where = f"{self.file}: {prim.GetPath()}: " if prim is not None else f"{self.file}: "
         self.warnings.append(where + msg)
+
+    def bound_material(self, prim):
+        """The ``UsdShade.Material`` bound to ``prim`` for :attr:`material_purpose` (its all-purpose
+        binding where it has none of that purpose), or an invalid one when nothing is bound."""
+        Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = pxr()
+        material, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial(self.material_purpose)
+        return material
 
     def err(self, prim, msg: str) -> SceneError:
         return SceneError(msg, file=self.file, prim=str(prim.GetPath()) if prim is not None else None)
@@ -110,12 +115,28 @@ class StageContext:
         v = attr.Get(self.timecode)
         return default if v is None else v
 
-    def is_dynamic(self, prim, shaping=()) -> bool:
-        """A *dynamic caster* (Salzman's sense): time-sampled ``shaping`` attributes (a mesh's points,
-        a shape's size, radius, height...), a time-varying transform on the prim or an ancestor, or
-        ``wsoft:dynamic = true`` on the prim or an ancestor."""
+    def points(self, prim):
+        """The points of the ``UsdGeom.PointBased`` ``prim`` at the time code as USD computes them:
+        extrapolated by ``velocities`` and ``accelerations`` from the time sample at or before it
+        (``UsdGeomPointBased.ComputePointsAtTime``) where USD moves them by velocity
+        (:func:`~wsoft.scene.usd_time.moves_by_velocity`), else the value at the time code; None
+        without points."""
         Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = pxr()
-        if any(a and a.GetNumTimeSamples() > 1 for a in shaping):
+        pb = UsdGeom.PointBased(prim)
+        if not self.timecode.IsDefault() and moves_by_velocity(prim):
+            points = pb.ComputePointsAtTime(self.timecode, self.timecode)
+            if points is not None and len(points):
+                return points
+        return self.get(pb.GetPointsAttr())
+
+    def is_dynamic(self, prim, shaping=()) -> bool:
+        """A *dynamic caster* (Salzman's sense): ``shaping`` attributes (a mesh's points, a shape's
+        size, radius, height...) whose value may vary (``ValueMightBeTimeVarying``: time samples, a
+        spline, value clips), points USD moves by velocity
+        (:func:`~wsoft.scene.usd_time.moves_by_velocity`), a time-varying transform on the prim or an
+        ancestor, or ``wsoft:dynamic = true`` on the prim or an ancestor."""
+        Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = pxr()
+        if any(a and a.ValueMightBeTimeVarying() for a in shaping) or moves_by_velocity(prim):
             return True
         p = prim
         while p and not p.IsPseudoRoot() and p != self.dynamic_stop:

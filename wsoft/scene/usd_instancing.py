@@ -128,9 +128,9 @@ class InstanceReader:
         mask = pi.ComputeMaskAtTime(self.ctx.timecode)  # empty: every instance shows
         keep = np.ones(len(indices), bool) if mask is None or len(mask) == 0 else np.asarray(mask, bool)
         M_pi = self.ctx.world(prim)
-        # dynamic when the instancer moves its instances over time (or is moved)
+        # dynamic when the instancer's values may vary over time, its instances move by velocity (is_dynamic), or it is moved
         attrs = (pi.GetPositionsAttr(), pi.GetOrientationsAttr(), pi.GetScalesAttr(), pi.GetProtoIndicesAttr(), pi.GetInvisibleIdsAttr())
-        moving = any(a and a.GetNumTimeSamples() > 1 for a in attrs) or self.ctx.is_dynamic(prim)
+        moving = any(a and a.ValueMightBeTimeVarying() for a in attrs) or self.ctx.is_dynamic(prim)
         meshes_of = {}
         for j, path in enumerate(protos):
             root = self.ctx.stage.GetPrimAtPath(path)
@@ -277,8 +277,7 @@ class InstanceReader:
         """How an instance proxy's material binding tells prototypes apart: a material inside the
         instance by its path relative to the instance prim (every instance has its own proxy of it,
         the same material), any other by its index in the scene's materials."""
-        Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = pxr()
-        material, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()
+        material = self.ctx.bound_material(prim)
         if material and material.GetPath().HasPrefix(ipath):
             return str(material.GetPath().MakeRelativePath(ipath))
         return self.meshes.material_for(prim)

@@ -2,7 +2,9 @@
 
 :func:`read_light` reads the lights wsoft shadows (:data:`HANDLED_LIGHTS`: rect, disk, sphere,
 cylinder and distant; the others are skipped with :data:`UNHANDLED_REASONS`) from their ``inputs:`` at the
-context's time code, their frame re-orthonormalised and their sizes scaled by the transform;
+context's time code, their frame re-orthonormalised and their sizes scaled by the transform, and
+their emission as UsdLux defines it (:func:`read_emission`; a light that emits nothing is skipped,
+:func:`emission_refusal`);
 :func:`read_shadow_controls` adds the ``UsdLux.ShadowAPI`` controls (shadow linking, distance,
 colour, falloff). :func:`read_camera` reads a ``UsdGeom.Camera``; :func:`auto_camera` frames a scene
 that has none.
@@ -14,6 +16,7 @@ import math
 
 import numpy as np
 
+from wsoft.scene.shaping import Shaping
 from wsoft.scene.types import LIGHT_CYLINDER, LIGHT_DISK, LIGHT_DISTANT, LIGHT_POINT, LIGHT_RECT, LIGHT_SPHERE, Camera, Light, Scene
 from wsoft.scene.usd_context import StageContext, pxr
 
@@ -30,6 +33,123 @@ ROUND = 1e-6  # scale factors within this fraction of each other are one radius 
 
 
 def read_light(ctx: StageContext, prim, type_name: str) -> Light | None:
+    """The light ``prim`` in the world (:func:`read_light_shape`), its ``intensity`` and ``color``
+    its emission (:func:`read_emission`)."""
+    light = read_light_shape(ctx, prim, type_name)
+    return None if light is None else read_shaping(ctx, prim, read_emission(ctx, prim, light))
+
+
+SHAPING_ATTRS = ("inputs:shaping:cone:angle", "inputs:shaping:cone:softness", "inputs:shaping:focus", "inputs:shaping:focusTint")
+
+
+def read_shaping(ctx: StageContext, prim, light: Light) -> Light:
+    """``light`` with its ``UsdLux.ShapingAPI`` (primary axis local −Z), read where the API is applied
+    or any of its inputs authored: ``shaping:cone:angle`` (fallback 90; in [0, 180] degrees),
+    ``shaping:cone:softness`` (>= 0; above 1 read as 1), ``shaping:focus`` (>= 0) and
+    ``shaping:focusTint``; a value out of range or not finite is an error naming the attribute. An
+    authored ``shaping:ies:file`` gets a warning: IES profiles are not read. A distant light's
+    emission has one direction, which a cone about its own axis does not cut: its authored shaping
+    gets a warning and is not applied."""
+    Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = pxr()
+    api = UsdLux.ShapingAPI(prim)
+    authored = any(prim.HasAttribute(a) and prim.GetAttribute(a).HasAuthoredValue() for a in SHAPING_ATTRS)
+    if not (prim.HasAPI(UsdLux.ShapingAPI) or authored):
+        return light
+    ies = ctx.get(api.GetShapingIesFileAttr(), None)
+    if ies is not None and getattr(ies, "path", str(ies)):
+        ctx.warn(prim, f"inputs:shaping:ies:file = {getattr(ies, 'path', ies)}: IES profiles are not read; the light is drawn "
+                 "with its cone and focus only (bake the profile into shaping:cone:angle and shaping:focus to approximate it)")
+    angle = ctx.finite(prim, "inputs:shaping:cone:angle", ctx.get(api.GetShapingConeAngleAttr(), 90.0))
+    if not 0.0 <= angle <= 180.0:
+        raise ctx.err(prim, f"inputs:shaping:cone:angle = {angle:g} must be in [0, 180] degrees off the light's axis")
+    soft = ctx.finite(prim, "inputs:shaping:cone:softness", ctx.get(api.GetShapingConeSoftnessAttr(), 0.0))
+    if soft < 0.0:
+        raise ctx.err(prim, f"inputs:shaping:cone:softness = {soft:g} is negative (0 is a hard edge, 1 the softest)")
+    focus = ctx.finite(prim, "inputs:shaping:focus", ctx.get(api.GetShapingFocusAttr(), 0.0))
+    if focus < 0.0:
+        raise ctx.err(prim, f"inputs:shaping:focus = {focus:g} is negative (0 is no focus)")
+    tint = tuple(float(c) for c in ctx.get(api.GetShapingFocusTintAttr(), (0.0, 0.0, 0.0)))
+    if not all(math.isfinite(c) for c in tint):
+        raise ctx.err(prim, f"inputs:shaping:focusTint = {tint} is not finite")
+    if min(tint) < 0.0:
+        raise ctx.err(prim, f"inputs:shaping:focusTint = ({', '.join(f'{c:g}' for c in tint)}) has negative components")
+    if light.kind == LIGHT_DISTANT:
+        if authored:
+            ctx.warn(prim, "ShapingAPI on a DistantLight is not applied (its light arrives along one direction, which no cone "
+                     "about its axis cuts): remove the shaping inputs, or use a rect, disk or sphere light for a spot")
+        return light
+    light.shaping = Shaping(cone_deg=angle, softness=min(soft, 1.0), focus=focus, focus_tint=tint)
+    return light
+
+
+EMITS_NOTHING = "emits nothing"
+"""The start of the reason a light that emits no light is skipped for (:func:`emission_refusal`)."""
+
+
+def read_emission(ctx: StageContext, prim, light: Light) -> Light:
+    """``light`` with its UsdLux emission: ``intensity`` = ``inputs:intensity x 2^inputs:exposure``,
+    divided by its size where ``inputs:normalize`` is on (:func:`size_factor`); ``color`` =
+    ``inputs:color``, times ``UsdLux.BlackbodyTemperatureAsRgb(inputs:colorTemperature)`` where
+    ``inputs:enableColorTemperature`` is on. A negative intensity (the light then emits nothing,
+    :func:`emission_refusal`) or colour component (read as 0) gets a warning: no light emits less
+    than nothing."""
+    Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = pxr()
+    lux = UsdLux.LightAPI(prim)
+    if light.intensity < 0.0:  # kept as authored: emission_refusal skips the light, naming it
+        ctx.warn(prim, f"inputs:intensity x 2^inputs:exposure = {light.intensity:g} is negative (no light emits less than nothing): "
+                 "this light emits nothing and is skipped; author an intensity >= 0")
+    if min(light.color) < 0.0:
+        fixed = tuple(max(c, 0.0) for c in light.color)
+        ctx.warn(prim, f"inputs:color = ({', '.join(f'{c:g}' for c in light.color)}) has negative components (no light emits less "
+                 f"than nothing): read as ({', '.join(f'{c:g}' for c in fixed)}); author components >= 0")
+        light.color = fixed
+    if bool(ctx.get(lux.GetEnableColorTemperatureAttr(), False)):
+        t = ctx.finite(prim, "inputs:colorTemperature", ctx.get(lux.GetColorTemperatureAttr(), 6500.0))
+        if t <= 0.0:
+            raise ctx.err(prim, f"inputs:colorTemperature = {t:g} must be > 0 (kelvin)")
+        bb = UsdLux.BlackbodyTemperatureAsRgb(t)
+        light.color = tuple(float(c) * float(b) for c, b in zip(light.color, bb))
+    if bool(ctx.get(lux.GetNormalizeAttr(), False)):
+        f = size_factor(light)
+        if f > 0.0:
+            light.intensity /= f
+    return light
+
+
+def size_factor(light: Light) -> float:
+    """UsdLux's ``sizeFactor`` of ``inputs:normalize``: an area light's world-space surface area (a
+    rect's, a disk's, a sphere's or ellipsoid's (Knud Thomsen's approximation), a cylinder's side),
+    a distant light's ``pi sin^2(theta)`` (``(2 - sin^2(theta)) pi`` past 90 degrees, theta its half
+    angle; 1 at angle 0); 1 for a point light or a shape of no area."""
+    a = light.aspect
+    r = light.radius
+    if light.kind == LIGHT_RECT:
+        return 4.0 * light.half_size[0] * light.half_size[1] or 1.0
+    if light.kind == LIGHT_DISK:
+        return math.pi * r * r * a[0] * a[1] or 1.0
+    if light.kind == LIGHT_SPHERE:
+        x, y, z = (r * c for c in a)
+        p = 1.6075
+        return 4.0 * math.pi * (((x * y) ** p + (x * z) ** p + (y * z) ** p) / 3.0) ** (1.0 / p) or 1.0
+    if light.kind == LIGHT_CYLINDER:
+        return 2.0 * math.pi * light.half_size[1] * 2.0 * light.half_size[0] or 1.0
+    if light.kind == LIGHT_DISTANT:
+        t = math.radians(0.5 * light.angle_deg)
+        if t <= 0.0:
+            return 1.0
+        return math.pi * math.sin(t) ** 2 if t <= 0.5 * math.pi else (2.0 - math.sin(t) ** 2) * math.pi
+    return 1.0
+
+
+def emission_refusal(light: Light) -> str | None:
+    """Why ``light`` is skipped for emitting nothing (its intensity, or every colour channel, 0), else None."""
+    if light.intensity > 0.0 and max(light.color) > 0.0:
+        return None
+    return (f"{EMITS_NOTHING} (intensity x 2^exposure {light.intensity:g}, color ({', '.join(f'{c:g}' for c in light.color)})): "
+            "no light, so no shadow to draw")
+
+
+def read_light_shape(ctx: StageContext, prim, type_name: str) -> Light | None:
     """The light ``prim`` (``type_name`` one of :data:`HANDLED_LIGHTS`) in the world: a rect light
     spans +-width/2, +-height/2 in its local XY plane, a disk light its radius there, a sphere light
     its radius about its origin (a sphere treated as a point, or of radius 0, is a point light), a
@@ -70,6 +190,8 @@ def read_light(ctx: StageContext, prim, type_name: str) -> Light | None:
         raise ctx.err(prim, f"inputs:exposure = {exposure:g} is out of range (2^exposure must be a finite float: -126..127)")
     intensity *= 2.0 ** exposure
     color = tuple(float(c) for c in ctx.get(lux.GetColorAttr(), (1.0, 1.0, 1.0)))
+    if not all(math.isfinite(c) for c in color):
+        raise ctx.err(prim, f"inputs:color = {color} is not finite")
     common = dict(path=str(prim.GetPath()), position=pos, frame=frame, intensity=intensity, color=color)
     if type_name == "RectLight":
         lt = UsdLux.RectLight(prim)

@@ -26,6 +26,7 @@ from wsoft.scene.soup import MeshPart
 from wsoft.scene.subdiv import BOUNDARY_MODES, MAX_LEVEL, SCHEMES, Refinement, Tags, crease_edges, refine
 from wsoft.scene.types import Material, Texture
 from wsoft.scene.usd_context import StageContext, pxr
+from wsoft.scene.usd_skel import SkelReader
 from wsoft.scene.usd_texture import OpacityNetwork
 
 
@@ -47,6 +48,7 @@ class MeshReader:
         self.tile_index: dict[tuple[int, int], int] = {}  # (UDIM material, tile) -> the tile's material
         self.prototype_triangles: dict[str, tuple[Refinement | None, Triangles]] = {}  # a PointInstancer prototype's mesh path -> (refinement, triangles)
         self.prototype_shapes: dict[str, ShapeMesh | None] = {}  # a PointInstancer prototype's shape path -> its tessellation
+        self.skel: SkelReader | None = None  # the stage's skinned meshes, read at the first mesh that may be one
 
     def read(self, prim) -> MeshPart | None:
         """A ``UsdGeom.Mesh`` (:meth:`read_mesh`) or one of UsdGeom's shapes (:meth:`read_shape`)."""
@@ -84,7 +86,7 @@ class MeshReader:
         uniform primvars) and primvars are refined with it (:meth:`read_primvar`)."""
         Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = pxr()
         mesh = UsdGeom.Mesh(prim)
-        points = self.ctx.get(mesh.GetPointsAttr())
+        points = self.ctx.points(prim)  # USD's: extrapolated by velocities where authored
         counts = self.ctx.get(mesh.GetFaceVertexCountsAttr())
         indices = self.ctx.get(mesh.GetFaceVertexIndicesAttr())
         if points is None or counts is None or indices is None or len(points) == 0 or len(counts) == 0:
@@ -106,9 +108,18 @@ class MeshReader:
             raise self.ctx.err(prim, f"faceVertexIndices[{bad}] = {int(idx[bad])} is out of range for {len(p)} points")
         if np.any(counts < 3):
             self.ctx.warn(prim, f"{int(np.sum(counts < 3))} faces with fewer than 3 vertices ignored")
+        if SkelReader.may_be_skinned(prim):
+            if self.ctx.world_override is not None:
+                self.ctx.warn(prim, "a skinned mesh in a PointInstancer's prototype is drawn in its bind pose (UsdSkel poses it "
+                              "only where it is bound in the stage itself)")
+            else:
+                self.skel = self.skel or SkelReader(self.ctx)
+                posed = self.skel.pose(prim, p)
+                if posed is not None:
+                    return self.place(prim, posed.points, counts, idx, mesh, (mesh.GetPointsAttr(),), posed.world, posed.dynamic)
         return self.place(prim, p, counts, idx, mesh, (mesh.GetPointsAttr(),))
 
-    def place(self, prim, p, counts, idx, mesh, shaping) -> MeshPart | None:
+    def place(self, prim, p, counts, idx, mesh, shaping, world: np.ndarray | None = None, posed_dynamic: bool = False) -> MeshPart | None:
         """The gprim ``prim`` whose polygons are the points ``p`` (local space, float64), face counts
         and face indices given (checked), as a :class:`MeshPart`: triangulated (a ``UsdGeom.Mesh``
         ``mesh`` with its ``holeIndices``; None: a shape's convex faces), wound by its
@@ -139,7 +150,7 @@ class MeshReader:
         tris = idx[corners]
 
         # world transform
-        M = self.ctx.world(prim)
+        M = self.ctx.world(prim) if world is None else world  # a skinned mesh: its skeleton's (``world``)
         if not np.all(np.isfinite(M)):
             raise self.ctx.err(prim, "world transform is not finite (NaN or inf in its xformOps or an ancestor's)")
         with np.errstate(over="ignore", invalid="ignore"):
@@ -170,7 +181,7 @@ class MeshReader:
                           f"is read: {str(ds).lower()})")
         baked = self.read_primvar(prim, corners, face_of_tri, tris, "wsoft:bakedLight", 3, shape=mesh is None, ref=ref)
         return MeshPart(points=pw, triangles=tris.astype(np.int32), material=mat, uv=uv, double_sided=ds, closed=closed_orientation(pw, tris),
-                        dynamic=self.ctx.is_dynamic(prim, shaping), baked=baked, faces=face_of_tri)
+                        dynamic=posed_dynamic or self.ctx.is_dynamic(prim, shaping), baked=baked, faces=face_of_tri)
 
     def triangulate(self, prim, mesh, p, counts, idx, ref: Refinement | None = None) -> Triangles:
         """The triangles of the faces that are not holes (``holeIndices``; out-of-range ones warned
@@ -448,8 +459,7 @@ class MeshReader:
         return face_mat[face_of_tri]
 
     def material_for(self, prim) -> int:
-        Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = pxr()
-        material, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()
+        material = self.ctx.bound_material(prim)
         if not material:
             color = self.display_color(prim)
             if color is None:

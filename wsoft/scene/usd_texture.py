@@ -52,7 +52,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wsoft.scene.types import WRAP_BLACK, WRAP_CLAMP, WRAP_NAMES, Material, StMap, Texture
+from wsoft.scene.types import WRAP_BLACK, WRAP_NAMES, Material, StMap, Texture
 from wsoft.scene.usd_context import StageContext, pxr
 
 MAX_TEXTURE_PIXELS = 8192 * 8192  # larger textures (67.1 Mpx) are not decoded: a warning, and the texture's fallback

@@ -17,7 +17,7 @@ import os
 import sys
 from collections.abc import Callable, Sequence
 
-from wsoft.stages.scenes import animated, basics, bridge, city, forest, interiors, organic, stsv, tower, tunnel_fan
+from wsoft.stages.scenes import animated, basics, bridge, character, city, forest, interiors, organic, stsv, tower, tunnel_fan
 from wsoft.usd_scenes import folder as bundled_folder
 
 # name -> generator(out_dir) -> {"file": path, "triangles": n, ...}
@@ -50,6 +50,7 @@ SCENES: dict[str, Callable[[str], dict[str, object]]] = {
     "bridge_sun_sweep": animated.scene_bridge_sun_sweep,
     "ramp_slide": animated.scene_ramp_slide,
     "ramp_static": animated.scene_ramp_static,
+    "walker": character.scene_walker,
 }
 
 

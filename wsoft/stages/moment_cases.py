@@ -22,7 +22,6 @@ for a sweep that names stages by path.
 from __future__ import annotations
 
 import os
-from pathlib import Path
 
 from wsoft.stages.builders import add_camera, add_mesh, add_quad, add_rect_light, make_stage
 
@@ -67,7 +66,9 @@ def stacked_plates(plates: int = 3):
 
 def stage_file(plates: int = 3) -> str:
     """The path of :func:`stacked_plates` as a ``.usda`` in the cache (written when its text changed)."""
-    folder = Path(os.environ.get("WSOFT_CACHE_DIR", Path.home() / ".cache" / "wsoft")) / "stages"
+    from wsoft.env import cache_dir
+
+    folder = cache_dir() / "stages"
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / f"stacked_plates_{plates}.usda"
     stage = stacked_plates(plates)  # held: the layer lives as long as its stage

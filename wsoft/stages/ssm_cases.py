@@ -19,7 +19,6 @@ and the sweep names it by that path.
 from __future__ import annotations
 
 import os
-from pathlib import Path
 
 from wsoft.stages.builders import add_camera, add_mesh, add_quad, add_rect_light, make_stage
 
@@ -74,7 +73,9 @@ NAMES = ("plate_aligned", "plate_rotated", "plate_holes", "plates_stacked")
 
 def stage_file(name: str) -> str:
     """The path of stage ``name`` as a ``.usda`` in the cache (written when its text changed)."""
-    folder = Path(os.environ.get("WSOFT_CACHE_DIR", Path.home() / ".cache" / "wsoft")) / "stages"
+    from wsoft.env import cache_dir
+
+    folder = cache_dir() / "stages"
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / f"ssm_{name}.usda"
     stage = build(name)  # held: the layer lives as long as its stage

@@ -8,7 +8,10 @@ supports and its quality knobs; nothing here lists them.
 names: ``wsoft --help`` needs no Warp); ``TECHNIQUES`` (name -> class) imports them at first use.
 A plugin that cannot be imported, is not a :class:`Technique`, is named otherwise than its entry
 point or takes a bundled technique's name is left out with a one-line :class:`PluginWarning`
-naming the entry point; the others keep working. :func:`markdown_table` renders the README's
+naming the entry point; the others keep working. A plugin that draws light maps without the
+parameter ``cube`` (its ``Params`` not a :class:`~wsoft.params.LightViewParams`) and without a
+``cube_refusal`` is kept with a :class:`PluginWarning` saying what it lacks
+(:meth:`Technique.cube_map_problem`). :func:`markdown_table` renders the README's
 table from the classes.
 """
 
@@ -20,7 +23,7 @@ import pkgutil
 import warnings
 
 from wsoft.errors import ParameterError, suggestion
-from wsoft.techniques.base import PassSpec, Quality, Technique, Tolerance
+from wsoft.techniques.base import LIGHT_MAP_KINDS, PassSpec, Quality, Technique, Tolerance
 
 ENTRY_POINT_GROUP = "wsoft.techniques"
 _NOT_TECHNIQUES = frozenset({"base"})  # modules of this package that hold no technique
@@ -71,7 +74,7 @@ def _load_bundled() -> dict[str, type[Technique]]:
         classes = _defined_in(module)
         if [c.name for c in classes] != [name]:
             raise RuntimeError(f"{module.__name__} must define one technique named {name!r}, defines {[c.name for c in classes]}")
-        why = classes[0].declaration_problem()
+        why = classes[0].declaration_problem() or classes[0].cube_map_problem()
         if why:
             raise RuntimeError(f"{module.__name__}: {why}")
         found[name] = _with_manual(classes[0])
@@ -101,6 +104,9 @@ def _load_plugins(bundled: dict[str, type[Technique]]) -> dict[str, type[Techniq
         if why:
             warnings.warn(f"{where}: left out, {why}", PluginWarning, stacklevel=3)
             continue
+        lacks = cls.cube_map_problem()
+        if lacks:  # kept: it renders what one frustum holds, and says so here
+            warnings.warn(f"{where}: {lacks}", PluginWarning, stacklevel=3)
         found[ep.name] = _with_manual(cls)
     return found
 
@@ -131,6 +137,12 @@ def __getattr__(name: str):
     if name == "NAMES":
         return names()
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def unmapped_techniques() -> list[str]:
+    """The registered techniques that draw no light map (none of their passes reads
+    :data:`LIGHT_MAP_KINDS`): they shadow receivers in every direction from a light."""
+    return sorted(n for n, c in _techniques().items() if not set(c.reads()) & set(LIGHT_MAP_KINDS))
 
 
 def unknown_technique(name: str, known) -> ParameterError:
@@ -184,5 +196,6 @@ def markdown_table(techniques: dict[str, type[Technique]] | None = None) -> str:
     return "\n".join(rows)
 
 
-__all__ = ["ENTRY_POINT_GROUP", "NAMES", "PassSpec", "PluginWarning", "TECHNIQUES", "Quality", "Technique", "Tolerance", "bundled_names",
-           "check_names", "create", "get_technique", "markdown_table", "names", "parameter_table", "plugin_entry_points", "reload_plugins"]
+__all__ = ["ENTRY_POINT_GROUP", "LIGHT_MAP_KINDS", "NAMES", "PassSpec", "PluginWarning", "TECHNIQUES", "Quality", "Technique", "Tolerance", "bundled_names",
+           "check_names", "create", "get_technique", "markdown_table", "names", "parameter_table", "plugin_entry_points", "reload_plugins",
+           "unmapped_techniques"]

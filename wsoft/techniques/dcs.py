@@ -6,7 +6,7 @@ For each receiver ``p`` (a G-buffer sample) and each light sample ``s`` (the sha
 the *depth complexity* ``count(s)``: how many occluding layers the shadow ray ``p -> s`` crosses.
 ``V`` (the paper's ``v_coef``) is the fraction of samples with ``count = 0``. The shadow rays are
 the reference's (:mod:`wsoft.reference`): from ``o``, ``p`` moved off its surface by
-:func:`~wsoft.raster.shadow_rays.ray_offset`, to each light point (:func:`~wsoft.lightspace.light.light_point`,
+:func:`~wsoft.scene.offsets.ray_offset`, to each light point (:func:`~wsoft.lightspace.light.light_point`,
 a distant light's at its ``far`` length); samples behind the receiver's tangent plane, and every
 sample of a rect or disk light whose emitting side faces away from the receiver, are blocked (the
 horizon, applied per sample as the reference does, :func:`~wsoft.lightspace.light.lit_along`).
@@ -114,7 +114,7 @@ from wsoft.lightspace.samples import LightSamples, sample_coords
 from wsoft.accel.stsv import in_volume, light_ball, planes_t, receiver_matrix, s_triangle, sample_blocked, sample_transmittance
 from wsoft.parallel import launch_chunked
 from wsoft.raster.gbuffer import GBufferGPU, gb_covered
-from wsoft.raster.shadow_rays import ray_epsilon, receiver_begin
+from wsoft.raster.shadow_rays import receiver_begin
 from wsoft.scene.adjacency import silhouette_candidates
 from wsoft.scene.surfaces import Surfaces
 from wsoft.techniques._object_based import ObjectBased, ObjectBasedParams, object_based_passes
@@ -155,7 +155,6 @@ def dcs_visibility(
     gb: GBufferGPU,
     ls: LightSamples,
     light: LightGPU,
-    eps: float,
     has_opaque: int,
     bvh: wp.uint64,
     tri_pts: wp.array[wp.vec3],
@@ -189,7 +188,7 @@ def dcs_visibility(
         return
     p = gb.pos[i]
     nrm = gb.nrm[i]
-    off, o, state, base, rot = receiver_begin(gb, ls, eps, i)
+    off, o, state, base, rot = receiver_begin(gb, ls, i)
     S = ls.count
     cnt = counts_t()
     share = shares_t()
@@ -340,6 +339,7 @@ class DCS(ObjectBased):
     perforated triangles; V = the fraction of samples with none."""
 
     name = "dcs"
+    distant_angle_limit = 50.0  # max point error 0.052 at 50 degrees, 0.115 at 60
     summary = ("depth complexity sampling: exact per-sample occluder counts from one ray per pixel and silhouette-edge "
                "updates, soft textured shadow volumes for perforated triangles")
     Params = DCSParams
@@ -377,7 +377,7 @@ class DCS(ObjectBased):
         bvh_id = a["bvh"].id if a["bvh"] is not None else wp.uint64(0)
         launch_chunked(
             dcs_visibility, n,
-            inputs=[gb.gpu(), p.sample_pattern().on(dev, disk_shaped(light)), ctx.light_gpu(light), ray_epsilon(gb, light),
+            inputs=[gb.gpu(), p.sample_pattern().on(dev, disk_shaped(light)), ctx.light_gpu(light),
                     a["has_opaque"], bvh_id, a["tri_pts"], a["ebins"].gpu, a["edge_pts"], a["edge_faces"], int(st is not None), tb, stri,
                     planes, ds.cutouts, cut_pts, int(p.estimator == "direct"), int(p.transmittance == "alpha")],
             outputs=[vis, wt, wh, vt], device=dev, min_chunk=256, per_thread=32)

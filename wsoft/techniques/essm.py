@@ -12,7 +12,9 @@ Passes (each timed in the stats: Table 1's EB, STG and Shadow):
    ``tiles`` (uint32 SAT tile grid, μ precision bits, tile size from the pyramid test, §6.1),
    ``uint32`` (one integer SAT) or ``float32`` (one float SAT), built by recursive doubling
    with ``reads`` texels per pass or by a direct row/column scan; the pass count is reported.
-3. ``essm_shadow`` — per eye sample:
+3. ``essm_shadow`` — per eye sample (a light across the receiver's tangent plane: both kernels
+   move to its front part's window and V is scaled by that part's share of the light,
+   :func:`~wsoft.lightspace.halfspace.kernel_front`):
 
    * the search kernel: the light's spread from z_min to the receiver (a rectangle);
    * ESM-Z (§4.2): Z_occ = (Z_avg − e^{−cd} [w * z e^{cz}]) / (1 − s_f), s_f = e^{−cd}[w * e^{cz}];
@@ -60,6 +62,7 @@ import warp as wp
 
 from wsoft.accel.pyramid import effective_depth_range
 from wsoft.accel.sat import SAT, box_area, build_sat, check_sat_params, mean_pyramid, sat_box
+from wsoft.lightspace.halfspace import front_box, kernel_front
 from wsoft.lightspace.light import CYLINDER_KERNEL, LightKernel, light_kernel, spread_texels
 from wsoft.lightspace.view import (
     ViewGPU,
@@ -366,18 +369,28 @@ def essm_shade(
         gv = 0.0
     plane = wp.vec3(dn + q.bias, gu, gv)
     # 1. blocker search over the light's spread from the nearest depth (ESM-Z, micro-subdivided)
+    # the light clipped to the receiver's front half-space: search and filter its part's window
+    mid, hs, front = kernel_front(lv, k, pv, nv)
+    if front <= 0.0:
+        vis[i] = 0.0
+        return
     sh = spread_texels(lv, k, q.zmin, d_lin, 0.5, q.max_r)
-    r = region(q, data, depth, tc[0] - sh[0], tc[0] + sh[0], tc[1] - sh[1], tc[1] + sh[1], plane, tc, 1)
+    b = front_box(tc, sh, mid, hs, 0.5)
+    r = region(q, data, depth, b[0], b[1], b[2], b[3], plane, tc, 1)
     nlook = r[2]
     nfb = r[3]
     occluded = 1.0 - r[0]
     if occluded <= 1.0e-4:
+        vis[i] = front
         looks[i] = int(nlook)
         fallbacks[i] = int(nfb)
         return
     z_occ = wp.clamp(r[1] / occluded, 0.0, wp.max(dn, 0.0))
     # 2. penumbra from the average blocker depth, as a Gaussian with the box's variance
     pen = spread_texels(lv, k, q.zmin + z_occ * q.zrange, d_lin, q.min_r, q.max_r)
+    # its centre ``fc`` and size those of the light's front part
+    fc = wp.vec2(tc[0] + mid[0] * pen[0], tc[1] + mid[1] * pen[1])
+    pen = wp.vec2(wp.where(hs[0] < 1.0, wp.max(pen[0] * hs[0], 0.5), pen[0]), wp.where(hs[1] < 1.0, wp.max(pen[1] * hs[1], 0.5), pen[1]))
     sxx = pen[0] * pen[0] / 3.0
     syy = pen[1] * pen[1] / 3.0
     sxy = float(0.0)
@@ -408,7 +421,7 @@ def essm_shade(
         if q.level == 0 or row == 0 or row == rows - 1:
             sp = ellipse_span(sxx, sxy, syy, det, 0.5 * (yl + yh))
             if sp[1] > sp[0]:
-                rr = region(q, data, depth, tc[0] + sp[0], tc[0] + sp[1], tc[1] + yl, tc[1] + yh, plane, tc, 0)
+                rr = region(q, data, depth, fc[0] + sp[0], fc[0] + sp[1], fc[1] + yl, fc[1] + yh, plane, tc, 0)
                 a = (sp[1] - sp[0]) * hgt
                 total += a * rr[0]
                 wsum += a
@@ -420,7 +433,7 @@ def essm_shade(
             ia = wp.max(lo[0], hi[0])
             ib = wp.min(lo[1], hi[1])
             if ib > ia:
-                rr = region(q, data, depth, tc[0] + ia, tc[0] + ib, tc[1] + yl, tc[1] + yh, plane, tc, 0)
+                rr = region(q, data, depth, fc[0] + ia, fc[0] + ib, fc[1] + yl, fc[1] + yh, plane, tc, 0)
                 a = (ib - ia) * hgt
                 total += a * rr[0]
                 wsum += a
@@ -435,7 +448,7 @@ def essm_shade(
                     xb = wp.max(lo[1], hi[1])
                 if xb > xa:
                     if q.level == 1:
-                        rr = region(q, data, depth, tc[0] + xa, tc[0] + xb, tc[1] + yl, tc[1] + yh, plane, tc, 0)
+                        rr = region(q, data, depth, fc[0] + xa, fc[0] + xb, fc[1] + yl, fc[1] + yh, plane, tc, 0)
                         a = 0.5 * (xb - xa) * hgt
                         total += a * rr[0]
                         wsum += a
@@ -470,7 +483,7 @@ def essm_shade(
                                 if w != run_w:
                                     # close the running run of equal cells
                                     if run_w > 0.0 and x0 > run_start:
-                                        rr = region(q, data, depth, tc[0] + run_start, tc[0] + x0, tc[1] + y0, tc[1] + y0 + ch, plane, tc, 0)
+                                        rr = region(q, data, depth, fc[0] + run_start, fc[0] + x0, fc[1] + y0, fc[1] + y0 + ch, plane, tc, 0)
                                         a = run_w * (x0 - run_start) * ch
                                         total += a * rr[0]
                                         wsum += a
@@ -481,7 +494,7 @@ def essm_shade(
     v = float(1.0)
     if wsum > 0.0:
         v = wp.clamp(total / wsum, 0.0, 1.0)
-    vis[i] = v
+    vis[i] = front * v
     looks[i] = int(nlook)
     fallbacks[i] = int(nfb)
 
@@ -569,6 +582,7 @@ class ESSM(Technique):
     """Exponential soft shadow mapping: ESM-Z blockers, SAT tile grids, anisotropic ellipse kernels, micro-subdivision."""
 
     name = "essm"
+    distant_angle_limit = 50.0  # max point error 0.076 at 50 degrees, 0.195 at 60
     instancing_refusal = ""  # its maps draw instances (wsoft.raster.depth_map.instance_runs)
     summary = "exponential soft shadow mapping: ESM-Z blocker depth, overflow-free SAT tile grids, anisotropic kernels, micro-subdivision"
     Params = ESSMParams

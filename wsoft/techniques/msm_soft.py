@@ -38,6 +38,12 @@ penumbra MAE on ``ogre`` / ``dinosaurs`` 0.0263 / 0.0411 at the defaults, 0.0276
 alpha 3e-5, 0.0253 / 0.0430 at 3e-4; the full uint32 SAT at max_radius 512 (11 bits) 0.0257 /
 0.0411 at 1e-4 but MAE 0.0103 on ``ogre`` (0.0050 at 1e-3); bias 0.005 gives 0.0249 / 0.0459.
 
+A light across the receiver's tangent plane: only its front part lights the receiver
+(:mod:`wsoft.lightspace.halfspace`). The blocker search and the filter move to that part's
+bounding window (:func:`~wsoft.lightspace.halfspace.kernel_front`) and V is the window's visible
+fraction times the part's share of the light: exact for a rect light cut along an axis,
+approximate for an oblique cut or a disk; a light wholly in front keeps the kernel as it is.
+
 Known limits: like ``pcss`` it takes one blocker depth per receiver, so overlapping blockers at
 different depths give one penumbra; a receiver's own surface inside a large kernel (a curved or
 tilted receiver) counts as a blocker in front of it unless ``bias`` covers it (the JCGT 2017 code
@@ -55,6 +61,7 @@ import warp as wp
 
 from wsoft.accel.pyramid import effective_depth_range
 from wsoft.accel.sat import Moments, box_area, build_sat, check_sat_params, mean_pyramid, sat_box
+from wsoft.lightspace.halfspace import front_box, kernel_front
 from wsoft.lightspace.light import CYLINDER_KERNEL, LightKernel, light_kernel, spread_texels
 from wsoft.lightspace.moments import (
     QUANTISATION,
@@ -66,7 +73,7 @@ from wsoft.lightspace.moments import (
     quantise_moments,
     unbiased_intensity,
 )
-from wsoft.lightspace.view import ViewGPU, normalised_depth
+from wsoft.lightspace.view import ViewGPU, normalised_depth, view_dir
 from wsoft.parallel import launch_chunked
 from wsoft.params import LightViewParams, check_ranges
 from wsoft.raster.gbuffer import GBufferGPU, gb_mapped_receiver
@@ -193,17 +200,25 @@ def msm_soft_shade(
         return
     d_lin = pv[2]
     zf = normalised_depth(d_lin, q.zmin, q.zrange) - q.bias
+    # the light clipped to the receiver's front half-space: search and filter its part's window
+    mid, hs, front = kernel_front(lv, k, pv, view_dir(lv, gb.nrm[i]))
+    if front <= 0.0:
+        vis[i] = 0.0
+        return
     # 1. blocker search over the region where any caster could cover part of the light
     sh = spread_texels(lv, k, q.zmin, d_lin, 0.5, q.max_r)
-    r = hamburger_canonical(box_moments(q, data, tc[0] - sh[0], tc[0] + sh[0], tc[1] - sh[1], tc[1] + sh[1]), zf)
+    b = front_box(tc, sh, mid, hs, 0.5)
+    r = hamburger_canonical(box_moments(q, data, b[0], b[1], b[2], b[3]), zf)
     if unbiased_intensity(r[0], q.alpha, zf) <= LIT_BELOW:
+        vis[i] = front
         return
     z_occ = wp.clamp(r[1] / r[0], 0.0, wp.max(zf, 0.0))
     blocker[i] = z_occ
     # 2. penumbra from the average blocker depth, as in PCSS; 3. the Hamburger bound over it
     pen = spread_texels(lv, k, q.zmin + z_occ * q.zrange, d_lin, q.min_r, q.max_r)
-    g = hamburger_canonical(box_moments(q, data, tc[0] - pen[0], tc[0] + pen[0], tc[1] - pen[1], tc[1] + pen[1]), zf)[0]
-    vis[i] = 1.0 - unbiased_intensity(g, q.alpha, zf)
+    b = front_box(tc, pen, mid, hs, 0.5)
+    g = hamburger_canonical(box_moments(q, data, b[0], b[1], b[2], b[3]), zf)[0]
+    vis[i] = front * (1.0 - unbiased_intensity(g, q.alpha, zf))
 
 
 for _t in (wp.uint32, wp.float32):
@@ -214,6 +229,7 @@ class MSMSoft(Technique):
     """Moment soft shadow mapping: SATs of four depth moments, the moments' blocker depth, PCSS kernels, the Hamburger bound."""
 
     name = "msm_soft"
+    distant_angle_limit = 50.0  # max point error 0.074 at 50 degrees, 0.146 at 60
     instancing_refusal = ""  # its maps draw instances (wsoft.raster.depth_map.instance_runs)
     summary = "moment soft shadow mapping (moment shadow maps, not MSSM): SAT of four depth moments, blocker depth from the canonical 3-point distribution, PCSS kernel, Hamburger bound"
     Params = MSMSoftParams

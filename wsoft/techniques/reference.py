@@ -16,7 +16,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from wsoft.lightspace.light import disk_shaped
-from wsoft.raster.shadow_rays import ray_epsilon
 from wsoft.reference import TRAVERSALS, reference_pattern, trace_reference
 from wsoft.scene.device import upload_scene
 from wsoft.params import check_ranges
@@ -86,7 +85,7 @@ class Reference(Technique):
             if dynamic:  # occluders: the dynamic casters only (their own BVH, built once per device)
                 ds, _ = scene.dynamic_subset().device_copy(ctx.device, upload_scene)
             counters = ctx.counters(light)
-            vis, err = trace_reference(ds, L, res[gbuf], pattern, disk, ray_epsilon(res[gbuf], light), p.traversal, counters,
+            vis, err = trace_reference(ds, L, res[gbuf], pattern, disk, p.traversal, counters,
                                        excluded=light.shadow_excluded, max_distance=light.shadow_distance)
             if "packet_fallback" in counters:
                 ctx.ctx.warn(pass_name, f"traced ray by ray, not in packets: {counters['packet_fallback']}")

@@ -6,7 +6,7 @@ penumbra, guided by the G-buffer.
 
 **Rays.** The reference's own (:mod:`wsoft.reference`): the same stratified per-pixel sample sets
 (``samples`` 1 to 8; a jittered ``m x m`` grid for 1 and 4, else the randomly shifted rank-1
-lattice; every receiver's set drawn from its own random stream, so the noise is decorrelated
+lattice; every receiver's set drawn from its own key (counter-based), so the noise is decorrelated
 between pixels), the same offset origins, ray lengths, light points and receiver's horizon (a
 sample behind the tangent plane is blocked). With ``seed`` equal, a receiver's rays are exactly the
 rays of ``reference samples=N`` with the same ``N``, and ``denoiser=none`` is that reference bit for
@@ -109,7 +109,7 @@ from wsoft.params import check_ranges
 from wsoft.parallel import launch_chunked
 from wsoft.raster.camera import camera_gpu
 from wsoft.raster.gbuffer import GBufferGPU, gb_covered
-from wsoft.raster.shadow_rays import ray_epsilon, receiver_begin, shadow_ray_length
+from wsoft.raster.shadow_rays import receiver_begin, shadow_ray_length
 from wsoft.reference import reference_pattern
 from wsoft.scene.rays import Occluders, blocker_distance, occluders
 from wsoft.scene.types import LIGHT_CYLINDER, LIGHT_DISK, LIGHT_DISTANT, LIGHT_RECT, LIGHT_SPHERE
@@ -162,7 +162,6 @@ def trace_blockers(
     light: LightGPU,
     ls: LightSamples,
     gb: GBufferGPU,
-    eps: float,
     dmax: float,
     radius: float,
     distant: int,
@@ -191,7 +190,7 @@ def trace_blockers(
         return
     p = gb.pos[i]
     n = gb.nrm[i]
-    off, o, state, base, rot = receiver_begin(gb, ls, eps, i)
+    off, o, state, base, rot = receiver_begin(gb, ls, i)
     visible = int(0)
     front = int(0)
     nb = int(0)
@@ -282,7 +281,7 @@ def trace_estimate(ds, L: LightGPU, light, gb, samples: int, seed: int, radius_s
     dmax = float(light.shadow_distance) if light.shadow_distance >= 0.0 else -1.0
     pattern = reference_pattern(samples, seed, True)
     launch_chunked(trace_blockers, n,
-                   inputs=[occluders(ds, light.shadow_excluded), L, pattern.on(dev, disk_shaped(light)), gb.gpu(), ray_epsilon(gb, light),
+                   inputs=[occluders(ds, light.shadow_excluded), L, pattern.on(dev, disk_shaped(light)), gb.gpu(),
                            dmax, radius, int(distant), float(radius_scale)],
                    outputs=[out.vis, out.frac, out.hit, out.pen, out.traced, out.blocked], device=dev, min_chunk=256, per_thread=32)
     return out
@@ -293,6 +292,7 @@ class RTDenoise(Technique):
     by a SIGMA-style penumbra filter or SVGF's à-trous wavelet filter."""
 
     name = "rtdenoise"
+    distant_angle_limit = 40.0  # its denoiser's d tan(angle / 2) / 2 filter: max point error 0.087 at 40 degrees, 0.183 at 50
     summary = ("1-8 of the reference's shadow rays per pixel (closest hit: blocker distance), then a denoiser: SIGMA-style penumbra "
                "filter with tile skipping, SVGF à-trous, or none")
     Params = RTDenoiseParams

@@ -165,6 +165,7 @@ class Salzman(Technique):
     """Salzman's depth + mask map of dynamic casters, with far bound, transparency and a caster grid."""
 
     name = "salzman"
+    distant_angle_limit = 150.0  # its soft view, widened by tan(angle / 2), coarsens its blur: wide_sun's check fails from 160
     instancing_refusal = "its static/dynamic split and gated maps work on the soup's triangle lists"
     summary = "Salzman 2007: blurred depth+mask map of dynamic casters, reconstructed caster depth, far bound, transparency, caster grid, 8-bit option"
     Params = SalzmanParams

@@ -25,6 +25,12 @@ texels: min V 0.02 at 1024²). The receiver's depth is taken ``plane_slope_bias`
 plane's depth step nearer (:func:`~wsoft.lightspace.view.plane_depth_step`), against the map's own
 error at grazing angles.
 
+A light across the receiver's tangent plane: only its front part lights the receiver
+(:mod:`wsoft.lightspace.halfspace`). The blocker search and the filter move to that part's
+bounding window (:func:`~wsoft.lightspace.halfspace.kernel_front`) and V is the window's visible
+fraction times the part's share of the light: exact for a rect light cut along an axis,
+approximate for an oblique cut or a disk; a light wholly in front keeps the kernel as it is.
+
 Known failure: light bleeding with stacked occluders (``bleed`` reduces it).
 """
 
@@ -37,6 +43,7 @@ import warp as wp
 
 from wsoft.accel.pyramid import effective_depth_range
 from wsoft.accel.sat import DIRECT_TEXELS, Moments, box_area, build_sat, check_sat_params, direct_box, mean_pyramid, sat_box
+from wsoft.lightspace.halfspace import front_box, kernel_front
 from wsoft.lightspace.light import CYLINDER_KERNEL, LightKernel, light_kernel, spread_texels
 from wsoft.lightspace.moments import chebyshev_bound, moments_variance
 from wsoft.lightspace.view import ViewGPU, normalised_depth, plane_depth_step, receiver_plane_affine, receiver_plane_at, view_dir
@@ -217,17 +224,25 @@ def vssm_shade(
         pl.qp = qp
         pl.gx = gx
         pl.gy = gy
+    # the light clipped to the receiver's front half-space: search and filter its part's window
+    mid, hs, front = kernel_front(lv, k, pv, nv)
+    if front <= 0.0:
+        vis[i] = 0.0
+        return
     sh = spread_texels(lv, k, q.zmin, d_lin, 0.5, q.max_r)
-    r = vregion(q, lv, pl, data, basis, tc[0] - sh[0], tc[0] + sh[0], tc[1] - sh[1], tc[1] + sh[1], d)
+    b = front_box(tc, sh, mid, hs, 0.5)
+    r = vregion(q, lv, pl, data, basis, b[0], b[1], b[2], b[3], d)
     nl = r[2]
     occ = 1.0 - r[0]
     if occ <= 1.0e-4:
+        vis[i] = front
         looks[i] = int(nl)
         return
     z_occ = wp.clamp(r[1] / occ, 0.0, wp.max(d, 0.0))
     pen = spread_texels(lv, k, q.zmin + z_occ * q.zrange, d_lin, q.min_r, q.max_r)
-    s = vregion(q, lv, pl, data, basis, tc[0] - pen[0], tc[0] + pen[0], tc[1] - pen[1], tc[1] + pen[1], d)
-    vis[i] = wp.clamp(s[0], 0.0, 1.0)
+    b = front_box(tc, pen, mid, hs, 0.5)
+    s = vregion(q, lv, pl, data, basis, b[0], b[1], b[2], b[3], d)
+    vis[i] = front * wp.clamp(s[0], 0.0, 1.0)
     looks[i] = int(nl + s[2])
 
 
@@ -239,6 +254,7 @@ class VSSM(Technique):
     """Variance soft shadow mapping: SAT of depth moments, Chebyshev blocker estimate, kernel subdivision."""
 
     name = "vssm"
+    distant_angle_limit = 50.0  # max point error 0.076 at 50 degrees, 0.147 at 60
     instancing_refusal = ""  # its maps draw instances (wsoft.raster.depth_map.instance_runs)
     summary = "variance soft shadow mapping: SAT of depth moments, Chebyshev blocker estimate, subdivision of non-planar kernels"
     Params = VSSMParams

@@ -95,7 +95,9 @@ import warp as wp
 
 from wsoft.accel.izb_grid import build_grid, izb_test
 from wsoft.errors import ParameterError
+from wsoft.lightspace.cube import outside_view_remedy
 from wsoft.lightspace.fit import fit_light_view
+from wsoft.lightspace.light import reach_mask
 from wsoft.lightspace.view import outside_view_warning
 from wsoft.params import check_ranges
 from wsoft.raster.camera import camera_gpu
@@ -262,7 +264,7 @@ class IZB(Technique):
 
             def run_bounds(res):
                 gb = res[gbuf]
-                edge, hits = bounds_stencil_pass(p, gb, res[sk], *(res[k] for k in maps), cam, L, ray_epsilon(gb, light), may_shadow, n_sub,
+                edge, hits = bounds_stencil_pass(p, gb, res[sk], *(res[k] for k in maps), cam, L, ray_epsilon(gb), may_shadow, n_sub,
                                                  dev, counters)
                 return {stencil: edge, probes: hits}
 
@@ -296,7 +298,7 @@ class IZB(Technique):
 
         def run_samples(res):
             gb = res[gbuf]
-            smp = place_samples(p, gb, res[sk], cam, L, ray_epsilon(gb, light), dmax, n_sub, dev, counters,
+            smp = place_samples(p, gb, res[sk], cam, L, ray_epsilon(gb), dmax, n_sub, dev, counters,
                                 stencil=res[stencil] if stencil is not None else None, probes=res[probes] if probes is not None else None,
                                 msaa=res[msaa] if msaa is not None else None)
             return {samples_key: smp}
@@ -325,11 +327,16 @@ class IZB(Technique):
         def run_grid(res):
             ds, smp = res[sk], res[samples_key]
             ins_h = smp["insert"].numpy() != 0
+            insert = smp["insert"]
+            if light.shaping.coned:  # samples outside a shaped light's cone are masked (docs/outputs.md): not inserted
+                ins_h &= reach_mask(light, smp["origin"].numpy())
+                insert = wp.array(ins_h.astype(np.int32), dtype=wp.int32, device=dev)
             pts = smp["origin"].numpy()[ins_h]
             lo, hi = scene.bounds
             view = fit_light_view(light, pts if len(pts) else np.zeros((1, 3)), lo, hi, p.grid_size,
-                                  casters=scene.caster_points if light.kind == LIGHT_DISTANT else None)
-            grid = build_grid(view, smp["origin"], smp["dir"], smp["tmax"], smp["insert"], ds.points, ds.indices,
+                                  casters=scene.caster_points if light.kind == LIGHT_DISTANT else None,
+                                  all_casters=lambda: scene.caster_points)
+            grid = build_grid(view, smp["origin"], smp["dir"], smp["tmax"], insert, ds.points, ds.indices,
                               without_culling(ds.cutouts, ds.tri_total, dev), ds.has_cutouts, dev)
             ll = grid.list_lengths
             counters.update(
@@ -339,7 +346,10 @@ class IZB(Technique):
                 grid_bytes=grid.grid_bytes, list_bytes=grid.list_bytes,
             )
             if grid.outside:
-                ctx.ctx.warn(grid_pass, outside_view_warning(light, f"{grid.outside} shadow samples"))
+                from wsoft.techniques import unmapped_techniques
+
+                remedy = outside_view_remedy(light, None, unmapped_techniques(), no_cube=f"izb builds no cube map ({self.cube_refusal})")
+                ctx.ctx.warn(grid_pass, outside_view_warning(light, f"{grid.outside} shadow samples", remedy))
             return {grid_key: grid}
 
         ctx.add_pass(grid_pass, inputs=(sk, samples_key), outputs=(grid_key,), run=run_grid, stage="grid", light=light)

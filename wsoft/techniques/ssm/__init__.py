@@ -28,6 +28,10 @@ covered share (a clamped sum of areas, or an occlusion bitmask over light sample
   false`` takes ``ceil(l)`` alone (the transition artifacts of Fig. 1a). Without a finite
   budget nothing is smoothed or blended (Table 2's note).
 * Over-precision (§6): the queried region grows to the support of the level's micro-occluders.
+* A light across the receiver's tangent plane: only its front part lights the receiver
+  (:mod:`wsoft.lightspace.halfspace`); each backprojected area is clipped to the plane's line on
+  the light and V is the front part's share less the covered area (``bitmask``: the samples behind
+  the line are blocked from the start).
 * Multisampling (§7, with ``pixel_samples`` > 1): ``msaa = interpolate`` computes visibility
   once per pixel, on its first covered sample, and resolves each sample whose camera depth is
   not within ``tau`` of it from the 4-neighbour whose depth is closest; ``single`` gives every
@@ -332,6 +336,7 @@ class SSM(Technique):
     """Backprojection soft shadow mapping: micro-occluders, bitmasks, HSM/MSSM/YSM, budgets, smooth LOQ, MSAA."""
 
     name = "ssm"
+    distant_angle_limit = 110.0  # max point error 0.082 at 110 degrees, 0.134 at 120
     instancing_refusal = ""  # its maps draw instances (wsoft.raster.depth_map.instance_runs)
     summary = "backprojection soft shadow mapping (micropatches/microquads/microrects, area or bitmask, HSM/MSSM/YSM, budget, smooth LOQ, MSAA resolve)"
     Params = SSMParams

@@ -33,7 +33,9 @@ import warp as wp
 
 from wsoft.accel.ssm_structures import DepthRanges, depth_range, pyr_at
 from wsoft.raster.gbuffer import GBufferGPU, gb_covered, gb_index, gb_neighbour, gb_pixel
-from wsoft.lightspace.bitmask import mask_quad, mask_rect, mask_t, mask_visibility
+from wsoft.lightspace.bitmask import mask_behind, mask_quad, mask_rect, mask_t, mask_visibility
+from wsoft.lightspace.halfspace import box_in_front, clip_half, front_part, polygon_area, view_front_line
+from wsoft.lightspace.halfspace import poly_t as poly2_t
 from wsoft.lightspace.light import LightKernel, spread
 from wsoft.lightspace.view import (
     DEPTH_CLEAR,
@@ -302,8 +304,9 @@ def clip_polygon(xs: poly_t, ys: poly_t, n: int, axis: int, sign: float):
 
 
 @wp.func
-def quad_area(a: wp.vec2, b: wp.vec2, c: wp.vec2, d: wp.vec2) -> float:
-    """Share of the light square covered by the quadrilateral a b c d (clipped, shoelace)."""
+def quad_area(a: wp.vec2, b: wp.vec2, c: wp.vec2, d: wp.vec2, front: wp.vec3) -> float:
+    """Share of the light square covered by the quadrilateral a b c d in front of the receiver's
+    line ``front`` (:func:`~wsoft.lightspace.halfspace.view_front_line`; clipped, shoelace)."""
     xs = poly_t()
     ys = poly_t()
     xs[0] = a[0]
@@ -319,11 +322,12 @@ def quad_area(a: wp.vec2, b: wp.vec2, c: wp.vec2, d: wp.vec2) -> float:
     xs, ys, n = clip_polygon(xs, ys, n, 0, -1.0)
     xs, ys, n = clip_polygon(xs, ys, n, 1, 1.0)
     xs, ys, n = clip_polygon(xs, ys, n, 1, -1.0)
-    s = float(0.0)
+    P = poly2_t()
     for i in range(n):
-        j = (i + 1) % n
-        s += xs[i] * ys[j] - xs[j] * ys[i]
-    return 0.125 * wp.abs(s)
+        P[i, 0] = xs[i]
+        P[i, 1] = ys[i]
+    P, n = clip_half(P, n, front)
+    return 0.25 * wp.abs(polygon_area(P, n))
 
 
 # -- backprojection --------------------------------------------------------------------------
@@ -364,9 +368,12 @@ def level_visibility(
     nv: wp.vec3,
     a: wp.vec4,
     j: int,
+    front: wp.vec3,
 ) -> wp.vec2:
     """(visibility, micro-occluders processed) from the level-``j`` micro-occluders of the
-    search area ``a`` (level-0 texel coordinates)."""
+    search area ``a`` (level-0 texel coordinates), over the part of the light in front of the
+    receiver's line ``front`` (:func:`~wsoft.lightspace.halfspace.view_front_line`): the samples
+    behind it are blocked from the start, areas are clipped to it."""
     lv = st.lv
     k = st.k
     cell = 1 << j
@@ -391,6 +398,8 @@ def level_visibility(
     cx1 = wp.min(cx1, n - 1)
     cy1 = wp.min(cy1, n - 1)
     m = mask_t()
+    if st.bitmask != 0:
+        m = mask_behind(m, st.n, samples, front)
     covered = float(0.0)
     count = int(0)
     tw = 1.0 / lv.scale[0]
@@ -425,7 +434,7 @@ def level_visibility(
                 if st.bitmask != 0:
                     m = mask_quad(m, st.n, st.pattern, samples, qa, qb, qc, qd)
                 else:
-                    covered += quad_area(qa, qb, qc, qd)
+                    covered += quad_area(qa, qb, qc, qd, front)
                 continue
             # micropatches and microrects: rectangles
             t0 = wp.vec2(float(cx * cell), float(cy * cell))
@@ -464,12 +473,13 @@ def level_visibility(
             if st.bitmask != 0:
                 m = mask_rect(m, st.n, st.pattern, samples, lo, hi)
             else:
-                covered += rect_area(lo, hi)
+                covered += box_in_front(lo, hi, front)
     vis = float(0.0)
     if st.bitmask != 0:
         vis = mask_visibility(m, st.n)
     else:
-        vis = 1.0 - wp.min(covered, 1.0)
+        lit = front_part(wp.vec2(1.0, 1.0), 0, front)
+        vis = lit - wp.min(covered, lit)
     return wp.vec2(vis, float(count))
 
 
@@ -504,23 +514,25 @@ def backproject(
         return
     s = rid[i]
     pv = view_of(st.lv, gb.pos[s])
-    nv = light_facing(st.lv, pv, view_dir(st.lv, gb.nrm[s]))
+    nr = view_dir(st.lv, gb.nrm[s])
+    nv = light_facing(st.lv, pv, nr)
+    front = view_front_line(st.lv, st.k, pv, nr)  # the light clipped to the receiver's front half-space
     a = area[i]
     top = occ.top
     if st.blend == 0:
         j = wp.min(int(wp.ceil(loq_raw[i] - 1.0e-6)), top)
-        r = level_visibility(st, occ, mr_ext, mr_dep, samples, pv, nv, a, j)
+        r = level_visibility(st, occ, mr_ext, mr_dep, samples, pv, nv, a, j, front)
         vis[i] = r[0]
         processed[i] = int(r[1])
         return
     lev = wp.min(loq[i], float(top))
     j0 = int(wp.floor(lev))
     alpha = lev - float(j0)
-    r0 = level_visibility(st, occ, mr_ext, mr_dep, samples, pv, nv, a, j0)
+    r0 = level_visibility(st, occ, mr_ext, mr_dep, samples, pv, nv, a, j0, front)
     v = r0[0]
     cnt = int(r0[1])
     if alpha > 1.0e-4 and j0 < top:
-        r1 = level_visibility(st, occ, mr_ext, mr_dep, samples, pv, nv, a, j0 + 1)
+        r1 = level_visibility(st, occ, mr_ext, mr_dep, samples, pv, nv, a, j0 + 1, front)
         v = (1.0 - alpha) * v + alpha * r1[0]
         cnt += int(r1[1])
     vis[i] = v
