@@ -221,10 +221,18 @@ def _render_row(case: dict, earlier: list[dict]) -> dict:
                 techs.append((label, name, params))
         runs: dict[str, list[float]] = {}
         extra: dict[str, dict] = {}
-        for label, name, params in techs:  # warm-up: compiles, and each technique's peak memory
+        from wsoft.errors import WsoftError
+
+        refused = {}
+        for label, name, params in list(techs):  # warm-up: compiles, and each technique's peak memory
             _reset_hwm()
             before = _hwm_mib()
-            fr = wsoft.render(scene, (name, params), **kw)
+            try:
+                fr = wsoft.render(scene, (name, params), **kw)
+            except WsoftError as exc:  # a map beyond its range, a stage it would need flattened: said in the row
+                refused[label] = {"ms": None, "refused": exc.line()}
+                techs.remove((label, name, params))
+                continue
             kinds = fr.stats["timings_by_kind_ms"]
             extra[label] = {"rss_peak_mib": round(_hwm_mib(), 1), "rss_rise_mib": round(_hwm_mib() - before, 1), "device_bytes": int(sum(fr.stats["memory_bytes"].values())),
                             "counters": fr.counters() if hasattr(fr, "counters") else {}}
@@ -240,6 +248,7 @@ def _render_row(case: dict, earlier: list[dict]) -> dict:
                 extra[label]["gbuffer_ms"] = kinds.get("gbuffer", 0.0)
         out = {label: {"ms": float(statistics.median(v)), "runs": v, **extra[label]} for label, v in runs.items()}
         out.update(skipped)
+        out.update(refused)
         return {**{k: case[k] for k in ("axis", "value", "width", "height", "lights", "instances", "device")},
                 "triangles": info["triangles"], "load_s": load_s, "techniques": out}
 

@@ -64,7 +64,8 @@ def write_report(rows: list[dict], md: Path, ctx: dict) -> None:
           "rounds after a warm-up; *implied* is the exponent its algorithm implies; a fitted exponent more than 0.2 above it "
           "is marked **over**. Peak RSS is the process's (the stage, Warp's caches and every earlier technique's leftovers "
           "included); the rise is what the technique's own render added to it. `-`: not run at that point (its time extrapolated from the axis's earlier points passes "
-          "60 s; the prediction is in the rows).", ""]
+          "60 s; the prediction is in the rows), or refused there (a map beyond its parameter's range, a stage it would need "
+          "flattened: the reason is in the rows).", ""]
     for axis in ("triangles", "pixels", "map", "lights", "instances"):
         mine = sorted((r for r in rows if r.get("axis") == axis), key=size_of)
         if not mine:
