@@ -123,8 +123,8 @@ def _cost(case: dict) -> dict:
 
 
 def _sequence(case: dict) -> dict:
-    from wsoft.bench.harness import ground_truth, load, reference, scene_file
-    from wsoft.metrics.sequences import compare_sequence
+    from wsoft.bench.harness import load
+    from wsoft.bench.temporal import measure_sequence
     from wsoft.pipeline.build import refusal
     from wsoft.techniques import TECHNIQUES
 
@@ -132,14 +132,7 @@ def _sequence(case: dict) -> dict:
     scene = load(name)
     light = scene.lights[0]
     techs = [(t, {"samples": 16} if t == "reference" else {}) for t in sorted(TECHNIQUES) if refusal(t, scene, light) is None]
-    kw = dict(width=case["width"], height=case["height"], light=light.path, device=case["device"])
-
-    def truth(scene_t, t):
-        return ground_truth(name, reference(name, samples=case["ground_truth"], time=t, scene=scene_t, **kw), light.path)
-
-    seq = compare_sequence(scene_file(name), techs, frames=case["frames"], ground_truth=truth, **kw)
-    labels = list(seq.frames[0])
-    ll = seq.frames[0][labels[0]].stats["light_labels"][0]
+    seq, labels, ll, _ = measure_sequence(name, light.path, techs, case)
     entries = []
     for (tech, params), label in zip(techs, labels):
         frames = [fs[label] for fs in seq.frames]

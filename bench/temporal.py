@@ -90,13 +90,12 @@ def settings(scene, light, map_size: int, quick: bool) -> list[tuple[str, dict]]
     return out
 
 
-def run_case(case: dict, ctx: dict) -> dict:
+def measure_sequence(name: str, light: str, techs: list, case: dict):
+    """``techs`` over the bundled stage ``name``'s ``case["frames"]`` (``case``: width, height,
+    device, ground_truth samples) against the cached reference per frame: (the sequence, its labels in
+    ``techs``' order, the light's label, the reference's ms per frame)."""
     from wsoft.metrics.sequences import compare_sequence
 
-    name, light = case["scene"], case["light"]
-    scene = load(name)
-    L = scene.find_light(light)
-    techs = settings(scene, L, case["map"], case["quick"])
     kw = dict(width=case["width"], height=case["height"], light=light, device=case["device"])
     ref_ms: list[float] = []
 
@@ -107,7 +106,15 @@ def run_case(case: dict, ctx: dict) -> dict:
 
     seq = compare_sequence(scene_file(name), techs, frames=case["frames"], ground_truth=truth, **kw)
     labels = list(seq.frames[0])
-    ll = seq.frames[0][labels[0]].stats["light_labels"][0]
+    return seq, labels, seq.frames[0][labels[0]].stats["light_labels"][0], ref_ms
+
+
+def run_case(case: dict, ctx: dict) -> dict:
+    name, light = case["scene"], case["light"]
+    scene = load(name)
+    L = scene.find_light(light)
+    techs = settings(scene, L, case["map"], case["quick"])
+    seq, labels, ll, ref_ms = measure_sequence(name, light, techs, case)
     entries = []
     for (tech, params), label in zip(techs, labels):
         frames = [fs[label] for fs in seq.frames]
