@@ -10,9 +10,12 @@ draws alone.
   (:func:`~wsoft.lightspace.samples.counter_draw`: each a hash of the key, the sample and the
   dimension, none depending on another).
 
-``bench foundation``'s ``ray_throughput`` rows time both beside the pass (one thread): the pass
-less the first is what tracing costs inside the pass; the second is the floor under any
-generation that keeps the reference's samples, bit for bit.
+* :func:`covered_receivers` reads each receiver's G-buffer point and writes one value: what a
+  chunked launch over the frame's receivers costs on Warp's CPU backend before any ray.
+
+``bench foundation``'s ``ray_throughput`` rows time all three beside the pass (one thread): the
+pass less the first is what tracing costs inside the pass; the second is the floor under any
+generation that keeps the reference's samples, bit for bit; the third the floor under any pass.
 """
 
 from __future__ import annotations
@@ -80,3 +83,19 @@ def random_draws(
     for s in range(ls.count):
         keep += counter_draw(state, s, 0) + counter_draw(state, s, 1)
     vis[i] = keep
+
+
+@wp.kernel
+def covered_receivers(
+    offset: int,
+    gb: GBufferGPU,
+    # outputs
+    vis: wp.array[float],
+):
+    """Only the launch over the receivers: each covered receiver's point read, one value written."""
+    i = wp.tid() + offset
+    if not gb_covered(gb, i):
+        vis[i] = 1.0
+        return
+    p = gb.pos[i]
+    vis[i] = p[0] + p[1] + p[2]

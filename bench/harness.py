@@ -38,9 +38,10 @@ SWEEPS = {"foundation": "wsoft.bench.foundation", "filtered": "wsoft.bench.filte
           "instancing": "wsoft.bench.instancing", "stsv": "wsoft.bench.stsv", "modern": "wsoft.bench.modern",
           "temporal": "wsoft.bench.temporal", "cube": "wsoft.bench.cube", "distributed": "wsoft.bench.distributed",
           "auto": "wsoft.bench.auto", "skinning": "wsoft.bench.skinning",
-          "scaling": "wsoft.bench.scaling"}
+          "scaling": "wsoft.bench.scaling", "worlds": "wsoft.bench.worlds",
+          "lights": "wsoft.bench.lights"}
 SWEEP_ALIASES = {"usd_pipeline": "usd-pipeline"}  # other spellings `wsoft bench` accepts (words joined by "-" in SWEEPS)
-REFERENCE_VERSION = 6  # a key of the reference cache: bump it when the reference's V, V_stderr or shaded R, G, B change
+REFERENCE_VERSION = 7  # a key of the reference cache: bump it when the reference's V, V_stderr or shaded R, G, B change
 _SCENE_DIR: Path | None = None
 
 
@@ -293,7 +294,7 @@ def run_in_process(name: str, mod, todo: list[dict], ctx: dict, jsonl: Path) -> 
 def run_sweep(name: str, *, quick: bool = False, device: list[str] | None = None, out_dir: str = "reports", fresh: bool = False,
               scenes: str | None = None, workers: int | None = None, scheduler: str | None = None, resources: dict | None = None,
               threads_per_worker: int = 1, cache_dir: str | None = None, save: str | None = None, baseline: str | None = None,
-              time_threshold: float = 0.10, page=None) -> int:
+              time_threshold: float = 0.10, rounds: int = 16, timer: str = "cpu", page=None) -> int:
     """Run sweep ``name`` (see the module docstring). ``workers`` (an embedded Dask cluster of that many
     processes, ``threads_per_worker`` threads each) or ``scheduler`` (a running Dask scheduler's
     address) send its rows to Dask workers (:mod:`wsoft.bench.dist`); ``resources``: what each
@@ -302,7 +303,8 @@ def run_sweep(name: str, *, quick: bool = False, device: list[str] | None = None
     baseline ``save`` (``<out_dir>/baselines/NAME/``); ``baseline`` (a saved name, a baseline folder or
     a rows file) compares them with it, writes ``<out_dir>/<sweep>-regress.md`` and returns 1 on a
     regression (a slowdown beyond ``1 + time_threshold`` that the rounds' spread confirms, an error
-    grown beyond its floor and standard errors, a vanished row, a NaN). ``page``: called as
+    grown beyond its floor and standard errors, a vanished row, a NaN); ``rounds``: the gate's timed
+    rounds per render row and ``timer`` the time judged, cpu or wall (:mod:`wsoft.bench.regress_rounds`). ``page``: called as
     ``page(stem, rows, out_dir, baseline_rows)`` after the report, returning the path it wrote (the
     command line passes :func:`wsoft.bench.html_report.write_html`: ``<out_dir>/<stem>.html``)."""
     from wsoft.bench import regress
@@ -310,7 +312,7 @@ def run_sweep(name: str, *, quick: bool = False, device: list[str] | None = None
     from wsoft.parallel import resolve_device
 
     name = sweep_name(name)
-    gate = regress.before_sweep(save, baseline, out_dir, time_threshold)
+    gate = regress.before_sweep(save, baseline, out_dir, time_threshold, rounds)
     mod = importlib.import_module(SWEEPS[name])
     if scenes and not Path(scenes).is_dir():  # a bad --scenes is an error before anything runs (or is remembered)
         raise ParameterError(f"--scenes {scenes}: no such folder")
@@ -356,5 +358,5 @@ def run_sweep(name: str, *, quick: bool = False, device: list[str] | None = None
             base_rows = [r for r in finished_rows(gate.files[stem]) if r.get("key") in keys]
         written.append(page(stem, rows, out, base_rows))
     print(f"wrote {' and '.join(map(str, written))} ({len(rows)} rows){f'; {failed} rows failed' if failed else ''}", file=sys.stderr)
-    regressed = regress.after_sweep(stem, jsonl, keys, out, save, gate, time_threshold) if (save or gate) else 0
+    regressed = regress.after_sweep(stem, jsonl, keys, out, save, gate, time_threshold, rounds, timer) if (save or gate) else 0
     return 1 if failed or regressed else 0

@@ -3,7 +3,7 @@
 ``wsoft regress OLD NEW`` (:func:`main`) and ``wsoft bench SWEEP --baseline NAME|PATH`` compare
 rows that share their ``key``; each row flattens to named metrics
 (:func:`wsoft.bench.regress_rows.flatten`): per-round times judged by ratio and a Mann-Whitney U
-test, error metrics judged against a floor and the rows' standard errors
+test at a Šidák-corrected level over the run's time comparisons, error metrics judged against a floor and the rows' standard errors
 (:mod:`wsoft.bench.regress_stats` states both tests). A row of the baseline missing from the new
 rows, a metric that vanished or turned NaN are regressions. Rows timed on another machine (host,
 Warp's CPU threads or CPU model differ) are compared for accuracy only, and the report says so.
@@ -17,12 +17,15 @@ written to ``<out-dir>/<sweep>-regress.md`` by ``wsoft bench``); exit code 1 on 
 from __future__ import annotations
 
 import argparse
+import math
+import statistics
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from wsoft.bench.regress_rounds import ROUNDS, TIMERS, judged_time
 from wsoft.bench.regress_rows import Source, check_name, describe, flatten, machine_of, other_machine, pairs, resolve, rows_of, save
-from wsoft.bench.regress_stats import FLOORS, TIME_THRESHOLD, Z, Verdict, accuracy_verdict, count_verdict, time_verdict
+from wsoft.bench.regress_stats import ALPHA, FLOORS, TIME_THRESHOLD, Z, Verdict, accuracy_verdict, count_verdict, sidak, time_verdict
 
 
 @dataclass
@@ -47,6 +50,10 @@ class Comparison:
     added: list[str] = field(default_factory=list)  # rows only the new side has
     loads: dict[str, list[float]] = field(default_factory=dict)  # "old"/"new" -> the host's 1-minute load as each row finished
     cores: set = field(default_factory=set)
+    time_comparisons: int = 0  # the time metrics judged: the Šidák correction's k
+    time_level: float = ALPHA  # each time comparison's level, sidak(ALPHA, time_comparisons)
+    few_rounds: list[Finding] = field(default_factory=list)  # time metrics whose rounds cannot reach time_level
+    time_ratios: list[float] = field(default_factory=list)  # every judged time metric's ratio of medians new/old
 
     @property
     def regressions(self) -> list[Finding]:
@@ -61,17 +68,28 @@ def _show(x) -> str:
     if x is None:
         return "-"
     if isinstance(x, list):
-        import statistics
-
         xs = [v for v in x if v == v]
         return f"{statistics.median(xs):.2f} ms (med of {len(x)})" if xs else "-"
     return f"{x:.4g}" if isinstance(x, float) else str(x)
 
 
+def _record(out: Comparison, f: Finding) -> None:
+    if f.verdict.ratio is not None and math.isfinite(f.verdict.ratio):
+        out.time_ratios.append(f.verdict.ratio)
+    if f.verdict.kind in ("worse", "better"):
+        out.findings.append(f)
+    elif f.verdict.kind == "too few rounds":
+        out.few_rounds.append(f)
+    else:
+        out.unchanged[f.row] += 1
+
+
 def compare_rows(old: dict[str, dict], new: dict[str, dict], *, stem: str = "", fp_old: dict | None = None, fp_new: dict | None = None,
-                 time_threshold: float = TIME_THRESHOLD) -> Comparison:
-    """Compare rows by key (``old`` and ``new``: key -> row)."""
+                 time_threshold: float = TIME_THRESHOLD, timer: str = "cpu") -> Comparison:
+    """Compare rows by key (``old`` and ``new``: key -> row); ``timer``: which of the gate's timed
+    rounds are judged (:func:`~wsoft.bench.regress_rounds.judged_time`)."""
     out = Comparison(stem, len(old), len(new))
+    timed: list[tuple[str, str, object, object]] = []  # (row, metric, old, new): judged once their number is known
     for key, ro in old.items():
         what = describe(ro)
         rn = new.get(key)
@@ -82,28 +100,25 @@ def compare_rows(old: dict[str, dict], new: dict[str, dict], *, stem: str = "", 
         if why:
             out.time_not_judged[what] = why
         mo, mn = flatten(ro), flatten(rn)
-        same = 0
+        out.unchanged.setdefault(what, 0)
         for name, a in mo.items():
             b = mn.get(name)
             if b is None or b.kind != a.kind:
                 out.findings.append(Finding(what, name, _show(a.samples or a.value), "missing", Verdict("worse", "metric vanished")))
                 continue
             if a.kind == "time":
-                if why:
-                    continue
-                v = time_verdict(a.samples, b.samples, time_threshold)
-                shown = (_show(a.samples), _show(b.samples))
-            elif a.kind == "accuracy":
+                if not why and judged_time(name, mo, timer):
+                    timed.append((what, name, a, b))
+                continue
+            if a.kind == "accuracy":
                 v = accuracy_verdict(a.value, b.value, a.se, b.se, FLOORS.get(name.rsplit(".", 1)[-1].split("#")[0], 0.0))
-                shown = (_show(a.value), _show(b.value))
             else:
                 v = count_verdict(a.value, b.value)
-                shown = (_show(a.value), _show(b.value))
-            if v.kind in ("worse", "better"):
-                out.findings.append(Finding(what, name, *shown, v))
-            else:
-                same += 1
-        out.unchanged[what] = same
+            _record(out, Finding(what, name, _show(a.value), _show(b.value), v))
+    out.time_comparisons = len(timed)
+    out.time_level = sidak(ALPHA, len(timed))
+    for what, name, a, b in timed:
+        _record(out, Finding(what, name, _show(a.samples), _show(b.samples), time_verdict(a.samples, b.samples, time_threshold, out.time_level)))
     out.added = [describe(r) for k, r in new.items() if k not in old]
     for side, rows in (("old", old), ("new", new)):
         out.loads[side] = [float(r["machine"]["load"]) for r in rows.values() if (r.get("machine") or {}).get("load") is not None]
@@ -111,19 +126,21 @@ def compare_rows(old: dict[str, dict], new: dict[str, dict], *, stem: str = "", 
     return out
 
 
-def compare(old: Source, new: Source, time_threshold: float = TIME_THRESHOLD) -> list[Comparison]:
+def compare(old: Source, new: Source, time_threshold: float = TIME_THRESHOLD, timer: str = "cpu") -> list[Comparison]:
     """Compare every rows file the two sources share (:func:`~wsoft.bench.regress_rows.pairs`)."""
-    return [compare_rows(rows_of(fo), rows_of(fn), stem=stem, fp_old=old.fingerprint, fp_new=new.fingerprint, time_threshold=time_threshold)
-            for stem, fo, fn in pairs(old, new)]
+    return [compare_rows(rows_of(fo), rows_of(fn), stem=stem, fp_old=old.fingerprint, fp_new=new.fingerprint, time_threshold=time_threshold,
+                         timer=timer) for stem, fo, fn in pairs(old, new)]
 
 
-def report(results: list[Comparison], old: str, new: str, time_threshold: float = TIME_THRESHOLD) -> str:
+def report(results: list[Comparison], old: str, new: str, time_threshold: float = TIME_THRESHOLD, timer: str = "cpu") -> str:
     """The markdown report of :func:`compare`'s results."""
     L = [f"# Regression gate: `{new}` against `{old}`", ""]
-    L.append(f"Time: ratio of medians new/old over the per-round times; a slowdown counts beyond x{1 + time_threshold:.2f} when a one-sided "
-             "Mann-Whitney U test rejects at 0.05 (with too few rounds for the test: the fastest new round beyond the slowest old one "
-             f"x{1 + time_threshold:.2f}). Accuracy: a change counts beyond max(floor, {Z:g} x sqrt(se_old^2 + se_new^2)), floors "
-             + ", ".join(f"{k} {v:g}" for k, v in FLOORS.items()) + "; a vanished row or metric, or a new NaN, is a regression.")
+    L.append(f"Time ({'CPU time, every thread of the process' if timer == 'cpu' else 'wall clock'} of the gate's timed rounds, "
+             "where the rows have them): ratio of medians new/old over the per-round times; a change counts beyond x{1 + time_threshold:.2f} (or below "
+             f"x{1 / (1 + time_threshold):.2f}) when a two-sided Mann-Whitney U test over the rounds also rejects, at a level Šidák-corrected "
+             f"for the run's time comparisons (any false alarm in a run: {ALPHA:g}). Accuracy: a change counts beyond max(floor, {Z:g} x "
+             "sqrt(se_old^2 + se_new^2)), floors " + ", ".join(f"{k} {v:g}" for k, v in FLOORS.items())
+             + "; a vanished row or metric, or a new NaN, is a regression.")
     for c in results:
         reg, imp = c.regressions, c.improvements
         L += ["", f"## `{c.stem}`: {len(reg)} regressions, {len(imp)} improvements ({c.old_rows} rows before, {c.new_rows} now)", ""]
@@ -135,6 +152,21 @@ def report(results: list[Comparison], old: str, new: str, time_threshold: float 
             L.append("")
         if time_threshold == float("inf"):
             L += ["**Times not judged** (`--time-threshold inf`): accuracy only.", ""]
+        if c.time_comparisons and time_threshold != float("inf"):
+            L.append(f"{c.time_comparisons} time comparisons, each U test at level {c.time_level:.3g}.")
+            whole = statistics.median(c.time_ratios) if len(c.time_ratios) >= 3 else 1.0
+            if not 1 / (1 + time_threshold) <= whole <= 1 + time_threshold:
+                L.append(f"The run's time metrics moved together: their median ratio is x{whole:.2f}, a change of the host (its load, "
+                         "clocks or another job's use of shared caches) or one shared by every row; rerun both sides on a host that runs "
+                         "nothing else before reading a time verdict.")
+            L.append("")
+        if c.few_rounds:
+            L += [f"**Times not judged: too few rounds** for {len(c.few_rounds)} of {c.time_comparisons} time metrics: their rounds can never "
+                  f"reach the level {c.time_level:.3g} (two-sided, every new round beyond every old one gives 2 / C(m + n, m)); rerun both sides "
+                  "with more rounds (`wsoft bench --rounds 16`). Beyond the threshold but not judged:", ""]
+            beyond = [f for f in c.few_rounds if _beyond(f.verdict, time_threshold)]
+            L += [f"- {f.row} {f.metric}: {f.old} -> {f.new}, {f.verdict.how}" for f in beyond] or ["- none"]
+            L.append("")
         if c.time_not_judged:
             whys = sorted(set(c.time_not_judged.values()))
             L.append(f"**Times not judged** for {len(c.time_not_judged)} rows measured on another machine ({'; '.join(whys)}): "
@@ -157,6 +189,11 @@ def report(results: list[Comparison], old: str, new: str, time_threshold: float 
     return "\n".join(L).rstrip() + "\n"
 
 
+def _beyond(v: Verdict, threshold: float) -> bool:
+    """Whether a time verdict's ratio lies beyond the threshold either way."""
+    return v.ratio is not None and (v.ratio > 1 + threshold or v.ratio < 1 / (1 + threshold))
+
+
 def failed(results: list[Comparison]) -> bool:
     return any(c.regressions for c in results)
 
@@ -171,11 +208,26 @@ def add_gate_arguments(parser: argparse.ArgumentParser) -> None:
                         "a .jsonl rows file); exit 1 on a regression, report in <out-dir>/<sweep>-regress.md")
     parser.add_argument("--time-threshold", type=float, default=TIME_THRESHOLD, metavar="F",
                         help=f"a slowdown counts beyond 1+F times the baseline (default {TIME_THRESHOLD}; inf: judge no time)")
+    parser.add_argument("--rounds", type=int, default=ROUNDS, metavar="N",
+                        help=f"with --save or --baseline: time every render row N more times after the sweep, round by round across the "
+                        f"rows in alternating order, for the gate's rank test (default {ROUNDS}; 0: the sweep's own 3 rounds, too few "
+                        "for the test)")
+    parser.add_argument("--timer", choices=TIMERS, default="cpu", help="which time of the timed rounds the gate judges: cpu (the "
+                        "process's CPU time, what other jobs on the host add least to; default) or wall (the wall clock: on a runner "
+                        "that runs nothing else)")
 
 
 def gate_kwargs(args) -> dict:
     """:func:`~wsoft.bench.harness.run_sweep`'s gate arguments from :func:`add_gate_arguments`' options."""
-    return {"save": args.save, "baseline": args.baseline, "time_threshold": args.time_threshold}
+    return {"save": args.save, "baseline": args.baseline, "time_threshold": args.time_threshold, "rounds": args.rounds,
+            "timer": args.timer}
+
+
+def check_rounds(n: int) -> None:
+    from wsoft.errors import ParameterError
+
+    if not 0 <= n <= 1000:
+        raise ParameterError(f"--rounds {n}: give a number of rounds in [0, 1000] ({ROUNDS}: the default)")
 
 
 def check_threshold(t: float) -> None:
@@ -185,21 +237,26 @@ def check_threshold(t: float) -> None:
         raise ParameterError(f"--time-threshold {t}: give a fraction in [0, 10) (0.10: 10 % slower), or inf to judge no time")
 
 
-def before_sweep(save_name: str | None, baseline: str | None, out_dir: str | Path, time_threshold: float) -> Source | None:
+def before_sweep(save_name: str | None, baseline: str | None, out_dir: str | Path, time_threshold: float, rounds: int = ROUNDS) -> Source | None:
     """Check the gate's options before a sweep runs: the baseline exists, the name is a name."""
     check_threshold(time_threshold)
+    check_rounds(rounds)
     if save_name is not None:
         check_name(save_name)
     return resolve(baseline, out_dir, "--baseline") if baseline else None
 
 
 def after_sweep(stem: str, jsonl: Path, keys: set[str], out_dir: str | Path, save_name: str | None, baseline: Source | None,
-                time_threshold: float) -> int:
-    """After a sweep: compare its rows (those of ``keys`` in ``jsonl``) with ``baseline``, writing
+                time_threshold: float, rounds: int = ROUNDS, timer: str = "cpu") -> int:
+    """After a sweep: time its render rows ``rounds`` more times (:func:`~wsoft.bench.regress_rounds.time_rounds`),
+    compare its rows (those of ``keys`` in ``jsonl``) with ``baseline``, writing
     ``<out_dir>/<stem>-regress.md`` and printing it, then save them as ``save_name`` unless they
     regressed; 1 on a regression."""
+    from wsoft.bench.regress_rounds import time_rounds
     from wsoft.bench.regress_rows import fingerprint
 
+    if not (baseline is None and save_name is None) and time_threshold != float("inf"):
+        time_rounds(Path(jsonl), keys, rounds)
     new = {k: r for k, r in rows_of(jsonl).items() if k in keys}
     rc = 0
     if baseline is not None:
@@ -208,8 +265,9 @@ def after_sweep(stem: str, jsonl: Path, keys: set[str], out_dir: str | Path, sav
             from wsoft.errors import ParameterError
 
             raise ParameterError(f"--baseline {baseline.given}: holds no {stem}.jsonl (it holds {', '.join(baseline.files)})")
-        results = [compare_rows(rows_of(base), new, stem=stem, fp_old=baseline.fingerprint, fp_new=fingerprint(), time_threshold=time_threshold)]
-        text = report(results, baseline.given, str(jsonl), time_threshold)
+        results = [compare_rows(rows_of(base), new, stem=stem, fp_old=baseline.fingerprint, fp_new=fingerprint(), time_threshold=time_threshold,
+                                   timer=timer)]
+        text = report(results, baseline.given, str(jsonl), time_threshold, timer)
         md = Path(out_dir) / f"{stem}-regress.md"
         md.write_text(text)
         print(text)
@@ -236,6 +294,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out-dir", default="reports", help="where saved baselines are looked up by name (<out-dir>/baselines/NAME; default ./reports)")
     p.add_argument("--time-threshold", type=float, default=TIME_THRESHOLD, metavar="F",
                    help=f"a slowdown counts beyond 1+F times the baseline (default {TIME_THRESHOLD}; inf: judge no time)")
+    p.add_argument("--timer", choices=TIMERS, default="cpu", help="which time of the gate's timed rounds to judge: cpu (default) or wall")
     p.add_argument("--output", metavar="FILE.md", help="also write the report there")
 
 
@@ -243,8 +302,8 @@ def run(args) -> int:
     """``wsoft regress`` on parsed arguments (:func:`parser`); errors raise :class:`~wsoft.errors.WsoftError`."""
     check_threshold(args.time_threshold)
     old, new = resolve(args.old, args.out_dir), resolve(args.new, args.out_dir)
-    results = compare(old, new, args.time_threshold)
-    text = report(results, args.old, args.new, args.time_threshold)
+    results = compare(old, new, args.time_threshold, args.timer)
+    text = report(results, args.old, args.new, args.time_threshold, args.timer)
     print(text, end="")
     if args.output:
         Path(args.output).write_text(text)

@@ -4,7 +4,8 @@ the machine that measured them.
 
 A row flattens to ``<label>.<metric>`` names whatever its sweep: a row of one technique (``label``
 or ``technique``) gives ``pcf.frame_ms`` (its ``timings_ms_runs``), ``pcf.mae_penumbra``,
-``pcf.flip``, ``pcf.nan_pixels``; a row holding several techniques in ``entries`` (``pareto``,
+``pcf.flip``, ``pcf.nan_pixels`` (the time from the gate's timed rounds ``frame_ms_rounds`` where the
+row has them, with ``pcf.frame_cpu_ms`` from ``frame_cpu_ms_rounds``, :mod:`wsoft.bench.regress_rounds`); a row holding several techniques in ``entries`` (``pareto``,
 ``temporal``, ``cube``, ``modern``) gives one set per entry label (``dcs(grid_size=1024).frame_ms``
 from ``frame_ms_runs``, or from ``frame_ms_frames`` the sequence's per-frame times; ``esm.flicker``
 with its ``flicker_se``); other ``*_ms_runs`` lists are time metrics of their own name.
@@ -24,7 +25,9 @@ BASELINES = "baselines"  # <out-dir>/baselines/NAME/ holds a saved baseline
 FINGERPRINT = "fingerprint.json"
 ACCURACY = tuple(FLOORS)  # error metrics judged against their floor and standard errors
 COUNTS = ("nan_pixels", "flip_nan_pixels")  # counts that must not grow
-TIME_NAMES = {"timings_ms_runs": "frame_ms", "frame_ms_runs": "frame_ms", "frame_ms_frames": "frame_ms"}
+TIME_NAMES = {"timings_ms_runs": "frame_ms", "frame_ms_runs": "frame_ms", "frame_ms_frames": "frame_ms", "frame_ms_rounds": "frame_ms",
+              "frame_cpu_ms_rounds": "frame_cpu_ms"}
+ROUNDS_OVER = {"frame_ms_rounds": "timings_ms_runs"}  # the gate's timed rounds, when a row has them, stand for the sweep's own
 TRANSPARENT = ("error", "temporal")  # containers whose metrics are the entry's own (no name part)
 SKIP = frozenset({"machine", "worker", "case", "key", "counters", "counters_last", "memory_bytes", "cpu_ms", "timings_ms", "timings_by_kind_ms",
                   "by_kind_ms", "pass_kinds", "pass_stages", "passes", "warnings", "params", "facing", "not_facing", "worst_frame", "cost"})
@@ -73,8 +76,9 @@ def flatten(row: dict) -> dict[str, Metric]:
 
     def walk(obj: dict, prefix: str, context: dict) -> None:
         context = {**context, **obj}
+        hidden = {ROUNDS_OVER[k] for k in obj if k in ROUNDS_OVER}
         for k, v in obj.items():
-            if k in SKIP:
+            if k in SKIP or k in hidden:
                 continue
             tname = _time_name(k)
             if tname and isinstance(v, list):

@@ -1,15 +1,19 @@
 """The regression gate's two tests, on plain numbers (no rows, no files).
 
-**Time** (after airspeed velocity's ``asv continuous``): the ratio of the medians new/old of a
-metric's per-round times, judged against the rounds' spread. A slowdown counts when the ratio
-exceeds ``1 + threshold`` *and* a one-sided Mann-Whitney U test (``scipy.stats.mannwhitneyu``,
-alternative "new rounds are slower") rejects at ``ALPHA``. The test can only reject when its
-smallest attainable p-value, ``1 / C(m + n, m)`` for m old and n new rounds, is at most
-``ALPHA``: 3 rounds against 3 reach exactly 0.05 (every new round slower than every old one).
-With fewer rounds (1 or 2 on a side, or 2 against 4) the test is replaced by the spread rule:
-a slowdown counts when the *fastest* new round is slower than the *slowest* old round times
-``1 + threshold``. Speed-ups are judged the same way, mirrored (ratio below ``1 / (1 + threshold)``).
-An infinite threshold judges no time (the gate on accuracy alone).
+**Time** (after airspeed velocity's ``asv continuous`` and its ``is_different``): the ratio of the
+medians new/old of a metric's per-round times, judged against the rounds' spread. A slowdown counts
+when the ratio exceeds ``1 + threshold`` *and* a two-sided Mann-Whitney U test over the rounds
+(``scipy.stats.mannwhitneyu``) gives p at most the run's corrected level: ``ALPHA`` (0.05) is the
+chance of any false alarm over the run's k time comparisons, so each comparison is tested at
+Šidák's ``1 - (1 - ALPHA) ** (1 / k)`` (:func:`sidak`; 40 comparisons: 0.00128). Both conditions are
+required: a significant change below the threshold is unchanged, and so is a ratio beyond it that
+the rounds' spread does not confirm. Speed-ups are judged the same way, mirrored (ratio below
+``1 / (1 + threshold)``). The test can reject only when its smallest attainable p-value,
+``2 / C(m + n, m)`` for m old and n new rounds (every new round beyond every old one), is at most
+that level (:func:`min_p`; 3 against 3: 0.1, 8 against 8: 0.00016); a metric whose rounds cannot
+reach it is "too few rounds", never judged, and the report says so: the gate's timed rounds
+(:mod:`wsoft.bench.regress_rounds`, 16 by default) reach any level a run needs. An
+infinite threshold judges no time (the gate on accuracy alone).
 
 **Accuracy** (penumbra MAE, ꟻLIP, flicker: lower is better): the change ``d = new - old`` counts
 when ``|d| > max(floor, Z * sqrt(se_old**2 + se_new**2))``, with each side's standard error as
@@ -26,7 +30,7 @@ import math
 import statistics
 from dataclasses import dataclass
 
-ALPHA = 0.05  # the U test's level
+ALPHA = 0.05  # the chance of any time false alarm in one comparison of two runs (Šidák-corrected per comparison)
 Z = 3.0  # standard errors an accuracy change must exceed
 TIME_THRESHOLD = 0.10  # default: a slowdown counts from 10 % on
 # the smallest change of each accuracy metric that counts (absolute, in the metric's units):
@@ -40,24 +44,35 @@ FLOORS = {"mae_penumbra": 0.002, "flip": 0.001, "flicker": 0.001}
 
 @dataclass
 class Verdict:
-    """What a test found: ``kind`` is "worse", "better", "same" or "not judged"; ``how`` says why
+    """What a test found: ``kind`` is "worse", "better", "same", "not judged" or (a time metric)
+    "too few rounds"; ``how`` says why
     in a few words (the ratio and p-value, or the change and its tolerance)."""
 
     kind: str
     how: str
+    ratio: float | None = None  # a time metric's ratio of medians new/old
 
 
 def _finite(xs) -> list[float]:
     return [float(x) for x in xs if x is not None and math.isfinite(float(x))]
 
 
+def sidak(alpha: float, k: int) -> float:
+    """The level of each of ``k`` independent tests that keeps the chance of any false rejection at
+    ``alpha`` (Šidák): ``1 - (1 - alpha) ** (1 / k)``."""
+    return 1.0 - (1.0 - alpha) ** (1.0 / max(k, 1))
+
+
 def min_p(m: int, n: int) -> float:
-    """The smallest p-value a one-sided U test of m against n samples can give: ``1 / C(m+n, m)``."""
-    return 1.0 / math.comb(m + n, m) if m and n else 1.0
+    """The smallest p-value a two-sided U test of m against n samples can give: ``2 / C(m+n, m)``
+    (every sample of one side beyond every sample of the other), at most 1."""
+    return min(1.0, 2.0 / math.comb(m + n, m)) if m and n else 1.0
 
 
 def time_verdict(old, new, threshold: float = TIME_THRESHOLD, alpha: float = ALPHA) -> Verdict:
-    """Judge per-round times ``old`` against ``new`` (see the module docstring)."""
+    """Judge per-round times ``old`` against ``new`` at the per-comparison level ``alpha`` (the
+    caller's Šidák-corrected level, :func:`sidak`; see the module docstring). ``kind`` is
+    "too few rounds" when the rounds cannot reach ``alpha`` whatever they hold."""
     a, b = _finite(old), _finite(new)
     if not b:
         return Verdict("worse", "no finite time")
@@ -65,24 +80,20 @@ def time_verdict(old, new, threshold: float = TIME_THRESHOLD, alpha: float = ALP
         return Verdict("not judged", "no old time")
     ratio = statistics.median(b) / statistics.median(a) if statistics.median(a) > 0 else math.inf
     if math.isinf(threshold):
-        return Verdict("not judged", f"x{ratio:.2f} (no threshold)")
+        return Verdict("not judged", f"x{ratio:.2f} (no threshold)", ratio)
     hi, lo = 1.0 + threshold, 1.0 / (1.0 + threshold)
-    if min_p(len(a), len(b)) <= alpha:
-        from scipy.stats import mannwhitneyu
+    floor_p = min_p(len(a), len(b))
+    if floor_p > alpha:
+        return Verdict("too few rounds", f"x{ratio:.2f}; {len(a)} vs {len(b)} rounds: smallest p {floor_p:.3g} > level {alpha:.3g}", ratio)
+    if lo <= ratio <= hi:
+        return Verdict("same", f"x{ratio:.2f}", ratio)
+    from scipy.stats import mannwhitneyu
 
-        if ratio > hi:
-            p = float(mannwhitneyu(b, a, alternative="greater").pvalue)
-            return Verdict("worse" if p <= alpha else "same", f"x{ratio:.2f}, U test p={p:.3f}")
-        if ratio < lo:
-            p = float(mannwhitneyu(b, a, alternative="less").pvalue)
-            return Verdict("better" if p <= alpha else "same", f"x{ratio:.2f}, U test p={p:.3f}")
-        return Verdict("same", f"x{ratio:.2f}")
-    rounds = f"{len(a)} vs {len(b)} rounds"
-    if ratio > hi and min(b) > max(a) * hi:
-        return Verdict("worse", f"x{ratio:.2f}, fastest new > slowest old x{hi:.2f} ({rounds})")
-    if ratio < lo and max(b) < min(a) * lo:
-        return Verdict("better", f"x{ratio:.2f}, slowest new < fastest old x{lo:.2f} ({rounds})")
-    return Verdict("same", f"x{ratio:.2f} ({rounds})")
+    p = float(mannwhitneyu(b, a, alternative="two-sided").pvalue)
+    how = f"x{ratio:.2f}, U test p={p:.2g} (level {alpha:.2g}, {len(a)} vs {len(b)} rounds)"
+    if p > alpha:
+        return Verdict("same", how, ratio)
+    return Verdict("worse" if ratio > hi else "better", how, ratio)
 
 
 def spread_se(samples) -> float:

@@ -17,11 +17,14 @@ row varies one axis from the base (:data:`BASE`) and runs in a child process of 
 
 In a row, every technique (the reference at 16 samples) renders once to warm up (its kernels
 compile), then :data:`ROUNDS` alternating rounds over the techniques (medians); a technique's time
-is its passes past the scene and the G-buffer (light maps, its own passes, the reference's), its
-memory the device bytes its passes hold and the process's peak RSS while it rendered (Linux's
-``VmHWM``, reset before each technique through ``/proc/self/clear_refs``). A technique whose time
-at the row's point, extrapolated from the axis's earlier rows, passes :data:`BUDGET_S` is not run
-there: the row records the prediction instead.
+is its passes past the scene and the G-buffer (light maps, its own passes, the reference's), wall
+and CPU (every thread's: :func:`technique_cpu_ms`, steadier on a shared machine), its memory the
+device bytes its passes hold and the process's peak RSS while it rendered (Linux's ``VmHWM``,
+reset before each technique through ``/proc/self/clear_refs``). A technique whose time at the
+row's point, extrapolated from the axis's earlier rows (:func:`_predicted_s`), passes
+:data:`BUDGET_S` is not run there (:func:`over_budget`): the row records the prediction instead.
+The loading rows record wall and CPU seconds of each step. The axes run cheapest first (map sizes
+last: an 8192² map per technique costs the most).
 
 The report fits each technique's exponent per axis (the slope of log time on log size, least
 squares over the measured points) beside the exponent its algorithm implies (:func:`implied`);
@@ -68,7 +71,7 @@ def cases(quick: bool, devices: list[str]) -> list[dict]:
     base = QUICK_BASE if quick else BASE
     out = []
     for dev in devices:
-        for axis in ("triangles", "pixels", "map", "lights", "instances", "loading"):
+        for axis in ("triangles", "pixels", "loading", "lights", "instances", "map"):  # the cheapest axes first
             for v in axis_values(axis, quick):
                 c = {**base, "axis": axis, "device": dev, "quick": quick}
                 if axis == "pixels":
@@ -200,6 +203,17 @@ def _predicted_s(case: dict, label: str, earlier: list[dict]) -> float | None:
     return y1 * (x / x1) ** max(k, 0.0)
 
 
+def technique_cpu_ms(stats: dict) -> float:
+    """The CPU milliseconds (every thread's) of a frame's passes past the scene and the G-buffer."""
+    return float(sum(ms for name, ms in stats["cpu_ms"].items() if stats["pass_kinds"].get(name) not in SCENE_KINDS))
+
+
+def over_budget(predicted_s: float | None) -> bool:
+    """Is a technique's predicted time at a row (:func:`_predicted_s`: the whole frame's, every light
+    of it included, as the axis's earlier rows measured it) past :data:`BUDGET_S`?"""
+    return predicted_s is not None and predicted_s > BUDGET_S
+
+
 def _render_row(case: dict, earlier: list[dict]) -> dict:
     import wsoft
     from wsoft.pipeline.loading import load_stage
@@ -215,11 +229,12 @@ def _render_row(case: dict, earlier: list[dict]) -> dict:
         techs, skipped = [], {}
         for label, name, params in _settings(scene, case):
             pred = _predicted_s(case, label, earlier)
-            if pred is not None and pred * len(lights) > BUDGET_S:
+            if over_budget(pred):
                 skipped[label] = {"ms": None, "predicted_s": round(pred, 2)}
             else:
                 techs.append((label, name, params))
         runs: dict[str, list[float]] = {}
+        cpu_runs: dict[str, list[float]] = {}  # the same passes' CPU time (every thread's), steadier than wall time on a shared machine
         extra: dict[str, dict] = {}
         from wsoft.errors import WsoftError
 
@@ -234,10 +249,13 @@ def _render_row(case: dict, earlier: list[dict]) -> dict:
                 techs.remove((label, name, params))
                 continue
             kinds = fr.stats["timings_by_kind_ms"]
+            cpu_runs[label] = []
             extra[label] = {"rss_peak_mib": round(_hwm_mib(), 1), "rss_rise_mib": round(_hwm_mib() - before, 1), "device_bytes": int(sum(fr.stats["memory_bytes"].values())),
                             "counters": fr.counters() if hasattr(fr, "counters") else {}}
             first = sum(v for k, v in kinds.items() if k not in SCENE_KINDS)
             runs[label] = [first] if first / 1e3 > BUDGET_S / ROUNDS else []
+            if runs[label]:
+                cpu_runs[label].append(technique_cpu_ms(fr.stats))
         for _ in range(ROUNDS):
             for label, name, params in techs:
                 if len(runs[label]) and runs[label][0] / 1e3 > BUDGET_S / ROUNDS:
@@ -245,12 +263,36 @@ def _render_row(case: dict, earlier: list[dict]) -> dict:
                 fr = wsoft.render(scene, (name, params), **kw)
                 kinds = fr.stats["timings_by_kind_ms"]
                 runs[label].append(sum(v for k, v in kinds.items() if k not in SCENE_KINDS))
+                cpu_runs[label].append(technique_cpu_ms(fr.stats))
                 extra[label]["gbuffer_ms"] = kinds.get("gbuffer", 0.0)
-        out = {label: {"ms": float(statistics.median(v)), "runs": v, **extra[label]} for label, v in runs.items()}
+        out = {label: {"ms": float(statistics.median(v)), "runs": v, "cpu_ms": float(statistics.median(cpu_runs[label])), **extra[label]}
+               for label, v in runs.items()}
         out.update(skipped)
         out.update(refused)
         return {**{k: case[k] for k in ("axis", "value", "width", "height", "lights", "instances", "device")},
                 "triangles": info["triangles"], "load_s": load_s, "techniques": out}
+
+
+PROFILE_TRIANGLES = 2_000_000  # loading rows up to this size also profile a second load (where its time goes)
+
+
+def load_profile(path: str, top: int = 6) -> dict[str, float]:
+    """Where ``load_stage(path)`` spends its time: a second load under cProfile, the ``top`` functions
+    by their own time (``file:function`` -> share of the profiled total, which cProfile inflates
+    for Python-heavy code alike)."""
+    import cProfile
+    import pstats
+
+    from wsoft.pipeline.loading import load_stage
+
+    prof = cProfile.Profile()
+    prof.enable()
+    load_stage(path)
+    prof.disable()
+    st = pstats.Stats(prof).stats
+    total = sum(v[2] for v in st.values()) or 1.0
+    own = sorted(((v[2], f"{Path(k[0]).name}:{k[2]}") for k, v in st.items()), reverse=True)[:top]
+    return {name: round(sec / total, 3) for sec, name in own}
 
 
 def _loading_row(case: dict) -> dict:
@@ -264,27 +306,33 @@ def _loading_row(case: dict) -> dict:
         path = os.path.join(d, "sheet.usdc")
         info = sheet_stage(case, path)
         t = {}
+        c0 = time.process_time()
         t0 = time.perf_counter()
         stage = Usd.Stage.Open(path)
         mesh = UsdGeom.Mesh(stage.GetPrimAtPath("/World/Sheet"))
         pts = np.asarray(mesh.GetPointsAttr().Get())
         idx = np.asarray(mesh.GetFaceVertexIndicesAttr().Get())
         np.asarray(mesh.GetFaceVertexCountsAttr().Get())
-        t["usd_read_s"] = time.perf_counter() - t0
+        t["usd_read_s"], t["usd_read_cpu_s"] = time.perf_counter() - t0, time.process_time() - c0
+        c0 = time.process_time()
         t0 = time.perf_counter()
         scene = load_stage(path)
-        t["load_s"] = time.perf_counter() - t0
+        t["load_s"], t["load_cpu_s"] = time.perf_counter() - t0, time.process_time() - c0
+        c0 = time.process_time()
         t0 = time.perf_counter()
         upload_scene(scene, case["device"])
-        t["upload_s"] = time.perf_counter() - t0
+        t["upload_s"], t["upload_cpu_s"] = time.perf_counter() - t0, time.process_time() - c0
+        if info["triangles"] <= PROFILE_TRIANGLES:
+            t["load_profile"] = load_profile(path)
         try:
             from embreex import rtcore_scene as rtcs
             from embreex.mesh_construction import TriangleMesh
 
+            c0 = time.process_time()
             t0 = time.perf_counter()
             es = rtcs.EmbreeScene()
             TriangleMesh(es, pts.astype(np.float32)[idx.reshape(-1, 3)])
-            t["embree_build_s"] = time.perf_counter() - t0
+            t["embree_build_s"], t["embree_build_cpu_s"] = time.perf_counter() - t0, time.process_time() - c0
         except ImportError:
             t["embree_build_s"] = None
         return {"axis": "loading", "value": case["value"], "device": case["device"], "triangles": info["triangles"], **t,
@@ -294,7 +342,8 @@ def _loading_row(case: dict) -> dict:
 def report(rows: list[dict], md: Path, ctx: dict) -> None:
     from wsoft.bench.scaling_report import write_report
 
-    write_report(rows, md, ctx)
+    devices = sorted({r["device"] for r in rows if "device" in r}) or ["cpu"]
+    write_report(rows, md, ctx | {"cases": cases(bool(ctx.get("quick")), devices)})
 
 
 def run_case(case: dict, ctx: dict) -> dict:

@@ -13,6 +13,17 @@ from wsoft.stages import add_box, add_camera, add_quad, add_rect_light, make_sta
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SCENES = os.path.join(ROOT, "usd_scenes")
+DISTANT_ONLY = {"csm"}  # techniques that shadow DistantLights alone (each declines a local light with its reason)
+SKY_ONLY = {"gtao", "skymaps"}  # techniques that shadow a DomeLight alone (each declines every other light with its reason)
+
+
+def skip_if_no_local_lights(technique: str) -> None:
+    """Skip a test over local lights for a technique of :data:`DISTANT_ONLY` or :data:`SKY_ONLY`
+    (its own tests cover it)."""
+    if technique in DISTANT_ONLY:
+        pytest.skip(f"{technique} shadows DistantLights alone; this test's lights are local")
+    if technique in SKY_ONLY:
+        pytest.skip(f"{technique} shadows a DomeLight alone; this test's lights are local")
 
 
 def _devices():

@@ -9,7 +9,7 @@ import sys
 
 import numpy as np
 import pytest
-from conftest import ROOT, add_box, add_quad, add_rect_light, make_stage, parallel_rect_exact, scene_path, wsoft_cli
+from conftest import ROOT, add_box, add_quad, add_rect_light, make_stage, parallel_rect_exact, scene_path, wsoft_cli, skip_if_no_local_lights
 
 import wsoft
 from wsoft.baking import fill_from_nearest, texel_coverage
@@ -110,9 +110,9 @@ def test_hard_at_the_vertices_is_the_point_light_answer(device):
 # (0.018 to 0.05 over the penumbra of this grid's vertices as the grid shifts by 1 cm, 0.028 averaged
 # over an eye view's pixels; its bake of the eye view's own points is the eye view, below): level 0 here
 BAKE_PARAMS = {"izb": {"aa": "none"}, "reference": {"samples": 64}, "ssm": {"budget": float("inf")},
-               "rtdenoise": {"denoiser": "none", "samples": 8}}
+               "rtdenoise": {"denoiser": "none", "samples": 8}, "vsmap": {"footprint": 0.02}, "smrt": {"footprint": 0.02}}
 # techniques refused at their defaults, and the setting their refusal names
-REFUSED_AT_DEFAULTS = {"izb": "aa=none", "rtdenoise": "denoiser=none"}
+REFUSED_AT_DEFAULTS = {"izb": "aa=none", "rtdenoise": "denoiser=none", "vsmap": "footprint=", "smrt": "footprint="}
 
 
 @pytest.mark.parametrize("name", sorted(TECHNIQUES))
@@ -121,6 +121,7 @@ def test_every_technique_bakes_or_says_why(name):
     for an eye view (x 1.5, + 0.02 for the coarser vertex sampling), or is refused with a reason;
     ``izb`` is refused with its default anti-aliasing and bakes with ``aa=none``, ``rtdenoise`` with
     its default denoiser (a screen-space filter) and bakes its raw rays with ``denoiser=none``."""
+    skip_if_no_local_lights(name)
     tech = TECHNIQUES[name](TECHNIQUES[name].make_params({}))
     if name in REFUSED_AT_DEFAULTS:
         assert tech.bake_support() is not None and REFUSED_AT_DEFAULTS[name] in tech.bake_support()
@@ -140,7 +141,7 @@ def test_every_technique_bakes_or_says_why(name):
 
 
 EYE_PARAMS = {"izb": {"aa": "none"}, "essm": {"anisotropic": False}, "ssm": {"smooth_radius": 0}, "reference": {"samples": 16},
-              "rtdenoise": {"denoiser": "none"}}
+              "rtdenoise": {"denoiser": "none"}, "vsmap": {"footprint": 0.02}, "smrt": {"footprint": 0.02}}
 
 
 @pytest.mark.parametrize("name", sorted(TECHNIQUES))
@@ -152,6 +153,7 @@ def test_a_bake_of_an_eye_views_own_points_is_the_eye_view(name):
     technique's defaults (the reference's random streams included), but for what reads pixel neighbours (``essm``'s anisotropic footprint,
     ``ssm``'s level-of-quality smoothing and ``rtdenoise``'s denoiser, off here) or casts eye rays
     (``izb``'s anti-aliasing, off)."""
+    skip_if_no_local_lights(name)
     import warp as wp
 
     from conftest import add_camera

@@ -79,7 +79,7 @@ def test_an_unknown_stage_suggests_the_closest_names(tmp_path, monkeypatch):
 
 def test_unknown_techniques_and_sweeps_suggest_the_closest_names():
     rc, _, err = run_captured(["render", "box_plane", "-t", "pcs", "--out", "o.exr"])
-    _one_error_line(rc, err, "unknown technique 'pcs' (did you mean pcss", "; techniques: dcs, esm")
+    _one_error_line(rc, err, "unknown technique 'pcs' (did you mean pcss", "; techniques: csm, dcs, esm")
     rc, _, err = run_captured(["compare", "box_plane", "-t", "hard", "-t", "esm_soft"])
     _one_error_line(rc, err, "unknown technique 'esm_soft' (did you mean msm_soft")
     rc, _, err = run_captured(["bench", "usd_pipelin", "--quick"])

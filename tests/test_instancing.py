@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import warp as wp
 
+from conftest import SKY_ONLY
 from instancing_util import rot, split, xf
 from wsoft.errors import ParameterError
 from wsoft.pipeline import build_graph, render
@@ -18,7 +19,8 @@ from wsoft.techniques import TECHNIQUES
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CUTOUT = os.path.join(ROOT, "usd_scenes", "cutout.usda")
 # the techniques that read light depth maps and keep a stage's instances
-MAP_TECHNIQUES_KEEPING_INSTANCES = [n for n, c in sorted(TECHNIQUES.items()) if not c.instancing_refusal and "light_depth" in c.reads()]
+MAP_TECHNIQUES_KEEPING_INSTANCES = [n for n, c in sorted(TECHNIQUES.items()) if not c.instancing_refusal and "light_depth" in c.reads()
+                                    and n not in SKY_ONLY]  # the sky's own maps: tests/test_skymaps.py
 
 # the fence (a cutout quad) and the leaf box (closed, single-sided) become prototypes; instances:
 # identity, rotated + anisotropically scaled, translated, rotated + mirrored (negative x scale)

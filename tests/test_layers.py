@@ -16,7 +16,7 @@ BENCH = ROOT / "bench"
 
 # lowest first: a module may import its own layer or lower ones, never a higher one
 LAYERS = [
-    ("core", ("wsoft.errors", "wsoft.env", "wsoft.params", "wsoft.parallel", "wsoft.graph", "wsoft.io", "wsoft.palette")),
+    ("core", ("wsoft.errors", "wsoft.env", "wsoft.params", "wsoft.parallel", "wsoft.graph", "wsoft.io", "wsoft.palette", "wsoft.rgbe")),
     ("stages", ("wsoft.stages", "wsoft.usd_scenes")),
     ("scene", ("wsoft.scene",)),
     ("lightspace", ("wsoft.lightspace",)),

@@ -13,7 +13,7 @@ import json
 
 import numpy as np
 import pytest
-from conftest import add_camera, add_quad, add_rect_light, make_stage, wsoft_cli
+from conftest import add_camera, add_quad, add_rect_light, make_stage, wsoft_cli, skip_if_no_local_lights
 
 import wsoft
 from wsoft.scene.types import LIGHT_DISK, LIGHT_SPHERE
@@ -79,6 +79,7 @@ def test_a_mirror_that_keeps_minus_z_keeps_the_light_facing_down():
 def test_a_light_facing_away_gives_no_light_and_says_so(device, technique):
     """The base's light turned 180 degrees about X: every receiver lies behind it (V = 0), a warning
     names the light and the count, and the light view does not claim those receivers as mapped."""
+    skip_if_no_local_lights(technique)
     scene = wsoft.load_scene(_base("rotate_x_180"))
     f = wsoft.render(scene, technique, width=W, height=H, device=device, **quick(technique))
     cov = f["A"] > 0
@@ -108,6 +109,7 @@ def _tilted_light():
 
 @pytest.mark.parametrize("technique", sorted(TECHNIQUES))
 def test_receivers_behind_a_light_get_none_of_it_those_in_front_are_lit(device, technique):
+    skip_if_no_local_lights(technique)
     scene = _tilted_light()
     assert np.allclose(scene.lights[0].direction, (0, 0.5**0.5, -0.5**0.5), atol=1e-6)
     f = wsoft.render(scene, technique, width=W, height=H, device=device, **quick(technique))
@@ -131,6 +133,7 @@ def test_a_light_facing_its_receivers_adds_no_pass():
 
 @pytest.mark.parametrize("technique", sorted(n for n, c in TECHNIQUES.items() if c(c.make_params(quick(n))).bake_support() is None))
 def test_a_bake_of_a_light_facing_away_writes_zero(device, technique):
+    skip_if_no_local_lights(technique)
     stage = _base("scale_1_1_-1")
     stats = {}
     layer = wsoft.bake(stage, technique, device=device, stats=stats, **quick(technique))
@@ -266,6 +269,7 @@ def test_every_technique_that_sizes_its_shadow_by_the_light_follows_the_ellipse(
     """Closer to the ellipse's brute-force answer than to that of a circle of the mean radius (the
     techniques whose shadow does not depend on the light's size, hard shadows and fixed-size kernels,
     are skipped)."""
+    skip_if_no_local_lights(technique)
     if not _sizes_by_light(technique):
         pytest.skip(f"{technique}'s shadow does not depend on the light's size")
     # a stochastic technique at its most rays: at 2 its noise (0.03 mean) hides the ellipse's difference from the circle
@@ -319,6 +323,7 @@ def test_the_reference_samples_an_ellipsoids_silhouette(device):
 
 @pytest.mark.parametrize("technique", sorted(TECHNIQUES))
 def test_an_ellipsoid_is_sampled_or_its_approximation_named(technique):
+    skip_if_no_local_lights(technique)
     cls = TECHNIQUES[technique]
     f = wsoft.render(_disk_stage("sphere"), technique, width=W, height=H, device="cpu", **quick(technique))
     said = [w for w in f.stats["warnings"] if "ellipsoid" in w and "/World/Light" in w]

@@ -196,7 +196,7 @@ def test_each_light_kind_and_shadow_disable():
     sun = UsdLux.DistantLight.Define(st, "/World/Sun")
     sun.CreateAngleAttr(4.0)
     off = add_rect_light(st, "/World/Off", (0, 0, 5), 1, 1, shadow=False)
-    UsdLux.DomeLight.Define(st, "/World/Dome")
+    UsdLux.PortalLight.Define(st, "/World/Portal")
     assert off
     s = wsoft.load_scene(st)
     kinds = {l.name: l.kind for l in s.lights}
@@ -209,8 +209,8 @@ def test_each_light_kind_and_shadow_disable():
     assert np.allclose(s.find_light("Sphere").position, [1, 1, 4])
     assert s.find_light("Sun").angle_deg == pytest.approx(4.0)
     assert [l.path for l in s.unshadowed_lights] == ["/World/Off"]
-    assert [(x.path, x.kind) for x in s.skipped_lights] == [("/World/Dome", "DomeLight")]
-    assert "not handled" in s.skipped_lights[0].reason
+    assert [(x.path, x.kind) for x in s.skipped_lights] == [("/World/Portal", "PortalLight")]
+    assert "not honoured" in s.skipped_lights[0].reason
 
 
 def test_camera_perspective_and_orthographic():

@@ -12,10 +12,10 @@ import pytest
 
 from wsoft.bench import regress
 from wsoft.bench.regress_rows import flatten, resolve
-from wsoft.bench.regress_stats import accuracy_verdict, min_p, time_verdict
+from wsoft.bench.regress_stats import accuracy_verdict, min_p, sidak, time_verdict
 from wsoft.errors import ParameterError
 
-ROUNDS = [100.0, 101.0, 99.0, 100.5, 99.5]
+ROUNDS = [100.0, 101.0, 99.0, 100.5, 99.5, 102.0, 98.0, 100.2]  # 8 rounds, as the gate's timed rounds
 
 
 def render_row(technique: str, scene: str = "box_plane", rounds=ROUNDS, mae_p: float = 0.10, flip: float = 0.005, host: str = "vm") -> dict:
@@ -68,26 +68,57 @@ def test_slower_with_small_spread_is_a_regression(tmp_path):
     assert "| pcf.frame_ms |" in text.split("### Regressions")[1] and "U test p=" in text
 
 
-def test_three_rounds_reject_only_when_all_separate():
-    assert min_p(3, 3) == pytest.approx(0.05)
-    assert time_verdict([100, 101, 99], [120, 121, 119]).kind == "worse"  # p = 1/20 = 0.05
-    assert time_verdict([100, 130, 99], [120, 121, 119]).kind == "same"  # an old round above a new one: p > 0.05
+def test_three_rounds_can_never_reach_the_corrected_level(tmp_path):
+    """3 against 3 rounds give p >= 2 / C(6, 3) = 0.1 whatever they hold: never a verdict, and the
+    report says so and names the metrics beyond the threshold it could not judge."""
+    assert min_p(3, 3) == pytest.approx(0.1)
+    assert min_p(8, 8) == pytest.approx(2 / 12870)
+    v = time_verdict([100, 101, 99], [150, 151, 149], alpha=0.05)
+    assert v.kind == "too few rounds" and "smallest p 0.1" in v.how
+    old, new = base_rows(), base_rows()
+    for r in old + new:
+        for e in r.get("entries", []):
+            e["frame_ms_frames"] = e["frame_ms_frames"][:3]
+        if "timings_ms_runs" in r:
+            r["timings_ms_runs"] = [100, 101, 99]
+    new[0]["timings_ms_runs"] = [150, 151, 149]
+    rc, text = gate(tmp_path, old, new)
+    assert rc == 0
+    assert "too few rounds** for 5 of 5 time metrics" in text and "x1.50" in text and "--rounds 16" in text
+    assert text.count("smallest p 0.1") == 1  # only the metric beyond the threshold is listed
 
 
 def test_slower_with_huge_spread_is_not_significant(tmp_path):
     new, old = base_rows(), base_rows()
-    old[0]["timings_ms_runs"] = [50.0, 100.0, 150.0, 70.0, 130.0]
-    new[0]["timings_ms_runs"] = [t * 1.2 for t in (40.0, 100.0, 160.0, 60.0, 140.0)]
+    old[0]["timings_ms_runs"] = [50.0, 100.0, 150.0, 70.0, 130.0, 90.0, 110.0, 60.0]
+    new[0]["timings_ms_runs"] = [t * 1.2 for t in (40.0, 100.0, 160.0, 60.0, 140.0, 95.0, 105.0, 70.0)]
     assert time_verdict(old[0]["timings_ms_runs"], new[0]["timings_ms_runs"]).kind == "same"
     rc, _ = gate(tmp_path, old, new)
     assert rc == 0
 
 
-def test_few_rounds_need_the_ratio_beyond_the_spread():
-    assert time_verdict([100, 102], [120, 121]).kind == "worse"  # fastest new 120 > slowest old 102 x 1.1
-    assert time_verdict([100, 115], [118, 122]).kind == "same"  # ratio 1.12 but 118 < 115 x 1.1
-    assert time_verdict([100], [111]).kind == "worse"
-    assert time_verdict([100, 102], [80, 81]).kind == "better"
+def test_sidak_level_over_the_runs_comparisons(tmp_path):
+    assert sidak(0.05, 1) == pytest.approx(0.05)
+    assert sidak(0.05, 40) == pytest.approx(0.001281, rel=1e-3)
+    assert 1 - (1 - sidak(0.05, 40)) ** 40 == pytest.approx(0.05)
+    # complete separation of 4 against 4 rounds: p = 2 / 70 = 0.029, significant alone, not among 40 comparisons
+    assert time_verdict([100, 101, 99, 100], [120, 121, 119, 122], alpha=0.05).kind == "worse"
+    assert time_verdict([100, 101, 99, 100], [120, 121, 119, 122], alpha=sidak(0.05, 40)).kind == "too few rounds"
+    rc, text = gate(tmp_path, base_rows(), base_rows())
+    # pcf, pcss, pcf on contact, and the sequence's dcs and esm
+    assert f"5 time comparisons, each U test at level {sidak(0.05, 5):.3g}" in text
+
+
+def test_threshold_and_significance_are_both_required():
+    steady = [100.0 + 0.1 * i for i in range(8)]
+    assert time_verdict(steady, [t * 1.05 for t in steady], alpha=0.001).kind == "same"  # significant (p = 0.00016), but 5 % < 10 %
+    noisy_old = [60.0, 140.0, 90.0, 110.0, 70.0, 130.0, 80.0, 120.0]
+    noisy_new = [t * 1.25 for t in (130.0, 70.0, 110.0, 90.0, 140.0, 60.0, 120.0, 80.0)]
+    v = time_verdict(noisy_old, noisy_new, alpha=0.01)
+    assert v.kind == "same" and v.ratio == pytest.approx(1.25)  # x1.25 but inside the rounds' spread
+    assert time_verdict(steady, [t * 1.2 for t in steady], alpha=0.001).kind == "worse"
+    assert time_verdict(steady, [t * 0.8 for t in steady], alpha=0.001).kind == "better"
+    assert time_verdict(steady, [math.nan], alpha=0.001).kind == "worse"  # no finite time left
 
 
 def test_infinite_threshold_judges_accuracy_only(tmp_path):
@@ -234,3 +265,61 @@ def test_run_sweep_saves_and_gates(tmp_path, monkeypatch, capsys):
         harness.run_sweep("fake-gate", quick=True, out_dir=out, save="a/b")
     capsys.readouterr()
 
+
+
+def test_timed_rounds_alternate_over_the_rows(tmp_path, monkeypatch):
+    """The gate's rounds: a warm-up frame per row, then round by round over the rows, the order
+    reversed every other round; only render rows of this host are timed; the gate judges them."""
+    import platform
+
+    from wsoft.bench import regress_rounds
+
+    rows = [render_row("pcf"), render_row("pcss"), render_row("pcf", scene="contact"), sequence_row()]
+    for r in rows[:3]:
+        r["case"].update(device="cpu", light=None)
+        r["machine"]["host"] = platform.node()
+    rows[2]["machine"]["host"] = "elsewhere"
+    f = tmp_path / "rows.jsonl"
+    write(f, rows)
+    seen = []
+    monkeypatch.setattr(regress_rounds, "time_once", lambda case: seen.append(case["technique"]) or (10.0 * len(seen), 5.0 * len(seen)))
+    assert regress_rounds.time_rounds(f, {r["key"] for r in rows}, rounds=3) == 2
+    assert seen == ["pcf", "pcss", "pcf", "pcss", "pcss", "pcf", "pcf", "pcss"]  # warm-up, round 1, round 2 reversed, round 3
+    kept = [json.loads(line) for line in f.read_text().splitlines()]
+    assert kept[0]["frame_ms_rounds"] == [30.0, 60.0, 70.0] and kept[1]["frame_ms_rounds"] == [40.0, 50.0, 80.0]
+    assert kept[0]["frame_cpu_ms_rounds"] == [15.0, 30.0, 35.0]
+    assert "frame_ms_rounds" not in kept[2] and "frame_ms_rounds" not in kept[3]
+    m = flatten(kept[0])
+    assert m["pcf.frame_ms"].samples == [30.0, 60.0, 70.0] and "pcf.frame_ms#2" not in m  # the rounds stand for timings_ms_runs
+    assert m["pcf.frame_cpu_ms"].samples == [15.0, 30.0, 35.0]
+    assert regress_rounds.time_rounds(f, {r["key"] for r in rows}, rounds=0) == 0
+    with pytest.raises(ParameterError, match="--rounds -1"):
+        regress.check_rounds(-1)
+
+
+def test_the_timer_picks_cpu_or_wall_rounds(tmp_path):
+    """With CPU rounds a row's wall-clock rounds are not judged (--timer cpu, the default), and the
+    other way round with --timer wall; a time with no counterpart is judged either way."""
+    from wsoft.bench.regress_rounds import judged_time
+
+    old, new = base_rows(), base_rows()
+    for r in old + new:
+        if "timings_ms_runs" in r:
+            r["frame_ms_rounds"], r["frame_cpu_ms_rounds"] = list(ROUNDS), [t / 2 for t in ROUNDS]
+    new[0]["frame_ms_rounds"] = [t * 2 for t in ROUNDS]  # the wall clock doubled (a busy host), the CPU time the same
+    rc, text = gate(tmp_path, old, new)
+    assert rc == 0 and "CPU time" in text
+    rc, text = gate(tmp_path, old, new, "--timer", "wall")
+    assert rc == 1 and "| pcf.frame_ms |" in text
+    new[0]["frame_cpu_ms_rounds"] = [t * 0.6 for t in ROUNDS]  # the code itself 20 % slower
+    assert gate(tmp_path, old, new)[0] == 1
+    for r in new:
+        if "frame_cpu_ms_rounds" in r:
+            r["frame_cpu_ms_rounds"] = [t * 0.65 for t in ROUNDS]  # every row 30 % slower: the host, or a change they share
+    rc, text = gate(tmp_path, old, new)
+    assert rc == 1 and "moved together: their median ratio is x1.30" in text
+    names = {"pcf.frame_ms", "pcf.frame_cpu_ms", "esm.frame_ms"}
+    assert [n for n in sorted(names) if judged_time(n, names, "cpu")] == ["esm.frame_ms", "pcf.frame_cpu_ms"]
+    assert [n for n in sorted(names) if judged_time(n, names, "wall")] == ["esm.frame_ms", "pcf.frame_ms"]
+    with pytest.raises(ParameterError, match="--timer gpu"):
+        judged_time("pcf.frame_ms", names, "gpu")

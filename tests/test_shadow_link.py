@@ -10,7 +10,7 @@ import json
 
 import numpy as np
 import pytest
-from conftest import add_camera, add_quad, add_rect_light, make_stage, wsoft_cli
+from conftest import DISTANT_ONLY, SKY_ONLY, add_camera, add_quad, add_rect_light, make_stage, wsoft_cli, skip_if_no_local_lights
 
 import wsoft
 from wsoft.techniques import TECHNIQUES, create
@@ -180,6 +180,7 @@ def test_loader_double_sided_and_animated_visibility():
 def test_excluded_blocker_casts_no_shadow(name):
     """Blocker A left out of the light's shadowLink: no shadow under it (V ~ 1, it is still seen and
     still drawn in the G-buffer), blocker B still shadows; the depth maps hold only the casters."""
+    skip_if_no_local_lights(name)
     st = two_blockers()
     link(st, "/World/Light", exclude=["/World/A"])
     scene = wsoft.load_scene(st)
@@ -198,6 +199,7 @@ def test_excluded_blocker_casts_no_shadow(name):
 def test_two_lights_blocker_linked_to_one(name):
     """Two lights over the same blockers; A is in L1's shadowLink only (L2 excludes it): A shadows
     L1's light and not L2's; B shadows both. Each light's maps are its own."""
+    skip_if_no_local_lights(name)
     st = two_blockers(lights=("/World/L1", "/World/L2"))
     link(st, "/World/L2", exclude=["/World/A"])
     scene = wsoft.load_scene(st)
@@ -211,6 +213,7 @@ def test_two_lights_blocker_linked_to_one(name):
 def test_include_root_false_with_explicit_includes(name):
     """includeRoot = false and includes = [B]: only B casts (the ground and A do not); the ground,
     excluded, still receives B's shadow."""
+    skip_if_no_local_lights(name)
     st = two_blockers()
     link(st, "/World/Light", include=["/World/B"], include_root=False)
     scene = wsoft.load_scene(st)
@@ -220,7 +223,7 @@ def test_include_root_false_with_explicit_includes(name):
     assert f.V[umbra(f, shadow_x(1.2, 1.0, 3.0))].mean() < 0.2, name
 
 
-@pytest.mark.parametrize("name", [n for n in NAMES if not TECHNIQUES[n].distance_refusal])
+@pytest.mark.parametrize("name", [n for n in NAMES if not TECHNIQUES[n].distance_refusal and n not in SKY_ONLY])
 def test_shadow_distance_under_a_distant_light(name):
     """The same near and far blockers under a sun straight down (an orthographic map: depth along
     the light): the near one shadows, the far one does not."""
@@ -262,6 +265,7 @@ def test_shadow_distance_honoured_or_refused(name):
     """shadow:distance = 1: blocker A, 0.5 above the ground, shadows; blocker B, 2 above it, does not
     (its occluder distance along every shadow ray exceeds 1). A technique that cannot honour it
     declines the light in one line naming shadow:distance, and render stops with that line."""
+    skip_if_no_local_lights(name)
     st = two_blockers(DIST_HEIGHTS, DIST_LIGHT_Z)
     scene0 = wsoft.load_scene(st)
     set_distance(st, "/World/Light", DISTANCE)
@@ -404,12 +408,15 @@ def test_plan_lists_the_shadow_controls(tmp_path):
     assert sh["link"]["excluded_prims"] == 1 and sh["link"]["prims"] == 3 and sh["link"]["excluded"] == ["/World/A"]
     from wsoft.techniques import TECHNIQUES
 
-    refused = ", ".join(sorted(t for t, c in TECHNIQUES.items() if c.distance_refusal))
+    refused = ", ".join(sorted(t for t, c in TECHNIQUES.items() if c.distance_refusal and t not in DISTANT_ONLY | SKY_ONLY))
     assert sh["distance"] == 2.5 and f"refused by {refused}" in sh["distance_applied"] and refused.startswith("dcs, esm, essm")
     assert sh["color"] == [0.5, 0.0, 0.0] and sh["color_applied"] == "applied to R G B, not to V"
     assert sh["falloff"] == 0.5 and sh["falloff_applied"].startswith("not applied")
-    assert set(plan["not_applicable"]) == {t for t, c in TECHNIQUES.items() if c.distance_refusal} >= {"dcs", "esm", "pwedge", "vsm"}
-    assert all("inputs:shadow:distance = 2.5" in w["reason"] for ws in plan["not_applicable"].values() for w in ws)
+    only_other_lights = DISTANT_ONLY | SKY_ONLY  # they decline the rect light itself
+    assert only_other_lights <= set(plan["not_applicable"])
+    by_distance = {t: ws for t, ws in plan["not_applicable"].items() if t not in only_other_lights}
+    assert set(by_distance) == {t for t, c in TECHNIQUES.items() if c.distance_refusal} - only_other_lights >= {"dcs", "esm", "pwedge", "vsm"}
+    assert all("inputs:shadow:distance = 2.5" in w["reason"] for ws in by_distance.values() for w in ws)
     t = run()
     assert t.returncode == 0, t.stderr
     assert "collection:shadowLink: 1 of 3 prims excluded (/World/A)" in t.stdout

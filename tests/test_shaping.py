@@ -74,12 +74,15 @@ def test_an_applied_shaping_api_with_nothing_authored_is_the_fallback_hemisphere
     assert wsoft.load_scene(st).lights[0].shaping.cone_deg == 90.0
 
 
-def test_an_ies_file_warns_once_naming_the_prim():
+def test_an_ies_file_is_read_beside_the_cone_without_a_warning():
+    """The profile and the cone both shape the light (tests/test_ies.py has the profile's own cases)."""
+    from wsoft.scene.ies import example_path
+
     st = _spot_stage(30.0)
-    UsdLux.ShapingAPI(st.GetPrimAtPath("/World/Light")).CreateShapingIesFileAttr(Sdf.AssetPath("lamp.ies"))
+    UsdLux.ShapingAPI(st.GetPrimAtPath("/World/Light")).CreateShapingIesFileAttr(Sdf.AssetPath(example_path()))
     scene = wsoft.load_scene(st)
-    w = [x for x in scene.warnings if "ies:file" in x]
-    assert len(w) == 1 and "/World/Light" in w[0] and "not read" in w[0]
+    s = scene.lights[0].shaping
+    assert s.ies is not None and s.coned and s.cone_deg == 30.0 and not scene.warnings
 
 
 def test_shaping_on_a_distant_light_warns_and_is_not_applied():
@@ -266,8 +269,86 @@ def test_a_30_degree_spot_gets_one_frustum_and_plan_says_why(tmp_path):
 def test_no_technique_warns_about_receivers_outside_the_cone(tmp_path):
     """Every technique on the 30-degree spot with a box outside its cone: no warning (the receivers
     the cone does not reach are masked, never 'left out of a view')."""
-    from wsoft.techniques import TECHNIQUES
+    from wsoft.techniques import TECHNIQUES, create
 
-    fs = wsoft.render(_save(_spot_stage(30.0), tmp_path), sorted(TECHNIQUES), width=48, height=36)
-    assert len(fs.frames) == len(TECHNIQUES)
+    path = _save(_spot_stage(30.0), tmp_path)
+    scene = wsoft.load_scene(path)
+    names = sorted(n for n in TECHNIQUES if create(n, {}).supports(scene, scene.lights[0]) is None)  # those drawing a sphere light
+    assert len(names) >= 10
+    fs = wsoft.render(path, names, width=48, height=36)
+    assert len(fs.frames) == len(names)
     assert {label: f.stats["warnings"] for label, f in fs.frames.items() if f.stats["warnings"]} == {}
+
+
+def test_cone_meets_balls_is_the_distance_to_the_widened_cone():
+    """A ball meets the region a 30-degree spot can light (the cone widened by the light's radius)
+    when its centre is within the light's radius plus its own of the cone; a cone past 90 degrees
+    rules nothing out."""
+    from wsoft.lightspace.light import cone_meets_balls
+
+    light = wsoft.load_scene(_spot_stage(30.0, radius=0.1)).lights[0]
+    # on the ground 3 below: the cone's edge at x = 3 tan 30 = 1.732; a ball at x, radius rb, meets it
+    # when its distance to the edge line, (x - 1.732) cos 30, is at most 0.1 + rb
+    xs = np.array([0.0, 1.9, 2.2, 2.4, 4.0])
+    c = np.stack([xs, np.zeros_like(xs), np.zeros_like(xs)], -1)
+    got = cone_meets_balls(light, c, np.full(len(xs), 0.2))
+    want = (xs - 3 * math.tan(math.radians(30))) * math.cos(math.radians(30)) <= 0.3
+    assert (got == want).all() and got.any() and not got.all()
+    wide = wsoft.load_scene(_spot_stage(120.0)).lights[0]
+    assert cone_meets_balls(wide, c, np.zeros(len(xs))).all()
+
+
+def test_the_reach_mask_of_a_frames_receivers_is_the_devices_test():
+    """From REACH_ON_DEVICE points up the mask runs light_reaches on the CPU threads: it agrees with
+    the float64 test on 40000 points around a 30-degree spot."""
+    import wsoft.lightspace.light as lm
+
+    light = wsoft.load_scene(_spot_stage(30.0, radius=0.3)).lights[0]
+    pts = np.random.default_rng(2).normal(size=(40000, 3)) * 3 + np.array([0.0, 0.0, HEIGHT])
+    fast = lm.reach_mask(light, pts)
+    slow = np.concatenate([lm.reach_mask(light, pts[k:k + lm.REACH_ON_DEVICE - 1]) for k in range(0, len(pts), lm.REACH_ON_DEVICE - 1)])
+    assert len(pts) >= lm.REACH_ON_DEVICE and fast.any() and (~fast).any()
+    assert (fast != slow).sum() <= 2  # float32 against float64, on the cone's edge only
+
+
+def test_pwedge_draws_only_the_edges_and_wedges_a_30_degree_spots_cone_can_use():
+    """The box outside the cone adds no silhouette edge; the wedge tests fall to a small share of the
+    unshaped light's (the cost the spot saves; its time: `wsoft bench lights`)."""
+    shaped = wsoft.render(wsoft.load_scene(_spot_stage(30.0)), "pwedge", width=80, height=60)
+    inside = wsoft.render(wsoft.load_scene(_spot_stage(30.0, far_box=False)), "pwedge", width=80, height=60)
+    plain = wsoft.render(wsoft.load_scene(_spot_stage(None)), "pwedge", width=80, height=60)
+    c = {k: f.stats["counters"]["techniques"]["pwedge"]["Light"] for k, f in (("shaped", shaped), ("inside", inside), ("plain", plain))}
+    assert c["shaped"]["silhouette_edges"] == c["inside"]["silhouette_edges"] < c["plain"]["silhouette_edges"]
+    assert c["shaped"]["wedge_tests"] <= 0.1 * c["plain"]["wedge_tests"]
+    same = (shaped["reach.Light"] > 0) & (shaped["P.X"] == inside["P.X"]) & (shaped["P.Y"] == inside["P.Y"]) & (shaped["A"] > 0)
+    assert same.sum() > 300 and np.array_equal(shaped["V"][same], inside["V"][same])  # the far box changed nothing the cone reaches
+
+
+@pytest.mark.slow
+def test_the_shaded_ground_is_the_closed_form_per_channel_under_a_coloured_tinted_spot():
+    """A point spot (cone 50, softness 0.3, focus 2, focusTint (0.2, 0.5, 1), colour (1, 0.8, 0.6),
+    intensity 3, exposure 1) over a grey ground: each channel is ``a + b E_c`` with
+    ``E_c = colour_c shaping_c(theta) cos(theta) / (d^2 + 1/pi)`` (one ``a`` and ``b`` for the frame:
+    albedo, ambient and exposure); the channels' own fits agree on ``b``."""
+    st = _spot_stage(50.0, box=False, far_box=False, point=True, ConeSoftness=0.3, Focus=2.0, FocusTint=(0.2, 0.5, 1.0))
+    lux = UsdLux.LightAPI(st.GetPrimAtPath("/World/Light"))
+    lux.CreateColorAttr((1.0, 0.8, 0.6))
+    lux.CreateIntensityAttr(3.0)
+    lux.CreateExposureAttr(1.0)
+    f = wsoft.render(wsoft.load_scene(st), "hard", width=96, height=72)
+    g = (f["A"] > 0) & (np.abs(f["P.Z"]) < 1e-4) & (f["R"] < 0.999) & (f["G"] < 0.999) & (f["B"] < 0.999)
+    P = np.stack([f["P.X"][g], f["P.Y"][g], f["P.Z"][g]], -1).astype(np.float64)
+    v = P - np.array([0.0, 0.0, HEIGHT])
+    dist = np.linalg.norm(v, axis=1)
+    theta = np.degrees(np.arccos(-v[:, 2] / dist))
+    shape = _factor_formula(theta, 50.0, 0.3, 2.0, (0.2, 0.5, 1.0))
+    fall = (HEIGHT / dist) / (dist ** 2 + 1.0 / math.pi)
+    slopes = []
+    for k, (ch, colour) in enumerate(zip("RGB", (1.0, 0.8, 0.6))):
+        E = colour * shape[:, k] * fall
+        A = np.stack([np.ones_like(E), E], -1)
+        coef, *_ = np.linalg.lstsq(A, f[ch][g].astype(np.float64), rcond=None)
+        assert np.abs(A @ coef - f[ch][g]).max() < 4e-3, ch
+        slopes.append(coef[1])
+    assert (theta < 30).sum() > 200 and (theta > 50).sum() > 200  # inside and outside the cone in view
+    assert np.ptp(slopes) < 0.01 * max(slopes)  # one exposure for all three: colour and tint carried per channel

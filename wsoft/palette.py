@@ -4,21 +4,24 @@ sweeps' plots (``wsoft.bench``) and in ``wsoft compare``'s grid (the reference b
 from __future__ import annotations
 
 # the bundled techniques in a fixed order; a plugin's technique takes one of the styles after them
-ORDER = ("hard", "pcf", "pcss", "vsm", "esm", "evsm", "msm", "msm_soft", "salzman", "essm", "vssm", "ssm", "izb", "dcs", "pwedge", "rtdenoise")
+ORDER = ("hard", "pcf", "pcss", "vsm", "esm", "evsm", "msm", "msm_soft", "salzman", "essm", "vssm", "ssm", "izb", "dcs", "pwedge", "rtdenoise", "csm", "vsmap", "smrt", "gtao", "skymaps")
 MARKERS = "osD^vP*Xh<>p"
+COLOURS = 40  # tab20 and tab20b
 
 
 def style(technique: str) -> dict:
     """``{"color", "marker"}`` of ``technique``: black dots for the reference, else a colour of
-    matplotlib's ``tab20`` and a marker. The bundled techniques (:data:`ORDER`) each have their own
-    colour; a plugin's takes one of the colours left over, chosen by its name."""
+    matplotlib's ``tab20`` then ``tab20b`` (40 colours) and a marker. The bundled techniques
+    (:data:`ORDER`) each have their own colour; a plugin's takes one of the colours left over,
+    chosen by its name."""
     from matplotlib import colormaps
 
     if technique == "reference":
         return {"color": "black", "marker": "."}
-    i = ORDER.index(technique) if technique in ORDER else len(ORDER) + sum(map(ord, technique)) % (20 - len(ORDER))
-    cmap = colormaps["tab20"]
-    return {"color": cmap((2 * i) % 20 + (i // 10) % 2), "marker": MARKERS[i % len(MARKERS)]}
+    i = ORDER.index(technique) if technique in ORDER else len(ORDER) + sum(map(ord, technique)) % (COLOURS - len(ORDER))
+    cmap = colormaps["tab20" if i < 20 else "tab20b"]
+    j = i % 20
+    return {"color": cmap((2 * j) % 20 + (j // 10) % 2), "marker": MARKERS[i % len(MARKERS)]}
 
 
 # how a technique's k-th variant (a swept parameter, another light or device) shifts its colour:

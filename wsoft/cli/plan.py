@@ -69,6 +69,9 @@ def run(args) -> int:
             print(f"      emits: in a cone of {em['cone']:g} degrees about {toward} (ShapingAPI: softness {em['softness']:g}, focus "
                   f"{em['focus']:g}, focusTint ({', '.join(f'{c:g}' for c in em['focus_tint'])})); receivers outside it are "
                   "masked out of its error metrics (reach.<light>)")
+            if em.get("ies"):
+                print(f"      IES profile: {em['ies']['file']} (angleScale {em['ies']['angle_scale']:g}, normalize "
+                      f"{'on: over its mean intensity' if em['ies']['normalize'] else 'off: over its peak'}), times the cone")
         elif em["side"] == "front":
             print(f"      emits: from its front only, toward {toward}; {em['points_behind']} of {em['points']} mesh points lie behind "
                   f"its plane" + (" (they get none of its light: V = 0)" if em["points_behind"] else ""))

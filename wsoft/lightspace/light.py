@@ -19,6 +19,7 @@ import warp as wp
 
 from wsoft.lightspace.view import ViewGPU
 from wsoft.scene.types import LIGHT_CYLINDER, LIGHT_DISK, LIGHT_DISTANT, LIGHT_RECT, Light
+from wsoft.scene.ies import ies_angle
 
 LINE_WIDTH = wp.constant(1.0e-3)
 """The half width, as a fraction of its half length, that a line light (a cylinder light of radius
@@ -42,9 +43,30 @@ class LightGPU:
     soft_cos: float  # ShapingAPI: cosine of the angle inside which the cone's soft edge ends (= cone_cos: a hard edge)
     focus: float  # ShapingAPI: off-axis cosine power (0: none)
     focus_tint: wp.vec3  # ShapingAPI: the colour the focus fades toward
+    shaped: int  # 1 where a cone, a focus or an IES profile shapes the emission (the reference weights its samples)
+    ies_on: int  # 1 with an IES profile (shaping:ies:file)
+    ies_scale: float  # 1 + shaping:ies:angleScale
+    ies_v: wp.array[float]  # the profile's vertical angles (degrees off -Z, ascending); None without a profile
+    ies_h: wp.array[float]  # its horizontal angles over 0..360 (degrees from +X toward +Y), symmetries unfolded
+    ies_t: wp.array2d[float]  # its values [vertical, horizontal] over Shaping.ies_divisor
 
 
-def light_gpu(light: Light, scene_diagonal: float) -> LightGPU:
+_IES_TABLES: dict = {}  # (profile, divisor, device) -> the three arrays: uploaded once per device
+
+
+def ies_tables(light: Light, device) -> tuple[wp.array, wp.array, wp.array]:
+    """The light's IES profile as the device reads it (:class:`LightGPU`'s ``ies_v``, ``ies_h``, ``ies_t``)."""
+    sh = light.shaping
+    key = (sh.ies, sh.ies_normalize, str(device))
+    if key not in _IES_TABLES:
+        v, h, t = sh.ies.full_table()
+        _IES_TABLES[key] = (wp.array(v.astype(np.float32), dtype=float, device=device),
+                            wp.array(h.astype(np.float32), dtype=float, device=device),
+                            wp.array((t / sh.ies_divisor()).astype(np.float32), dtype=float, device=device))
+    return _IES_TABLES[key]
+
+
+def light_gpu(light: Light, scene_diagonal: float, device=None) -> LightGPU:
     g = LightGPU()
     g.kind = int(light.kind)
     g.position = wp.vec3(*np.asarray(light.position, np.float64))
@@ -61,7 +83,57 @@ def light_gpu(light: Light, scene_diagonal: float) -> LightGPU:
     g.soft_cos = float(math.cos(math.radians(light.shaping.cone_deg * (1.0 - light.shaping.softness)))) if coned else -2.0
     g.focus = float(light.shaping.focus) if light.kind != LIGHT_DISTANT else 0.0
     g.focus_tint = wp.vec3(*light.shaping.focus_tint)
+    distant = light.kind == LIGHT_DISTANT
+    g.shaped = int(light.shaping.shaped and not distant)
+    g.ies_on = int(light.shaping.ies is not None and not distant)
+    g.ies_scale = float(1.0 + light.shaping.ies_angle_scale)
+    if g.ies_on:
+        g.ies_v, g.ies_h, g.ies_t = ies_tables(light, device or "cpu")
     return g
+
+
+@wp.func
+def table_interval(a: wp.array[float], x: float) -> int:
+    """The index ``i`` of the interval ``a[i] <= x < a[i + 1]`` of the ascending ``a`` (at least 2
+    entries), clamped to ``[0, len - 2]`` (bisection)."""
+    lo = int(0)
+    hi = a.shape[0] - 1
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if a[mid] <= x:
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
+@wp.func
+def ies_factor(L: LightGPU, d: wp.vec3) -> float:
+    """The IES profile's factor (:attr:`~wsoft.scene.shaping.Shaping.ies`, over its divisor) along
+    the unit direction ``d`` from the light toward a receiver: its vertical angle ``theta`` off −Z
+    taken through ``shaping:ies:angleScale`` (:func:`~wsoft.scene.ies.ies_angle`), its horizontal
+    angle from +X toward +Y; bilinear in the two over the profile's angle sets, 0 outside its
+    vertical range."""
+    c = wp.clamp(-wp.dot(d, L.az), -1.0, 1.0)
+    theta = wp.acos(c) * (180.0 / wp.pi)
+    t = wp.clamp((theta - 180.0) / L.ies_scale + 180.0, 0.0, 180.0)
+    nv = L.ies_v.shape[0]
+    if t < L.ies_v[0] or t > L.ies_v[nv - 1]:
+        return 0.0
+    phi = wp.atan2(wp.dot(d, L.ay), wp.dot(d, L.ax)) * (180.0 / wp.pi)
+    if phi < 0.0:
+        phi = phi + 360.0
+    ih = table_interval(L.ies_h, phi)
+    fh = wp.clamp((phi - L.ies_h[ih]) / (L.ies_h[ih + 1] - L.ies_h[ih]), 0.0, 1.0)
+    iv = int(0)
+    fv = float(0.0)
+    if nv > 1:
+        iv = table_interval(L.ies_v, t)
+        fv = wp.clamp((t - L.ies_v[iv]) / (L.ies_v[iv + 1] - L.ies_v[iv]), 0.0, 1.0)
+    iv1 = wp.min(iv + 1, nv - 1)
+    lo = (1.0 - fh) * L.ies_t[iv, ih] + fh * L.ies_t[iv, ih + 1]
+    hi = (1.0 - fh) * L.ies_t[iv1, ih] + fh * L.ies_t[iv1, ih + 1]
+    return (1.0 - fv) * lo + fv * hi
 
 
 @wp.func
@@ -70,18 +142,31 @@ def shaping_weight(L: LightGPU, d: wp.vec3) -> wp.vec3:
     direction ``d`` from a point of the light toward a receiver, ``c = dot(d, -az)`` the cosine off
     its primary axis: 0 beyond the cone (``c < cos(angle)``); inside it, ``smoothstep`` from
     ``cos(angle)`` to ``cos(angle (1 - softness))`` (the soft edge; softness 0: 1 throughout);
-    times ``f + (1 - f) focusTint`` with ``f = max(c, 0)^focus`` (focus 0: f = 1)."""
+    times ``f + (1 - f) focusTint`` with ``f = max(c, 0)^focus`` (focus 0: f = 1); times the IES
+    profile's factor (:func:`ies_factor`) where the light has one."""
     c = -wp.dot(d, L.az)
     w = float(1.0)
+    if L.ies_on != 0:
+        w = ies_factor(L, d)
     if L.cone_cos > -1.5:
         if c < L.cone_cos:
             return wp.vec3(0.0)
         if L.soft_cos > L.cone_cos:
-            w = wp.smoothstep(L.cone_cos, L.soft_cos, c)
+            w = w * wp.smoothstep(L.cone_cos, L.soft_cos, c)
     if L.focus > 0.0:
         f = wp.pow(wp.max(c, 0.0), L.focus)
         return w * (wp.vec3(f) + (1.0 - f) * L.focus_tint)
     return wp.vec3(w)
+
+
+@wp.func
+def sample_weight(L: LightGPU, d: wp.vec3) -> float:
+    """The weight of a light sample seen along the shadow ray direction ``d`` (from the receiver
+    toward the sample): the mean over the colour channels of :func:`shaping_weight` along ``-d``
+    (from the sample toward the receiver). The reference's ``V = sum(visible w) / sum(w)`` of a
+    shaped light."""
+    s = shaping_weight(L, -d)
+    return (s[0] + s[1] + s[2]) / 3.0
 
 
 def shaping_weights(light: Light, d: np.ndarray) -> np.ndarray:
@@ -97,10 +182,40 @@ def shaping_weights(light: Light, d: np.ndarray) -> np.ndarray:
             t = np.clip((c - lo) / (hi - lo), 0.0, 1.0)
             w = t * t * (3.0 - 2.0 * t)
         w = np.where(c < lo, 0.0, w)
+    if light.shaping.ies is not None and light.kind != LIGHT_DISTANT:
+        w = w * ies_weights(light, d)
     if light.shaping.focus > 0.0 and light.kind != LIGHT_DISTANT:
         f = np.maximum(c, 0.0) ** light.shaping.focus
         return w[:, None] * (f[:, None] + (1.0 - f[:, None]) * np.asarray(light.shaping.focus_tint, np.float64)[None])
     return np.repeat(w[:, None], 3, axis=1)
+
+
+def ies_weights(light: Light, d: np.ndarray) -> np.ndarray:
+    """:func:`ies_factor` on the host, for unit directions ``d`` ([N, 3], from the light toward
+    receivers), in float64: [N] factors."""
+    F = np.asarray(light.frame, np.float64)
+    c = np.clip(-(d @ F[:, 2]), -1.0, 1.0)
+    sh = light.shaping
+    theta = ies_angle(np.degrees(np.arccos(c)), sh.ies_angle_scale)
+    phi = np.degrees(np.arctan2(d @ F[:, 1], d @ F[:, 0]))
+    return sh.ies.sample(theta, phi) / sh.ies_divisor()
+
+
+REACH_ON_DEVICE = 1 << 14
+"""From this many points up :func:`reach_mask` runs :func:`light_reaches` across the CPU threads: on
+a 640 x 480 frame's receivers the float64 NumPy test cost 55-85 ms of a shaped light's frame
+(``pwedge``'s edge pass, on 2 loaded cores)."""
+
+
+def reach_flags(light: Light, points: np.ndarray) -> np.ndarray:
+    """:func:`light_reaches` for each of ``points`` ([N, 3]) on the CPU device (bool [N])."""
+    from wsoft.parallel import launch_chunked
+
+    pts = np.ascontiguousarray(np.asarray(points, np.float32).reshape(-1, 3))
+    out = wp.empty(len(pts), dtype=wp.int32, device="cpu")
+    launch_chunked(reach_points, len(pts), inputs=[light_gpu(light, 1.0), wp.array(pts, dtype=wp.vec3, device="cpu")],
+                   outputs=[out], device="cpu", min_chunk=1 << 14)
+    return out.numpy().astype(bool)
 
 
 def reach_mask(light: Light, points: np.ndarray) -> np.ndarray:
@@ -108,10 +223,14 @@ def reach_mask(light: Light, points: np.ndarray) -> np.ndarray:
     cone's angle off its −Z axis, widened by the angle its bounding ball (:meth:`Light.extent`)
     spans seen from the point (so every point some part of the light's cone reaches is kept; a
     point at or inside that ball is reached). Every point for a light without a cone. Compared in
-    cosines: ``cos(off) >= cos(cone + widen)``, with ``sin(widen) = r / d``."""
-    pts = np.asarray(points, np.float64).reshape(-1, 3)
+    cosines: ``cos(off) >= cos(cone + widen)``, with ``sin(widen) = r / d``. From
+    :data:`REACH_ON_DEVICE` points up (a frame's receivers), :func:`light_reaches` decides, in float32
+    across the CPU threads (the test the techniques' kernels make); below, float64 here."""
     if not light.shaping.coned:
-        return np.ones(len(pts), bool)
+        return np.ones(len(np.asarray(points).reshape(-1, 3)), bool)
+    if len(np.asarray(points).reshape(-1, 3)) >= REACH_ON_DEVICE:
+        return reach_flags(light, points)
+    pts = np.asarray(points, np.float64).reshape(-1, 3)
     v = pts - np.asarray(light.position, np.float64)[None]
     d2 = np.einsum("ij,ij->i", v, v)
     r = light.extent()
@@ -463,6 +582,41 @@ def light_reaches(L: LightGPU, p: wp.vec3) -> bool:
         return True
     bound = L.cone_cos * wp.sqrt(d2 - r * r) - sin_c * r
     return -wp.dot(v, L.az) >= bound - 1.0e-6 * wp.sqrt(d2)
+
+
+def cone_meets_balls(light: Light, centres: np.ndarray, radii: np.ndarray) -> np.ndarray:
+    """Which balls (``centres`` [N, 3], ``radii`` [N]) meet the region a shaped light's cone can
+    light, the cone widened by the light's bounding ball (:func:`reach_mask`'s region: the points
+    within ``r`` of the cone, ``r`` the light's extent): bool [N], all True without a cone or for a
+    cone past 90 degrees (its region is not convex: no caster is ruled out). For a cone up to 90
+    degrees the region is convex, so a shadow ray from a point of the light to a reached receiver
+    stays in it, and a caster whose bounding ball misses it shadows no reached receiver. A ball
+    meets it when its centre lies within ``r + radius`` of the cone."""
+    c = np.asarray(centres, np.float64).reshape(-1, 3)
+    if not light.shaping.coned or light.shaping.cone_deg > 90.0:
+        return np.ones(len(c), bool)
+    v = c - np.asarray(light.position, np.float64)[None]
+    d = np.linalg.norm(v, axis=1)
+    pad = light.extent() + np.asarray(radii, np.float64).reshape(-1)
+    along = -(v @ np.asarray(light.frame, np.float64)[:, 2])
+    cone = math.radians(light.shaping.cone_deg)
+    off = np.arccos(np.clip(along / np.maximum(d, 1e-300), -1.0, 1.0))
+    # distance from the centre to the cone: 0 inside; d sin(off - cone) up to 90 degrees past it; d beyond
+    dist = np.where(off <= cone, 0.0, np.where(off - cone < 0.5 * math.pi, d * np.sin(np.minimum(off - cone, 0.5 * math.pi)), d))
+    return dist <= pad * (1.0 + 1e-9) + 1e-12
+
+
+@wp.kernel
+def reach_points(
+    offset: int,
+    L: LightGPU,
+    pts: wp.array[wp.vec3],
+    # outputs
+    out: wp.array[wp.int32],
+):
+    """1 where the light's cone reaches ``pts[i]`` (:func:`light_reaches`), else 0."""
+    i = wp.tid() + offset
+    out[i] = wp.where(light_reaches(L, pts[i]), 1, 0)
 
 
 def reached_receivers(light: Light, points: np.ndarray) -> np.ndarray:

@@ -95,6 +95,11 @@ def stratified_sample(s: int, n: int, m: int, jitter: wp.vec2, shift: wp.vec2) -
     ``jitter`` is the offset inside the grid stratum (0.5, 0.5 = its centre); ``shift`` the
     lattice's random shift."""
     if m * m == n:
+        if (m & (m - 1)) == 0:
+            # m a power of two: the stratum by mask and shift, and the division by m a multiplication by
+            # 1/m (both exact scalings by a power of two: the same bits), so no divider work per sample
+            inv = 1.0 / float(m)
+            return wp.vec2((float(s & (m - 1)) + jitter[0]) * inv, (float(s >> wp.bit_count(wp.uint32(m - 1))) + jitter[1]) * inv)
         gx = s % m
         gy = s // m
         return wp.vec2((float(gx) + jitter[0]) / float(m), (float(gy) + jitter[1]) / float(m))
@@ -143,6 +148,16 @@ def counter_draw(key: wp.uint32, s: int, dim: int) -> float:
 
 
 @wp.func
+def counter_pair(key: wp.uint32, s: int, dim: int) -> wp.vec2:
+    """Dimensions ``dim`` and ``dim + 1`` of sample ``s`` (:func:`counter_draw` of each, the same
+    bits), the hash of (key, s) they share computed once."""
+    ks = pcg_hash(key + wp.uint32(s))
+    h0 = pcg_hash(ks + wp.uint32(dim))
+    h1 = pcg_hash(ks + wp.uint32(dim + 1))
+    return wp.vec2(float(h0 >> wp.uint32(8)) * (1.0 / 16777216.0), float(h1 >> wp.uint32(8)) * (1.0 / 16777216.0))
+
+
+@wp.func
 def sampling_begin(ls: LightSamples, index: int, px: int, py: int):
     """Start a pixel's samples: (its key or random state, first table index, rotation (cos, sin,
     dx, dy)). ``index``: the receiver's own index (seeds its draws); ``px, py``: its pixel
@@ -174,18 +189,18 @@ def sampling_begin(ls: LightSamples, index: int, px: int, py: int):
 def sample_coords(ls: LightSamples, state: wp.uint32, base: int, rot: wp.vec4, s: int):
     """Light coordinates of sample ``s`` of a pixel started by :func:`sampling_begin`, and
     ``state`` passed on unchanged: per-pixel sets draw sample ``s`` from the pixel's key and ``s``
-    alone (:func:`counter_draw`, dimensions 0 and 1), so any sample is computed without the others."""
+    alone (dimensions 0 and 1 of :func:`counter_draw`, through :func:`counter_pair`), so any sample is
+    computed without the others."""
     u = wp.vec2(0.0, 0.0)
     if ls.per_pixel != 0:
         if ls.kind == 0:  # regular
             u = stratified_sample(s, ls.count, ls.grid, wp.vec2(0.5, 0.5), wp.vec2(0.0, 0.0))
         else:  # random; jittered and stratified (jitter in the stratum, or the lattice's shift in rot)
-            a = counter_draw(state, s, 0)
-            b = counter_draw(state, s, 1)
+            ab = counter_pair(state, s, 0)
             if ls.kind == 2:
-                u = wp.vec2(a, b)
+                u = ab
             else:
-                u = stratified_sample(s, ls.count, ls.grid, wp.vec2(a, b), wp.vec2(rot[2], rot[3]))
+                u = stratified_sample(s, ls.count, ls.grid, ab, wp.vec2(rot[2], rot[3]))
         return to_light_coords(u, ls.disk), state
     u = ls.table[base + s]
     if ls.rotate != 0 and ls.disk == 0:

@@ -32,7 +32,7 @@ from wsoft.raster.gbuffer import GBuffer, render_gbuffer
 from wsoft.raster.horizon import clip_to_front, front_counts, front_fraction
 from wsoft.raster.depth_map import rasterize
 from wsoft.scene.device import upload_scene
-from wsoft.scene.types import LIGHT_DISTANT, Camera, Light, Scene
+from wsoft.scene.types import LIGHT_DISTANT, LIGHT_DOME, Camera, Light, Scene
 
 
 SCENE = Key("scene")
@@ -160,7 +160,7 @@ class RenderContext:
         return keys[face.face]
 
     def light_gpu(self, light: Light):
-        return light_gpu(light, self.scene.diagonal)
+        return light_gpu(light, self.scene.diagonal, self.device)
 
     def pass_counters(self, name: str) -> dict:
         """The counters of a pass (``stats["counters"]["passes"][name]``)."""
@@ -493,6 +493,8 @@ class RenderContext:
         """A technique's visibility of ``light`` capped by the light's front fraction (V = min(V,
         front)); a technique that applies the horizon itself (``horizon = "exact"``) keeps its own,
         handed on only where :meth:`light_behind` has receivers to count (else ``vis_key`` itself)."""
+        if light.kind == LIGHT_DOME:  # a dome's V is already over the receiver's hemisphere (wsoft.scene.dome)
+            return vis_key
         bk = self.light_behind(light)
         exact = tctx.tech.horizon == "exact"
         if exact and bk is None:

@@ -61,7 +61,13 @@ def with_render_settings(scene, render_settings: str | None, time_code: float | 
                          f"pass render_settings={str(render_settings)!r} to load_scene", file=scene.path)
 
 
-FLATTEN_LIMIT = 20_000_000  # instanced triangles beyond which a stage is not flattened for a technique that needs it
+FLATTEN_LIMIT = 4_000_000
+"""Instanced triangles beyond which a stage is not flattened for a technique that needs it (the
+one-line error names the techniques that keep instances). Flattening a loaded stage peaks near
+3.3 kB a triangle (``wsoft bench scaling``'s instances axis: 6.8 GB at 2.09M triangles), and
+dcs on open_world's 6.0M flattened ran out of 24 GiB: at this limit the flat copy stays near
+13 GB. The same bound as :data:`AUTO_KEEP_TRIANGLES`: a stage too big to flatten by default is
+not flattened for one technique either."""
 
 
 def instancing_plan(scene: Scene, techs: list, labels: list[str]) -> dict:

@@ -14,7 +14,7 @@ from wsoft.lightspace.view import MAX_HALF_ANGLE, to_frame
 from wsoft.pipeline.build import build_graph
 from wsoft.pipeline.framing import frame_setup
 from wsoft.pipeline.loading import instancing_plan, load_stage, too_big_to_flatten
-from wsoft.scene.types import LIGHT_CYLINDER, LIGHT_DISTANT, Light, Scene
+from wsoft.scene.types import LIGHT_CYLINDER, LIGHT_DISTANT, LIGHT_DOME, Light, Scene
 
 
 COLOR_APPLIED = "applied to R G B, not to V"
@@ -24,20 +24,28 @@ FALLOFF_APPLIED = "not applied (UsdLux gives no formula for the fade; the shadow
 def shadow_controls(scene: Scene, light: Light) -> dict:
     """A light's UsdLux shadow controls as ``wsoft plan`` lists them: the ``collection:shadowLink``
     membership (prims it leaves out of the shadow, of the prims loaded), ``inputs:shadow:distance``
-    (None: unlimited) and which techniques honour it, the shadow colour (applied to ``R G B``, not
+    (None: unlimited) and which of the techniques that render the light honour it, the shadow colour (applied to ``R G B``, not
     to ``V``) and falloff (not applied)."""
     from wsoft.techniques import TECHNIQUES
 
     out = [scene.prims[i] for i in light.shadow_excluded]
     casting = scene.casting_mask(light)
     refused = sorted(n for n, c in TECHNIQUES.items() if c.distance_refusal)
+    if light.distance_limited:  # among the techniques that render this light at all (without the distance)
+        import dataclasses
+
+        unlimited = dataclasses.replace(light, shadow_distance=-1.0)
+        renders = {n for n, c in TECHNIQUES.items() if c(c.make_params({})).supports(scene, unlimited) is None}
+        refused = [n for n in refused if n in renders]
+    else:
+        renders = set(TECHNIQUES)
     return {
         "link": {"excluded_prims": len(out), "prims": len(scene.prims), "excluded": out[:5],
                  "casting_triangles": scene.triangle_count if casting is None else int(casting.sum()),
                  "applied": "excluded prims cast no shadow of this light (still seen, still receive it)" if out else "every prim casts"},
         "distance": light.shadow_distance if light.distance_limited else None,
         "distance_applied": ("unlimited" if not light.distance_limited else
-                             f"honoured by {', '.join(n for n in sorted(TECHNIQUES) if n not in refused)}; refused by {', '.join(refused)}"),
+                             f"honoured by {', '.join(n for n in sorted(renders) if n not in refused)}; refused by {', '.join(refused)}"),
         "color": list(light.shadow_color),
         "color_applied": COLOR_APPLIED,
         "falloff": light.shadow_falloff,
@@ -49,19 +57,23 @@ def shadow_controls(scene: Scene, light: Light) -> dict:
 def emission(scene: Scene, light: Light) -> dict:
     """Where a light emits, as ``wsoft plan`` lists it: ``side`` (``front``: a rect or disk light,
     from its front only, along ``direction``, its transformed local −Z; ``all around``: a sphere or
-    point light; ``along``: a distant light's ``direction``; ``shaped``: a ``UsdLux.ShapingAPI`` cone
+    point light; ``along``: a distant light's ``direction``; ``from the sky``: a dome; ``shaped``: a ``UsdLux.ShapingAPI`` cone
     of ``cone`` degrees off ``direction``, its ``softness``, ``focus`` and ``focus_tint``) and, for a one-sided light, how many of
     the scene's mesh points (:attr:`Scene.caster_points`) lie on or behind its plane, where it gives
     V = 0 (``points_behind`` of ``points``)."""
     d = [float(c) + 0.0 for c in np.round(np.asarray(light.direction, np.float64), 6)]
     if light.shaping.shaped:  # UsdLux ShapingAPI: emission cut to a cone about -Z and faded off axis
         return {"side": "shaped", "direction": d, "cone": light.shaping.cone_deg, "softness": light.shaping.softness, "focus": light.shaping.focus,
-                "focus_tint": list(light.shaping.focus_tint), "one_sided": light.one_sided}
+                "focus_tint": list(light.shaping.focus_tint), "one_sided": light.one_sided,
+                "ies": ({"file": light.shaping.ies_path, "angle_scale": light.shaping.ies_angle_scale,
+                         "normalize": light.shaping.ies_normalize} if light.shaping.ies is not None else None)}
     if light.one_sided:
         pts = scene.caster_points
         return {"side": "front", "direction": d, "points_behind": light.points_behind(pts), "points": int(len(pts))}
     if light.kind == LIGHT_DISTANT:
         return {"side": "along", "direction": d}
+    if light.kind == LIGHT_DOME:  # the sky: inward from every direction (wsoft.scene.dome)
+        return {"side": "from the sky (" + light.dome.description() + ")"}
     return {"side": "all around"}
 
 

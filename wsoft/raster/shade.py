@@ -4,13 +4,16 @@ Each light adds its irradiance, ``E = emission x omega x S x max(0, N.L)``: ``em
 radiance (:func:`emission_of`: ``intensity x 2^exposure x color``, times the blackbody colour of
 ``colorTemperature`` where ``enableColorTemperature`` is on, over the light's size where
 ``normalize`` is on), ``omega`` the solid angle it fills seen from the sample (:func:`light_omega`),
-``L`` toward its centre, and ``UsdLux.ShapingAPI``'s cone, softness, focus and focusTint
+``L`` toward its centre, and ``UsdLux.ShapingAPI``'s cone, softness, focus, focusTint and IES profile
 (:func:`~wsoft.lightspace.light.shaping_weight`) along the direction from its centre to the sample
 (an area light's whole emission shaped as its centre's). Several lights sum. The image is exposed once per frame so that it is not
 blown out: the sum without shadows (every ``S`` = 1) is scaled so that its 99th percentile over the
 samples a light reaches (of each sample's brightest channel) is 1 (:func:`frame_exposure`); the shadows do not move the exposure,
 so every technique's image of a frame is exposed alike and only its shadows differ. A surface shows
 ``albedo x (ambient + (1 - ambient) x exposed irradiance)``, clamped to [0, 1].
+
+A dome light (the sky) adds its irradiance about the sample's normal times its ``S``
+(:mod:`wsoft.raster.shade_dome`).
 
 Surfaces with baked lighting (``primvars:wsoft:bakedLight``) are lit by it, masked by the lights'
 ``S`` weighted by their irradiance there (a lightmap masked by a shadow map, as Salzman intends).
@@ -31,7 +34,8 @@ import warp as wp
 from wsoft.parallel import launch_chunked
 from wsoft.raster.gbuffer import GBufferGPU, gb_covered
 from wsoft.lightspace.light import LINE_WIDTH, LightGPU, light_center_dir, shaping_weight
-from wsoft.scene.types import LIGHT_CYLINDER, LIGHT_DISK, LIGHT_DISTANT, LIGHT_RECT, LIGHT_SPHERE, Light
+from wsoft.raster.shade_dome import add_dome
+from wsoft.scene.types import LIGHT_CYLINDER, LIGHT_DISK, LIGHT_DISTANT, LIGHT_DOME, LIGHT_RECT, LIGHT_SPHERE, Light
 
 AMBIENT = 0.12  # share of the exposed image that is unshadowed ambient
 EXPOSURE_PERCENTILE = 99.0  # the unshadowed irradiance's percentile (brightest channel, samples lit) exposed to 1
@@ -179,6 +183,9 @@ def shade(ds, gb, lights_and_vis: list[tuple]) -> wp.array:
     for item, rad in zip(lights_and_vis, radiance):
         L, vis, light = item[0], item[1], item[2]
         sc = item[3] if len(item) > 3 else light.shadow_color
+        if light.kind == LIGHT_DOME:  # the sky: its irradiance about each normal (wsoft.raster.shade_dome)
+            add_dome(light, gb, vis, sc, unit, lum, unshadowed, num, den, dev)
+            continue
         em = wp.vec3(*(rad * unit))
         area = emitting_area(light) if light.kind != LIGHT_DISTANT else 0.0
         launch_chunked(accumulate_light, n, inputs=[L, g, vis, wp.vec3(*sc), em, float(area), distant_omega(light)],

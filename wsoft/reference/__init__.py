@@ -10,7 +10,10 @@ sphere seen as its silhouette disk, an ellipsoid as its silhouette ellipse); cyl
 their silhouette rectangle seen from the point (a line light on its segment,
 :func:`~wsoft.lightspace.light.silhouette_rect`); distant lights uniformly in the sun's cone. A
 sample counts only where its ray leaves the receiver's visible side and the light emits back along
-it (a rect or disk light from its front only: :func:`~wsoft.lightspace.light.lit_along`). Rays are
+it (a rect or disk light from its front only: :func:`~wsoft.lightspace.light.lit_along`). A shaped
+light's samples (``UsdLux.ShapingAPI``: cone, focus, IES profile) are weighted by its shaped
+emission from the sample toward the receiver, ``V = sum(visible w) / sum(w)``
+(:func:`weighted_fraction`, docs/outputs.md "V of a shaped area light"). Rays are
 any-hit against the scene's BVH and alpha-tested through cutout triangles. Randomness is seeded by
 the pattern's seed, the receiver and the sample index (counter-based draws,
 :func:`~wsoft.lightspace.samples.counter_draw`).
@@ -36,7 +39,7 @@ from __future__ import annotations
 import warp as wp
 
 import wsoft.parallel  # noqa: F401  (Warp configured before this package's kernels are defined)
-from wsoft.lightspace.light import LightGPU, light_point, lit_along
+from wsoft.lightspace.light import LightGPU, light_point, lit_along, sample_weight
 from wsoft.lightspace.samples import LightSamples, SamplePattern, sample_coords
 from wsoft.parallel import launch_chunked
 from wsoft.raster.gbuffer import GBufferGPU, gb_covered
@@ -59,39 +62,80 @@ def visible_fraction(visible: int, samples: int):
     return float(visible) / float(samples), wp.sqrt(pe * (1.0 - pe) / float(samples))
 
 
-@wp.kernel
-def trace_visibility(
-    offset: int,
-    occ: Occluders,
-    light: LightGPU,
-    ls: LightSamples,
-    gb: GBufferGPU,
-    dmax: float,
-    # outputs
-    vis: wp.array[float],
-    stderr: wp.array[float],
-):
-    i = wp.tid() + offset
-    if not gb_covered(gb, i):
-        vis[i] = 1.0
-        stderr[i] = 0.0
-        return
-    p = gb.pos[i]
-    n = gb.nrm[i]
-    off, o, state, base, rot = receiver_begin(gb, ls, i)
-    visible = int(0)
-    samples = ls.count
-    for s in range(samples):
-        c, state = sample_coords(ls, state, base, rot, s)
-        r = light_point(light, p, c)
-        d = wp.vec3(r[0], r[1], r[2])
-        if lit_along(light, n, d):
-            tm = shadow_ray_length(r[3], dmax, off)
-            if unoccluded(occ, o, d, tm):
-                visible += 1
-    v, e = visible_fraction(visible, samples)
-    vis[i] = v
-    stderr[i] = e
+@wp.func
+def weighted_fraction(v: float, e: float, sw: float, sv: float, sww: float):
+    """(V, its standard error) of a shaped light: ``V = sv / sw``, the visible samples' shaping
+    weights over all samples' (``sw``; ``sww`` their squares), its error that of ``n = sw^2 / sww``
+    effective samples (at least 1; pseudo-count estimate as :func:`visible_fraction`). Where the
+    weights sum to under 1e-20 (the shaped light sends next to nothing toward the receiver: it is
+    masked, docs/outputs.md; their squares would underflow float32) the unweighted ``v``, ``e``."""
+    if sw <= 1.0e-20:
+        return v, e
+    vw = wp.clamp(sv / sw, 0.0, 1.0)
+    n = wp.max((sw / wp.sqrt(wp.max(sww, 1.0e-37))) * (sw / wp.sqrt(wp.max(sww, 1.0e-37))), 1.0)
+    pe = (vw * n + 0.5) / (n + 1.0)
+    return vw, wp.sqrt(pe * (1.0 - pe) / n)
+
+
+def visibility_kernel(shaped: bool):
+    """:func:`trace_visibility`; ``shaped``: each sample weighted by the shaped emission toward the
+    receiver (:func:`~wsoft.lightspace.light.sample_weight`, :func:`weighted_fraction`), compiled in
+    only then (an unshaped light's kernel is the plain fraction, bit for bit)."""
+
+    def trace_visibility(
+        offset: int,
+        occ: Occluders,
+        light: LightGPU,
+        ls: LightSamples,
+        gb: GBufferGPU,
+        dmax: float,
+        # outputs
+        vis: wp.array[float],
+        stderr: wp.array[float],
+    ):
+        i = wp.tid() + offset
+        if not gb_covered(gb, i):
+            vis[i] = 1.0
+            stderr[i] = 0.0
+            return
+        p = gb.pos[i]
+        n = gb.nrm[i]
+        off, o, state, base, rot = receiver_begin(gb, ls, i)
+        visible = int(0)
+        samples = ls.count
+        sw = float(0.0)
+        sv = float(0.0)
+        sww = float(0.0)
+        for s in range(samples):
+            c, state = sample_coords(ls, state, base, rot, s)
+            r = light_point(light, p, c)
+            d = wp.vec3(r[0], r[1], r[2])
+            w = float(0.0)
+            if wp.static(shaped):
+                w = sample_weight(light, d)
+                sw += w
+                sww += w * w
+            if lit_along(light, n, d):
+                tm = shadow_ray_length(r[3], dmax, off)
+                if unoccluded(occ, o, d, tm):
+                    visible += 1
+                    if wp.static(shaped):
+                        sv += w
+        v, e = visible_fraction(visible, samples)
+        if wp.static(shaped):
+            v, e = weighted_fraction(v, e, sw, sv, sww)
+        vis[i] = v
+        stderr[i] = e
+
+    if shaped:
+        trace_visibility.__name__ = trace_visibility.__qualname__ = "trace_visibility_shaped"
+    else:
+        trace_visibility.__qualname__ = "trace_visibility"
+    return wp.kernel(trace_visibility, module=__name__)
+
+
+trace_visibility = visibility_kernel(False)
+trace_visibility_shaped = visibility_kernel(True)
 
 
 @wp.func
@@ -118,48 +162,85 @@ def packet_rays(light: LightGPU, ls: LightSamples, state: wp.uint32, base: int, 
     return dx, dy, dz, tm, mask, state
 
 
-@wp.kernel(module=PACKETS_MODULE)
-def trace_visibility_packets(
-    offset: int,
-    mesh: wp.uint64,
-    pb: PackedBVH,
-    cut: Surfaces,
-    has_cutouts: int,
-    light: LightGPU,
-    ls: LightSamples,
-    gb: GBufferGPU,
-    dmax: float,
-    # outputs
-    vis: wp.array[float],
-    stderr: wp.array[float],
-    given_up: wp.array[wp.int32],
-):
-    """:func:`trace_visibility` with a receiver's samples traced in packets of :data:`PACKET`
-    (the same rays, generated in the same order). Once a packet of a
-    receiver gives up (its rays fan out over fine geometry, :func:`trace_packet`), the
-    receiver's other samples go ray by ray; ``given_up``: 1 for such receivers."""
-    i = wp.tid() + offset
-    given_up[i] = 0
-    if not gb_covered(gb, i):
-        vis[i] = 1.0
-        stderr[i] = 0.0
-        return
-    p = gb.pos[i]
-    n = gb.nrm[i]
-    off, o, state, base, rot = receiver_begin(gb, ls, i)
-    visible = int(0)
-    samples = ls.count
-    first = int(0)
-    each = int(0)
-    while first < samples:
-        dx, dy, dz, tm, mask, state = packet_rays(light, ls, state, base, rot, p, n, off, dmax, first)
-        live, each = trace_receiver_packet(mesh, pb, cut, has_cutouts, o, dx, dy, dz, tm, mask, each)
-        visible += popcount(live)
-        first += PACKET
-    v, e = visible_fraction(visible, samples)
-    vis[i] = v
-    stderr[i] = e
-    given_up[i] = each
+@wp.func
+def packet_weights(light: LightGPU, ls: LightSamples, state: wp.uint32, base: int, rot: wp.vec4, p: wp.vec3, first: int,
+                   live: wp.uint32, sw: float, sv: float, sww: float):
+    """``sw``, ``sv``, ``sww`` of :func:`weighted_fraction` plus a packet's samples ``first ..``
+    (regenerated from the random ``state`` :func:`packet_rays` started from; ``live``: the bits of
+    those unblocked)."""
+    for k in range(wp.min(PACKET, ls.count - first)):
+        c, state = sample_coords(ls, state, base, rot, first + k)
+        r = light_point(light, p, c)
+        w = sample_weight(light, wp.vec3(r[0], r[1], r[2]))
+        sw += w
+        sww += w * w
+        if (live >> wp.uint32(k)) & wp.uint32(1) != wp.uint32(0):
+            sv += w
+    return sw, sv, sww
+
+
+def packets_kernel(shaped: bool):
+    """:func:`trace_visibility_packets`; ``shaped`` as :func:`visibility_kernel`."""
+
+    def trace_visibility_packets(
+        offset: int,
+        mesh: wp.uint64,
+        pb: PackedBVH,
+        cut: Surfaces,
+        has_cutouts: int,
+        light: LightGPU,
+        ls: LightSamples,
+        gb: GBufferGPU,
+        dmax: float,
+        # outputs
+        vis: wp.array[float],
+        stderr: wp.array[float],
+        given_up: wp.array[wp.int32],
+    ):
+        """:func:`trace_visibility` with a receiver's samples traced in packets of :data:`PACKET`
+        (the same rays, generated in the same order). Once a packet of a
+        receiver gives up (its rays fan out over fine geometry, :func:`trace_packet`), the
+        receiver's other samples go ray by ray; ``given_up``: 1 for such receivers."""
+        i = wp.tid() + offset
+        given_up[i] = 0
+        if not gb_covered(gb, i):
+            vis[i] = 1.0
+            stderr[i] = 0.0
+            return
+        p = gb.pos[i]
+        n = gb.nrm[i]
+        off, o, state, base, rot = receiver_begin(gb, ls, i)
+        visible = int(0)
+        samples = ls.count
+        first = int(0)
+        each = int(0)
+        sw = float(0.0)
+        sv = float(0.0)
+        sww = float(0.0)
+        while first < samples:
+            s0 = state
+            dx, dy, dz, tm, mask, state = packet_rays(light, ls, state, base, rot, p, n, off, dmax, first)
+            live, each = trace_receiver_packet(mesh, pb, cut, has_cutouts, o, dx, dy, dz, tm, mask, each)
+            visible += popcount(live)
+            if wp.static(shaped):
+                sw, sv, sww = packet_weights(light, ls, s0, base, rot, p, first, live, sw, sv, sww)
+            first += PACKET
+        v, e = visible_fraction(visible, samples)
+        if wp.static(shaped):
+            v, e = weighted_fraction(v, e, sw, sv, sww)
+        vis[i] = v
+        stderr[i] = e
+        given_up[i] = each
+
+    if shaped:
+        trace_visibility_packets.__name__ = trace_visibility_packets.__qualname__ = "trace_visibility_packets_shaped"
+    else:
+        trace_visibility_packets.__qualname__ = "trace_visibility_packets"
+    return wp.kernel(trace_visibility_packets, module=PACKETS_MODULE)
+
+
+trace_visibility_packets = packets_kernel(False)
+trace_visibility_packets_shaped = packets_kernel(True)
 
 
 # chunks a CPU thread: receivers cost unevenly (lit, penumbra, packets that give up) and chunks
@@ -219,7 +300,7 @@ def trace_reference(ds: DeviceScene, light: LightGPU, gb, pattern: SamplePattern
         cut, has_cutouts = shadow_surfaces(ds, excluded)
         given_up = wp.empty(n, dtype=wp.int32, device=ds.device)
         launch_chunked(
-            trace_visibility_packets,
+            trace_visibility_packets_shaped if light.shaped else trace_visibility_packets,
             n,
             inputs=[ds.mesh.id, pb, cut, has_cutouts, light, pattern.on(ds.device, disk), gb.gpu(), dmax],
             outputs=[vis, err, given_up],
@@ -231,7 +312,7 @@ def trace_reference(ds: DeviceScene, light: LightGPU, gb, pattern: SamplePattern
             counters["receivers_ray_by_ray"] = int(given_up.numpy().sum())
         return vis, err
     launch_chunked(
-        trace_visibility,
+        trace_visibility_shaped if light.shaped else trace_visibility,
         n,
         inputs=[occluders(ds, excluded), light, pattern.on(ds.device, disk), gb.gpu(), dmax],
         outputs=[vis, err],

@@ -407,21 +407,39 @@ def leaf_hits(
 
 
 @wp.func
-def ray_reaches_box(o: wp.vec3, d: wp.vec3, tmax: float, lo: wp.vec3, hi: wp.vec3) -> bool:
-    """Does the segment o + t*d, t in [0, tmax], meet the box ``lo..hi``? (slab test; callers
-    pad the box so that rounding never drops a ray that meets a triangle inside it)."""
+def slab_reciprocal(da: float) -> float:
+    """The reciprocal of a ray's direction component for the slab test (a zero component: 1e20)."""
+    if da == 0.0:
+        return 1.0 / 1.0e-20
+    return 1.0 / da
+
+
+@wp.func
+def ray_meets_box(o: wp.vec3, inv: wp.vec3, tmax: float, lo: wp.vec3, hi: wp.vec3) -> bool:
+    """:func:`ray_reaches_box` from the direction's reciprocals ``inv`` (:func:`slab_reciprocal`)."""
     tn = float(0.0)
     tf = tmax
     for a in range(3):
-        da = d[a]
-        if da == 0.0:
-            da = 1.0e-20
-        inv = 1.0 / da
-        t1 = (lo[a] - o[a]) * inv
-        t2 = (hi[a] - o[a]) * inv
+        t1 = (lo[a] - o[a]) * inv[a]
+        t2 = (hi[a] - o[a]) * inv[a]
         tn = wp.max(tn, wp.min(t1, t2))
         tf = wp.min(tf, wp.max(t1, t2))
     return tn <= tf
+
+
+@wp.func
+def ray_reaches_box(o: wp.vec3, d: wp.vec3, tmax: float, lo: wp.vec3, hi: wp.vec3) -> bool:
+    """Does the segment o + t*d, t in [0, tmax], meet the box ``lo..hi``? (slab test; callers
+    pad the box so that rounding never drops a ray that meets a triangle inside it)."""
+    return ray_meets_box(o, wp.vec3(slab_reciprocal(d[0]), slab_reciprocal(d[1]), slab_reciprocal(d[2])), tmax, lo, hi)
+
+
+@wp.func
+def padded_leaf_box(o: wp.vec3, lo: wp.vec3, hi: wp.vec3):
+    """A leaf's box padded by 1e-5 of the coordinates' magnitude (box and origin) per axis: (lo, hi)."""
+    pad = (wp.vec3(wp.max(wp.abs(lo[0]), wp.abs(hi[0])) + wp.abs(o[0]), wp.max(wp.abs(lo[1]), wp.abs(hi[1])) + wp.abs(o[1]),
+                   wp.max(wp.abs(lo[2]), wp.abs(hi[2])) + wp.abs(o[2])) + wp.vec3(1.0)) * 1.0e-5
+    return lo - pad, hi + pad
 
 
 @wp.func
@@ -430,16 +448,29 @@ def rays_reaching_leaf(o: wp.vec3, dx: packet_f, dy: packet_f, dz: packet_f, tm:
     """The rays of ``live`` whose segment meets the leaf's box, padded by 1e-5 of the coordinates'
     magnitude (box and origin) per axis: conservative, a ray that meets a triangle of the leaf is
     kept (the padded box also has thickness where the leaf's triangles lie in one axis plane)."""
-    pad = (wp.vec3(wp.max(wp.abs(lo[0]), wp.abs(hi[0])) + wp.abs(o[0]), wp.max(wp.abs(lo[1]), wp.abs(hi[1])) + wp.abs(o[1]),
-                   wp.max(wp.abs(lo[2]), wp.abs(hi[2])) + wp.abs(o[2])) + wp.vec3(1.0)) * 1.0e-5
-    blo = lo - pad
-    bhi = hi + pad
+    blo, bhi = padded_leaf_box(o, lo, hi)
     sub = wp.uint32(0)
     m = live
     while m != wp.uint32(0):
         k = lowest_bit(m)
         m = m & (m - wp.uint32(1))
         if ray_reaches_box(o, wp.vec3(dx[k], dy[k], dz[k]), tm[k], blo, bhi):
+            sub = sub | (wp.uint32(1) << wp.uint32(k))
+    return sub
+
+
+@wp.func
+def rays_meeting_leaf(o: wp.vec3, ix: packet_f, iy: packet_f, iz: packet_f, tm: packet_f, live: wp.uint32, lo: wp.vec3,
+                      hi: wp.vec3) -> wp.uint32:
+    """:func:`rays_reaching_leaf` from the rays' direction reciprocals (:func:`slab_reciprocal`,
+    computed once a packet: the same answer without three divisions a ray and leaf)."""
+    blo, bhi = padded_leaf_box(o, lo, hi)
+    sub = wp.uint32(0)
+    m = live
+    while m != wp.uint32(0):
+        k = lowest_bit(m)
+        m = m & (m - wp.uint32(1))
+        if ray_meets_box(o, wp.vec3(ix[k], iy[k], iz[k]), tm[k], blo, bhi):
             sub = sub | (wp.uint32(1) << wp.uint32(k))
     return sub
 
@@ -458,12 +489,16 @@ def visit_child(
     dy: packet_f,
     dz: packet_f,
     tm: packet_f,
+    ix: packet_f,
+    iy: packet_f,
+    iz: packet_f,
     live: wp.uint32,
     work: int,
 ):
     """One child (box ``lo..hi``) of a record whose box the packet enters at ``t`` (1e30: never):
     an inner child is returned to descend into (else -1); a leaf's triangles are tested on the
-    spot, each against the rays whose own segment meets the leaf's box (:func:`rays_reaching_leaf`:
+    spot, each against the rays whose own segment meets the leaf's box (:func:`rays_meeting_leaf`,
+    from the directions' reciprocals ``ix``, ``iy``, ``iz``:
     the packet's bounds reach boxes that most of its rays miss). Returns (live, inner record or
     -1, work done so far: a ray-box test counts half a ray-triangle test)."""
     if t >= 1.0e30:
@@ -471,7 +506,7 @@ def visit_child(
     if child[1] >= 0:
         sub = live
         if wp.bit_count(live) > 1:
-            sub = rays_reaching_leaf(o, dx, dy, dz, tm, live, lo, hi)
+            sub = rays_meeting_leaf(o, ix, iy, iz, tm, live, lo, hi)
             work += wp.bit_count(live) / 2
         if sub == wp.uint32(0):
             return live, -1, work
@@ -514,6 +549,13 @@ def trace_packet(
         return leaf_hits(pb, cut, has_cutouts, pb.root_leaf[0], pb.root_leaf[1], o, dx, dy, dz, tm, live), 0
     budget = WORK_PER_RAY * wp.bit_count(mask)
     work = int(0)
+    ix = packet_f()
+    iy = packet_f()
+    iz = packet_f()
+    for k in range(PACKET):  # every lane (an unused one's reciprocal is never read): a loop the compiler can vectorise
+        ix[k] = slab_reciprocal(dx[k])
+        iy[k] = slab_reciprocal(dy[k])
+        iz[k] = slab_reciprocal(dz[k])
     stack = stack_i()
     sp = int(0)
     rec = int(0)
@@ -538,8 +580,8 @@ def trace_packet(
             hi_n = q.hi_r
             lo_f = q.lo_l
             hi_f = q.hi_l
-        live, n0, work = visit_child(pb, cut, has_cutouts, near, t_near, lo_n, hi_n, o, dx, dy, dz, tm, live, work)
-        live, n1, work = visit_child(pb, cut, has_cutouts, far, t_far, lo_f, hi_f, o, dx, dy, dz, tm, live, work)
+        live, n0, work = visit_child(pb, cut, has_cutouts, near, t_near, lo_n, hi_n, o, dx, dy, dz, tm, ix, iy, iz, live, work)
+        live, n1, work = visit_child(pb, cut, has_cutouts, far, t_far, lo_f, hi_f, o, dx, dy, dz, tm, ix, iy, iz, live, work)
         if live == wp.uint32(0):
             return live, 0
         if n0 >= 0 and n1 >= 0:

@@ -12,8 +12,10 @@ from functools import cached_property
 
 import numpy as np
 
+from wsoft.scene.dome import LIGHT_DOME, Dome
 from wsoft.scene.render_settings import RenderSettings
 from wsoft.scene.shaping import Shaping
+from wsoft.scene.stmap import StMap  # noqa: F401  (read from here by the loaders)
 
 # light kinds (the integers are what kernels see)
 LIGHT_RECT = 0
@@ -22,8 +24,9 @@ LIGHT_SPHERE = 2
 LIGHT_DISTANT = 3
 LIGHT_POINT = 4  # SphereLight with treatAsPoint or radius 0
 LIGHT_CYLINDER = 5  # CylinderLight: its side along the frame's X (a line light: radius 0)
+# LIGHT_DOME (6): a DomeLight, its sky in Light.dome (wsoft.scene.dome)
 LIGHT_KIND_NAMES = {LIGHT_RECT: "rect", LIGHT_DISK: "disk", LIGHT_SPHERE: "sphere", LIGHT_DISTANT: "distant", LIGHT_POINT: "point",
-                    LIGHT_CYLINDER: "cylinder"}
+                    LIGHT_CYLINDER: "cylinder", LIGHT_DOME: "dome"}
 
 # the 12 triangles of a box's 8 corners (corner k: bit 0 -> x, bit 1 -> y, bit 2 -> z high)
 BOX_TRIANGLES = ((0, 2, 3), (0, 3, 1), (4, 5, 7), (4, 7, 6), (0, 1, 5), (0, 5, 4), (2, 6, 7), (2, 7, 3), (0, 4, 6), (0, 6, 2),
@@ -48,25 +51,6 @@ class Texture:
     wrap_s: int = WRAP_REPEAT
     wrap_t: int = WRAP_REPEAT
     border: float = 0.0  # the value outside the image under WRAP_BLACK: transparent black, scaled and biased (the bias)
-
-
-@dataclass(frozen=True)
-class StMap:
-    """Where a cutout texture's st comes from on a mesh: the primvar ``primvar`` (a
-    ``UsdPrimvarReader_float2``'s ``varname``; ``fallback`` on a mesh without it; None: ``fallback``
-    everywhere, an unconnected ``st``) mapped by the affine ``matrix`` (the ``UsdTransform2d`` nodes
-    between reader and texture, composed: st = ``matrix[:, :2] @ uv + matrix[:, 2]``, 2 x 3 rows).
-    Applied on the host per triangle corner at load (:meth:`wsoft.scene.usd_mesh.MeshReader.texture_coords`),
-    which is exact: the device interpolates st linearly over a triangle."""
-
-    primvar: str | None
-    fallback: tuple[float, float] = (0.0, 0.0)
-    matrix: tuple[tuple[float, float, float], tuple[float, float, float]] = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0))
-    reader: str = ""  # the reader node's path (messages name it)
-
-    @property
-    def identity(self) -> bool:
-        return self.matrix == ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0))
 
 
 @dataclass
@@ -101,7 +85,8 @@ class Light:
     ``radius`` when round) and emit all around; distant lights shine along −Z with a cone of full
     angle ``angle_deg``. Cylinder lights are the side of a cylinder of length ``2 half_size[0]``
     along X and radius ``half_size[1]`` (= ``radius``) about ``position``, emitting all around from
-    its side (not its end caps); of radius 0 a line light (:attr:`is_line`).
+    its side (not its end caps); of radius 0 a line light (:attr:`is_line`). A dome light
+    (``LIGHT_DOME``) is the sky: no position or size, its radiance in ``dome`` (:mod:`wsoft.scene.dome`).
     """
 
     path: str
@@ -131,6 +116,7 @@ class Light:
     """A disk's (X, Y) or sphere's (X, Y, Z) semi-axes along the frame's axes as fractions of
     ``radius``: (1, 1, 1) for a round light, else one of them 1 (``radius`` is the largest)."""
     shaping: Shaping = field(default_factory=Shaping)  # UsdLux.ShapingAPI: cone, softness, focus, focus tint about −Z
+    dome: Dome | None = None  # a dome light's (kind LIGHT_DOME) sky: texture, rotation, sampling table (wsoft.scene.dome)
 
     @property
     def distance_limited(self) -> bool:
@@ -190,6 +176,8 @@ class Light:
             return f"radius {self.radius:g}"
         if self.kind == LIGHT_DISTANT:
             return f"angle {self.angle_deg:g} deg"
+        if self.kind == LIGHT_DOME:
+            return f"sky, {self.dome.description()}"
         return "point"
 
     def extent(self) -> float:

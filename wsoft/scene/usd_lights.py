@@ -1,7 +1,7 @@
 """USD lights with their shadow controls, and cameras -> :class:`~wsoft.scene.types.Light`, :class:`~wsoft.scene.types.Camera`.
 
 :func:`read_light` reads the lights wsoft shadows (:data:`HANDLED_LIGHTS`: rect, disk, sphere,
-cylinder and distant; the others are skipped with :data:`UNHANDLED_REASONS`) from their ``inputs:`` at the
+cylinder, distant and dome (:mod:`wsoft.scene.usd_dome`); the others are skipped with :data:`UNHANDLED_REASONS`) from their ``inputs:`` at the
 context's time code, their frame re-orthonormalised and their sizes scaled by the transform, and
 their emission as UsdLux defines it (:func:`read_emission`; a light that emits nothing is skipped,
 :func:`emission_refusal`);
@@ -16,15 +16,19 @@ import math
 
 import numpy as np
 
+from wsoft.scene.dome import LIGHT_DOME
+from wsoft.scene.ies import IesError, read_ies
 from wsoft.scene.shaping import Shaping
 from wsoft.scene.types import LIGHT_CYLINDER, LIGHT_DISK, LIGHT_DISTANT, LIGHT_POINT, LIGHT_RECT, LIGHT_SPHERE, Camera, Light, Scene
 from wsoft.scene.usd_context import StageContext, pxr
+from wsoft.scene.usd_dome import read_dome
 
-HANDLED_LIGHTS = ("RectLight", "DiskLight", "SphereLight", "CylinderLight", "DistantLight")
+DOME_LIGHTS = ("DomeLight", "DomeLight_1")  # the sky (wsoft.scene.dome, read by wsoft.scene.usd_dome)
+HANDLED_LIGHTS = ("RectLight", "DiskLight", "SphereLight", "CylinderLight", "DistantLight", *DOME_LIGHTS)
 UNHANDLED_REASONS = {
-    "DomeLight": "environment (dome) lighting has no finite emitter to shadow-map; not handled",
     "GeometryLight": "mesh (geometry) lights are not handled by any technique",
-    "PortalLight": "portal lights only shape a DomeLight; not handled",
+    "PortalLight": "portal lights (openings a DomeLight's light is restricted to) are not honoured: the dome lights every receiver "
+                   "from its whole sky",
     "PluginLight": "plugin lights have no known shape; not handled",
 }
 
@@ -36,18 +40,22 @@ def read_light(ctx: StageContext, prim, type_name: str) -> Light | None:
     """The light ``prim`` in the world (:func:`read_light_shape`), its ``intensity`` and ``color``
     its emission (:func:`read_emission`)."""
     light = read_light_shape(ctx, prim, type_name)
+    if light is not None and light.kind == LIGHT_DOME:
+        return read_dome(ctx, prim, type_name, read_emission(ctx, prim, light))
     return None if light is None else read_shaping(ctx, prim, read_emission(ctx, prim, light))
 
 
-SHAPING_ATTRS = ("inputs:shaping:cone:angle", "inputs:shaping:cone:softness", "inputs:shaping:focus", "inputs:shaping:focusTint")
+SHAPING_ATTRS = ("inputs:shaping:cone:angle", "inputs:shaping:cone:softness", "inputs:shaping:focus", "inputs:shaping:focusTint",
+                 "inputs:shaping:ies:file", "inputs:shaping:ies:angleScale", "inputs:shaping:ies:normalize")
 
 
 def read_shaping(ctx: StageContext, prim, light: Light) -> Light:
     """``light`` with its ``UsdLux.ShapingAPI`` (primary axis local −Z), read where the API is applied
     or any of its inputs authored: ``shaping:cone:angle`` (fallback 90; in [0, 180] degrees),
     ``shaping:cone:softness`` (>= 0; above 1 read as 1), ``shaping:focus`` (>= 0) and
-    ``shaping:focusTint``; a value out of range or not finite is an error naming the attribute. An
-    authored ``shaping:ies:file`` gets a warning: IES profiles are not read. A distant light's
+    ``shaping:focusTint``; a value out of range or not finite is an error naming the attribute.
+    ``shaping:ies:file`` (an LM-63 profile, :func:`read_ies_shaping`) with ``shaping:ies:angleScale``
+    (> -1) and ``shaping:ies:normalize``. A distant light's
     emission has one direction, which a cone about its own axis does not cut: its authored shaping
     gets a warning and is not applied."""
     Gf, Sdf, Tf, Usd, UsdGeom, UsdLux, UsdShade = pxr()
@@ -55,10 +63,7 @@ def read_shaping(ctx: StageContext, prim, light: Light) -> Light:
     authored = any(prim.HasAttribute(a) and prim.GetAttribute(a).HasAuthoredValue() for a in SHAPING_ATTRS)
     if not (prim.HasAPI(UsdLux.ShapingAPI) or authored):
         return light
-    ies = ctx.get(api.GetShapingIesFileAttr(), None)
-    if ies is not None and getattr(ies, "path", str(ies)):
-        ctx.warn(prim, f"inputs:shaping:ies:file = {getattr(ies, 'path', ies)}: IES profiles are not read; the light is drawn "
-                 "with its cone and focus only (bake the profile into shaping:cone:angle and shaping:focus to approximate it)")
+    ies = read_ies_shaping(ctx, prim, api)
     angle = ctx.finite(prim, "inputs:shaping:cone:angle", ctx.get(api.GetShapingConeAngleAttr(), 90.0))
     if not 0.0 <= angle <= 180.0:
         raise ctx.err(prim, f"inputs:shaping:cone:angle = {angle:g} must be in [0, 180] degrees off the light's axis")
@@ -78,8 +83,31 @@ def read_shaping(ctx: StageContext, prim, light: Light) -> Light:
             ctx.warn(prim, "ShapingAPI on a DistantLight is not applied (its light arrives along one direction, which no cone "
                      "about its axis cuts): remove the shaping inputs, or use a rect, disk or sphere light for a spot")
         return light
-    light.shaping = Shaping(cone_deg=angle, softness=min(soft, 1.0), focus=focus, focus_tint=tint)
+    light.shaping = Shaping(cone_deg=angle, softness=min(soft, 1.0), focus=focus, focus_tint=tint, **ies)
     return light
+
+
+def read_ies_shaping(ctx: StageContext, prim, api) -> dict:
+    """The ``Shaping`` fields of ``shaping:ies:file`` (resolved by the stage's asset resolver, else
+    taken as written; the profile read by :func:`~wsoft.scene.ies.read_ies`),
+    ``shaping:ies:angleScale`` (finite, > -1: ``1 + angleScale`` divides the profile's angles,
+    :func:`~wsoft.scene.ies.ies_angle`) and ``shaping:ies:normalize``; none without a file. A file
+    that is missing or malformed, or an angle scale out of range, is an error naming the attribute."""
+    asset = ctx.get(api.GetShapingIesFileAttr(), None)
+    written = getattr(asset, "path", str(asset or ""))
+    if not written:
+        return {}
+    path = getattr(asset, "resolvedPath", "") or written
+    try:
+        profile = read_ies(path)
+    except IesError as e:
+        raise ctx.err(prim, f"inputs:shaping:ies:file = {written}: {e}") from None
+    scale = ctx.finite(prim, "inputs:shaping:ies:angleScale", ctx.get(api.GetShapingIesAngleScaleAttr(), 0.0))
+    if scale <= -1.0:
+        raise ctx.err(prim, f"inputs:shaping:ies:angleScale = {scale:g} must be > -1 (the profile's angles are divided by "
+                      "1 + angleScale; 0 leaves them as they are)")
+    normalize = bool(ctx.get(api.GetShapingIesNormalizeAttr(), False))
+    return dict(ies=profile, ies_path=path, ies_angle_scale=scale, ies_normalize=normalize)
 
 
 EMITS_NOTHING = "emits nothing"
@@ -193,6 +221,8 @@ def read_light_shape(ctx: StageContext, prim, type_name: str) -> Light | None:
     if not all(math.isfinite(c) for c in color):
         raise ctx.err(prim, f"inputs:color = {color} is not finite")
     common = dict(path=str(prim.GetPath()), position=pos, frame=frame, intensity=intensity, color=color)
+    if type_name in DOME_LIGHTS:
+        return Light(kind=LIGHT_DOME, **common)
     if type_name == "RectLight":
         lt = UsdLux.RectLight(prim)
         w = ctx.size(prim, "inputs:width", ctx.get(lt.GetWidthAttr(), 1.0)) * scale[0]

@@ -17,7 +17,7 @@ import os
 import sys
 from collections.abc import Callable, Sequence
 
-from wsoft.stages.scenes import animated, basics, bridge, character, city, forest, interiors, organic, stsv, tower, tunnel_fan
+from wsoft.stages.scenes import animated, basics, bridge, character, city, forest, interiors, lights, open_world, organic, stsv, tower, tunnel_fan
 from wsoft.usd_scenes import folder as bundled_folder
 
 # name -> generator(out_dir) -> {"file": path, "triangles": n, ...}
@@ -51,6 +51,11 @@ SCENES: dict[str, Callable[[str], dict[str, object]]] = {
     "ramp_slide": animated.scene_ramp_slide,
     "ramp_static": animated.scene_ramp_static,
     "walker": character.scene_walker,
+    "open_world": open_world.scene_open_world,
+    "open_world_flyby": open_world.scene_open_world_flyby,
+    "open_world_sunset": open_world.scene_open_world_sunset,
+    "dome_uniform": lights.scene_dome_uniform,
+    "dusk_street": lights.scene_dusk_street,
 }
 
 

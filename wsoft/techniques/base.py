@@ -159,6 +159,10 @@ class Technique:
     # point lights: "" when the technique renders them, else why it cannot (one line, naming what
     # to use instead); supports() then refuses them with it
     point_refusal: ClassVar[str] = ""
+    # dome lights (UsdLux DomeLight, wsoft.scene.dome): "" when the technique renders the sky's
+    # visibility (V = E_occluded / E_unoccluded over the receiver's hemisphere), else why it cannot;
+    # supports() refuses a dome with it
+    dome_refusal: ClassVar[str] = "it shadows an emitter of finite extent, not the sky: render a DomeLight with the reference or a dome technique"
     # cylinder lights (UsdLux CylinderLight, a line light at radius 0): what the technique renders of
     # one, in a line (`wsoft techniques` and `wsoft plan` show it); "" where it does not say
     cylinder_model: ClassVar[str] = ""
@@ -212,11 +216,13 @@ class Technique:
     def supports(self, scene, light) -> str | None:
         """``None`` when the technique can render ``light`` of ``scene``, else the reason it cannot.
         Subclasses that override it start with ``super().supports(scene, light)``."""
-        from wsoft.scene.types import LIGHT_POINT  # here: parsing the command line imports no Warp (wsoft.scene does)
+        from wsoft.scene.types import LIGHT_DOME, LIGHT_POINT  # here: parsing the command line imports no Warp (wsoft.scene does)
 
         why = self.shadow_controls_refusal(light)
         if why is None and light.kind == LIGHT_POINT and self.point_refusal:
             return self.point_refusal
+        if why is None and light.kind == LIGHT_DOME and self.dome_refusal:
+            return self.dome_refusal
         return why
 
     def shadow_controls_refusal(self, light) -> str | None:

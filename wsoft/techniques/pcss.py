@@ -39,21 +39,10 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from wsoft.accel.filters import pcf_visibility, taps_on
-from wsoft.lightspace.halfspace import kernel_front
-from wsoft.lightspace.light import CYLINDER_KERNEL, LightKernel, light_kernel, spread
-from wsoft.lightspace.samples import to_light_coords
-from wsoft.lightspace.view import (
-    DEPTH_CLEAR,
-    ViewGPU,
-    depth_at,
-    map_coords,
-    receiver_tap_depth,
-    texel_center,
-    texel_size,
-    view_dir,
-    within_distance,
-)
+from wsoft.accel.filters import taps_on
+from wsoft.accel.pcss_filter import pcss_filter
+from wsoft.lightspace.light import CYLINDER_KERNEL, LightKernel, light_kernel
+from wsoft.lightspace.view import DEPTH_CLEAR, ViewGPU, view_dir
 from wsoft.parallel import launch_chunked
 from wsoft.raster.gbuffer import GBufferGPU, gb_receiver
 from wsoft.params import LightViewParams, check_ranges
@@ -78,12 +67,6 @@ class PCSSParams(LightViewParams):
             for n in (self.blocker_samples, self.filter_samples):
                 check(math.isqrt(n) ** 2 == n, f"the grid pattern needs square sample counts, not {n}")
         check(self.min_radius <= self.max_radius, "need min_radius <= max_radius")
-
-
-@wp.func
-def clamp_half(lv: ViewGPU, h: wp.vec2, lo_texels: float, hi_texels: float) -> wp.vec2:
-    t = texel_size(lv)
-    return wp.vec2(wp.clamp(h[0], lo_texels * t[0], hi_texels * t[0]), wp.clamp(h[1], lo_texels * t[1], hi_texels * t[1]))
 
 
 @wp.kernel
@@ -114,39 +97,10 @@ def shade_pcss(
         vis[i] = 1.0
         return
     pv = wp.vec3(r[0], r[1], r[2])
-    nv = view_dir(lv, gb.nrm[i])
-    m0 = map_coords(lv, pv)
-    # the light clipped to the receiver's front half-space: search and filter its part's window
-    mid, hs, front = kernel_front(lv, k, pv, nv)
-    if front <= 0.0:
-        vis[i] = 0.0
-        return
-    # 1. blocker search over the region where any caster could cover part of the light
-    search = clamp_half(lv, spread(lv, k, z_caster_min, pv[2]), 1.0, max_radius)
-    mc = wp.vec2(m0[0] + mid[0] * search[0], m0[1] + mid[1] * search[1])
-    search = wp.vec2(search[0] * hs[0], search[1] * hs[1])
-    total = float(0.0)
-    count = float(0.0)
-    for s in range(nb):
-        o = to_light_coords(btaps[s], k.disk)
-        m = wp.vec2(mc[0] + o[0] * search[0], mc[1] + o[1] * search[1])
-        d = depth_at(lv, depth, m)
-        c = texel_center(lv, m)
-        zr = receiver_tap_depth(lv, pv, nv, m, plane_slope)
-        if d < zr - bias:
-            if dmax < 0.0 or within_distance(lv, pv, wp.vec2(c[0], c[1]), d, dmax):
-                total += d
-                count += 1.0
-    if count == 0.0:
-        vis[i] = front
-        return
-    z_avg = total / count
-    blockers[i] = z_avg
-    # 2. penumbra from the average blocker depth; 3. PCF over it, shaped like the light
-    pen = clamp_half(lv, spread(lv, k, z_avg, pv[2]), min_radius, max_radius)
-    mf = wp.vec2(m0[0] + mid[0] * pen[0], m0[1] + mid[1] * pen[1])
-    pen = wp.vec2(pen[0] * hs[0], pen[1] * hs[1])
-    vis[i] = front * pcf_visibility(lv, depth, pv, nv, mf, pen, k.disk, ftaps, nf, bias, 1, plane_slope, dmax)
+    res = pcss_filter(lv, k, depth, pv, view_dir(lv, gb.nrm[i]), btaps, nb, ftaps, nf, z_caster_min, bias, 0.0, plane_slope, min_radius,
+                      max_radius, dmax)
+    vis[i] = res[0]
+    blockers[i] = res[1]
 
 
 class PCSS(Technique):

@@ -63,7 +63,9 @@ a rectangle :data:`~wsoft.lightspace.light.LINE_WIDTH` of its length wide) and d
 of its tangent plane that emits toward it (``horizon = "fraction"``; the clipped integrals give no
 more).
 ``collection:shadowLink`` is honoured; ``inputs:shadow:distance`` is refused. Instanced stages are
-flattened.
+flattened. A shaped light (``UsdLux.ShapingAPI``) with a cone up to 90 degrees keeps only the
+silhouette edges that meet its cone widened by the light (:func:`~wsoft.lightspace.light.cone_meets_balls`),
+and the receivers its cone does not reach test no wedge.
 
 Counters (``stats["counters"]["techniques"]["pwedge"][light]``): ``silhouette_edges``,
 ``wedge_tests`` (receiver-edge pairs read from the cells' lists), ``wedge_receivers`` (receivers
@@ -88,7 +90,7 @@ from wsoft.accel.dcs_bins import BinsGPU, receiver_items
 from wsoft.accel.occluders import count_parts, in_wedge
 from wsoft.lightspace.bitmask import popcount
 from wsoft.lightspace.coverage import edge_coverage, front_coverage, light_frame, receiver_front
-from wsoft.lightspace.light import LightGPU, disk_shaped, in_front, light_bound, light_point, light_reaches
+from wsoft.lightspace.light import LightGPU, cone_meets_balls, disk_shaped, in_front, light_bound, light_point, light_reaches
 from wsoft.lightspace.samples import LightSamples, sample_coords
 from wsoft.accel.stsv import in_volume, light_ball, planes_t, receiver_matrix, s_triangle, sample_blocked
 from wsoft.parallel import launch_chunked
@@ -298,8 +300,14 @@ class PWedge(ObjectBased):
                       "1e-3 of its length wide)")
 
     def edges(self, scene, opaque, light, device):
-        """The silhouette edges seen from the light's centre, with their hard shadow quads' planes."""
+        """The silhouette edges seen from the light's centre, with their hard shadow quads' planes;
+        of a shaped light's (a cone up to 90 degrees) only those that meet its cone widened by the
+        light (:func:`~wsoft.lightspace.light.cone_meets_balls`: an edge outside it shadows no
+        receiver the cone reaches, whose wedges are the only ones read)."""
         pts, quad = centre_silhouettes(scene, opaque, light)
+        if len(pts) and light.shaping.coned:
+            keep = cone_meets_balls(light, pts.astype(np.float64).mean(axis=1), 0.5 * np.linalg.norm(pts[:, 1] - pts[:, 0], axis=1))
+            pts, quad = pts[keep], quad[keep]
         part = triangle_parts(scene.points, scene.triangles[np.flatnonzero(opaque)])  # in opaque_bvh's order
         arrays = {"edge_pts": wp.array(pts if len(pts) else np.zeros((1, 2, 3), np.float32), dtype=wp.vec3, device=device),
                   "edge_quad": wp.array(quad if len(quad) else np.zeros((1, 3), np.float32), dtype=wp.vec3, device=device),

@@ -17,6 +17,8 @@ from dataclasses import dataclass
 
 from wsoft.lightspace.light import disk_shaped
 from wsoft.reference import TRAVERSALS, reference_pattern, trace_reference
+from wsoft.reference.dome import trace_dome_reference
+from wsoft.scene.dome import is_dome
 from wsoft.scene.device import upload_scene
 from wsoft.params import check_ranges
 from wsoft.techniques.base import PassSpec, Quality, Technique, Tolerance, check, param
@@ -52,6 +54,7 @@ class Reference(Technique):
     tolerance = Tolerance(mae=0.0003, mae_penumbra=0.01)
     horizon = "exact"  # per light sample, in the tracing kernel
     cylinder_model = "its silhouette rectangle seen from each point, sampled (a line light: its segment)"
+    dome_refusal = ""  # a DomeLight: rays over each receiver's hemisphere (wsoft.reference.dome)
 
     def supports(self, scene, light) -> str | None:
         why = super().supports(scene, light)
@@ -71,9 +74,11 @@ class Reference(Technique):
         gbuf = ctx.gbuffer()
         scene_key = ctx.scene_arrays()
         out = ctx.visibility_key(light)
-        L = ctx.light_gpu(light)
         scene = ctx.scene
         dynamic = p.casters == "dynamic"
+        if is_dome(light):
+            return self._add_dome_pass(ctx, light, gbuf, scene_key, out)
+        L = ctx.light_gpu(light)
         pattern = reference_pattern(p.samples, ctx.frame_seed(p.seed), p.jitter)
         disk = disk_shaped(light)
 
@@ -89,6 +94,24 @@ class Reference(Technique):
                                        excluded=light.shadow_excluded, max_distance=light.shadow_distance)
             if "packet_fallback" in counters:
                 ctx.ctx.warn(pass_name, f"traced ray by ray, not in packets: {counters['packet_fallback']}")
+            return {out: ctx.visibility(vis, err)}
+
+        return ctx.add_pass(pass_name, inputs=(gbuf, scene_key), outputs=(out,), run=run, stage="trace", light=light)
+
+    def _add_dome_pass(self, ctx, light, gbuf, scene_key, out):
+        """The dome's pass: ``samples`` rays over each receiver's hemisphere (:mod:`wsoft.reference.dome`)."""
+        p = self.params
+        scene = ctx.scene
+        dynamic = p.casters == "dynamic"
+        pass_name = ctx.pass_name(("reference_dome_alpha" if scene.has_cutouts else "reference_dome") + ("_dynamic" if dynamic else ""),
+                                  light)
+
+        def run(res):
+            ds = res[scene_key]
+            if dynamic:
+                ds, _ = scene.dynamic_subset().device_copy(ctx.device, upload_scene)
+            vis, err = trace_dome_reference(ds, light, res[gbuf], p.samples, ctx.frame_seed(p.seed), excluded=light.shadow_excluded,
+                                            max_distance=light.shadow_distance)
             return {out: ctx.visibility(vis, err)}
 
         return ctx.add_pass(pass_name, inputs=(gbuf, scene_key), outputs=(out,), run=run, stage="trace", light=light)

@@ -16,6 +16,23 @@ through cutouts, through the prims the light's ``collection:shadowLink`` leaves 
 distance to its blockers (the mean over its blocked rays): the penumbra estimate needs it, an
 any-hit test does not give it.
 
+**A DomeLight** (the sky, :mod:`wsoft.scene.dome`): the dome reference's own rays
+(:mod:`wsoft.reference.dome`: the same per-receiver keys, strategies and points, the same offset
+origins, rays to the sky or to ``inputs:shadow:distance``), as closest-hit queries (:func:`trace_sky`):
+with ``seed`` equal, ``denoiser=none`` is ``reference samples=N`` bit for bit. A constant dome:
+cosine-distributed directions about the normal (Malley's method,
+:func:`~wsoft.lightspace.sky.cosine_direction`), V the visible fraction. A latlong texture: multiple
+importance sampling, ceil(N/2) cosine rays and floor(N/2) drawn from the texture's luminance x solid
+angle table, balance-heuristic weights, V = sum a vis / sum a (one ray: a cosine ray alone; a pixel
+none of whose rays has weight takes its neighbours' through the denoiser, or 1 with
+``denoiser=none``). Each blocked ray's penumbra radius is half its blocker's distance times
+``radius_scale`` (the sky subtends a hemisphere: a penumbra as wide as the blocker is far). The
+denoisers are the same; there is no front-fraction pass (every ray is in front). V is the visible
+fraction of the dome's irradiance, the dome reference's quantity. Counters add ``dome_rays``
+(``cosine`` or ``cosine+texture``). Measured on a box on a ground at 96 x 72 against 1024 cosine
+rays: MAE 0.097 (1 ray, ``denoiser=none``), 0.037 (8 rays), 0.014 (2 rays, ``penumbra``), 0.012 (2
+rays, ``atrous``); ``docs/techniques.md``.
+
 **Penumbra radius** (what NRD SIGMA's front end packs per pixel, ``SIGMA_FrontEnd_PackPenumbra``):
 per blocked ray ``d tan(a) / 2``, ``d`` the blocker's distance and ``a`` the light's angular radius
 seen from the blocker (``tan a = r / (D - d)``: ``r`` half a rect light's mean side (a cylinder
@@ -104,13 +121,17 @@ import warp as wp
 from wsoft.accel.denoise import LIT, UNKNOWN, atrous_filter, penumbra_filter
 from wsoft.accel.temporal import accumulate
 from wsoft.lightspace.light import LightGPU, disk_shaped, in_front, light_point
-from wsoft.lightspace.samples import LightSamples, sample_coords
+from wsoft.lightspace.sky import cosine_direction
+from wsoft.lightspace.samples import LightSamples, counter_draw, pixel_key, sample_coords
 from wsoft.params import check_ranges
 from wsoft.parallel import launch_chunked
 from wsoft.raster.camera import camera_gpu
 from wsoft.raster.gbuffer import GBufferGPU, gb_covered
-from wsoft.raster.shadow_rays import receiver_begin, shadow_ray_length
+from wsoft.raster.shadow_rays import ray_origin, receiver_begin, shadow_ray_length
 from wsoft.reference import reference_pattern
+from wsoft.reference.dome import LATTICE, SKY_DISTANCE, DomeGPU, dome_gpu, dome_sample, dome_texel, strategy_point
+from wsoft.scene.dome import is_dome
+from wsoft.scene.offsets import ray_offset
 from wsoft.scene.rays import Occluders, blocker_distance, occluders
 from wsoft.scene.types import LIGHT_CYLINDER, LIGHT_DISK, LIGHT_DISTANT, LIGHT_RECT, LIGHT_SPHERE
 from wsoft.techniques.base import PassSpec, Quality, Technique, Tolerance, check, param
@@ -241,6 +262,114 @@ def times_front(
     vis[i] = wp.where(f == UNKNOWN, 0.0, front[i] * f)
 
 
+@wp.kernel
+def trace_sky(
+    offset: int,
+    occ: Occluders,
+    gb: GBufferGPU,
+    dome: DomeGPU,
+    samples: int,
+    grid: int,
+    seed: int,
+    dmax: float,
+    radius_scale: float,
+    # outputs
+    vis: wp.array[float],
+    frac: wp.array[float],
+    hit: wp.array[float],
+    pen: wp.array[float],
+    traced: wp.array[wp.int32],
+    blocked: wp.array[wp.int32],
+):
+    """:func:`trace_blockers` for a dome: per G-buffer sample, the dome reference's ``samples`` rays
+    (:func:`~wsoft.reference.dome.trace_dome_visibility`: the same keys, strategies and points) as
+    closest-hit queries. A constant dome: cosine-distributed about the normal, V = the visible
+    fraction. A latlong texture: ceil(N/2) cosine-distributed rays and floor(N/2) drawn from the
+    texture's table, each weighted by the balance heuristic ``a = L cos / (n_c cos / pi + n_l p_l)``,
+    V = sum a vis / sum a (``frac``: :data:`~wsoft.accel.denoise.UNKNOWN` where no ray has weight).
+    Penumbra radius per blocked ray: half its blocker's distance (the sky subtends a hemisphere: a
+    penumbra as wide as the blocker is far)."""
+    i = wp.tid() + offset
+    if not gb_covered(gb, i):
+        vis[i] = 1.0
+        frac[i] = 1.0
+        hit[i] = -1.0
+        pen[i] = LIT
+        traced[i] = 0
+        blocked[i] = 0
+        return
+    p = gb.pos[i]
+    n = gb.nrm[i]
+    off = ray_offset(p, gb.err[i])
+    o = ray_origin(p, n, off)
+    tm = shadow_ray_length(SKY_DISTANCE, dmax, off)
+    key = pixel_key(seed, i)
+    num = float(0.0)
+    den = float(0.0)
+    front = int(0)
+    nb = int(0)
+    dsum = float(0.0)
+    rsum = float(0.0)
+    nc = samples
+    if dome.textured != 0:
+        nc = (samples + 1) / 2
+    nl = samples - nc
+    for s in range(samples):
+        d = wp.vec3(0.0)
+        if s < nc:
+            d = cosine_direction(n, strategy_point(key, s, s, nc, grid, 0))
+        else:
+            d = dome_sample(dome, strategy_point(key, s, s - nc, nl, grid, 4), wp.vec2(counter_draw(key, s, 8), counter_draw(key, s, 9)))
+        cn = wp.dot(n, d)
+        a = float(0.0)
+        if cn > 0.0:
+            a = 1.0
+            if dome.textured != 0:
+                a = 0.0
+                k = dome_texel(dome, d)
+                pl = dome.prob[k] / wp.max(dome.area[k / dome.w], 1.0e-30)
+                q = float(nc) * cn / wp.pi + float(nl) * pl
+                if q > 0.0:
+                    a = dome.lum[k] * cn / q
+        if a > 0.0:
+            front += 1
+            den += a
+            t = blocker_distance(occ, o, d, tm)
+            if t < 0.0:
+                num += a
+            else:
+                db = t + off
+                nb += 1
+                dsum += db
+                rsum += 0.5 * db * radius_scale
+    if dome.textured != 0:
+        vis[i] = wp.where(den > 0.0, wp.clamp(num / wp.max(den, 1.0e-30), 0.0, 1.0), 1.0)
+    else:
+        vis[i] = num / float(samples)
+    frac[i] = wp.where(den > 0.0, wp.clamp(num / wp.max(den, 1.0e-30), 0.0, 1.0), UNKNOWN)
+    traced[i] = front
+    blocked[i] = nb
+    if nb == 0:
+        hit[i] = -1.0
+        pen[i] = LIT
+    else:
+        hit[i] = dsum / float(nb)
+        pen[i] = rsum / float(nb)
+
+
+@wp.kernel
+def known_or_lit(
+    offset: int,
+    frac: wp.array[float],
+    # outputs
+    vis: wp.array[float],
+):
+    """A dome's V: the denoised visible fraction, 1 where nothing around says (no ray in front)."""
+    i = wp.tid() + offset
+    f = frac[i]
+    vis[i] = wp.where(f == UNKNOWN, 1.0, f)
+
+
 def light_radius(light) -> tuple[float, bool]:
     """(the light's radius in ``tan a = r / (D - d)``: half a rect light's mean side (a cylinder
     light's, the rectangle of its length by its diameter), a disk's or
@@ -287,8 +416,24 @@ def trace_estimate(ds, L: LightGPU, light, gb, samples: int, seed: int, radius_s
     return out
 
 
+def trace_sky_estimate(ds, light, gb, samples: int, seed: int, radius_scale: float) -> tuple[RayEstimate, str]:
+    """Trace the dome reference's ``samples`` rays toward ``light``'s dome per G-buffer sample
+    (:func:`trace_sky`); and how they were drawn (``cosine``, or ``cosine+texture`` for a latlong texture)."""
+    n = gb.count
+    dev = ds.device
+    out = RayEstimate(*(wp.empty(n, dtype=float, device=dev) for _ in range(4)),
+                      *(wp.empty(n, dtype=wp.int32, device=dev) for _ in range(2)))
+    dmax = float(light.shadow_distance) if light.shadow_distance >= 0.0 else -1.0
+    launch_chunked(trace_sky, n,
+                   inputs=[occluders(ds, light.shadow_excluded), gb.gpu(), dome_gpu(light, ds.device), int(samples), LATTICE, int(seed),
+                           dmax, float(radius_scale)],
+                   outputs=[out.vis, out.frac, out.hit, out.pen, out.traced, out.blocked], device=dev, min_chunk=256, per_thread=32)
+    return out, "cosine" if light.dome.constant else "cosine+texture"
+
+
 class RTDenoise(Technique):
-    """A few ray-traced shadow rays per pixel (the reference's, closest-hit), denoised in screen space
+    """A few ray-traced shadow rays per pixel (the reference's, closest-hit; toward the sky for a
+    DomeLight: cosine-distributed, and for a texture also drawn from its radiance), denoised in screen space
     by a SIGMA-style penumbra filter or SVGF's à-trous wavelet filter."""
 
     name = "rtdenoise"
@@ -309,6 +454,7 @@ class RTDenoise(Technique):
     # wide; at 640 x 480 against 256 reference samples the penumbra MAE is 0.026
     tolerance = Tolerance(mae=0.003, mae_penumbra=0.075)
     instancing_refusal = ""  # closest-hit rays go through the instances' top-level BVH (wsoft.scene.rays.blocker_distance)
+    dome_refusal = ""  # a dome: rays toward the sky (trace_sky), the same denoisers
     horizon = "exact"  # per ray, and the denoised part in front times the exact front fraction
     cylinder_model = ("the reference's rays to its silhouette rectangle; the denoiser's penumbra radius from half its mean side, "
                       "(length / 2 + radius) / 2, as a rect light's")
@@ -324,11 +470,16 @@ class RTDenoise(Technique):
         gbuf = ctx.gbuffer()
         scene_key = ctx.scene_arrays()
         rays_key = ctx.key("rtdenoise_rays", light)
-        L = ctx.light_gpu(light)
+        dome = is_dome(light)
+        L = None if dome else ctx.light_gpu(light)
 
         def run_trace(res):
-            est = trace_estimate(res[scene_key], L, light, res[gbuf], p.samples, ctx.frame_seed(p.seed), p.radius_scale)
             c = ctx.counters(light)
+            if dome:
+                est, how = trace_sky_estimate(res[scene_key], light, res[gbuf], p.samples, ctx.frame_seed(p.seed), p.radius_scale)
+                c["dome_rays"] = how
+            else:
+                est = trace_estimate(res[scene_key], L, light, res[gbuf], p.samples, ctx.frame_seed(p.seed), p.radius_scale)
             traced, blocked = est.traced.numpy(), est.blocked.numpy()
             c.update(samples=p.samples, denoiser=p.denoiser, rays=int(traced.astype(np.int64).sum()),
                      rays_blocked=int(blocked.astype(np.int64).sum()), penumbra_samples=int(((blocked > 0) & (blocked < traced)).sum()))
@@ -337,7 +488,7 @@ class RTDenoise(Technique):
         ctx.add_pass(ctx.pass_name("rtdenoise_trace", light), inputs=(gbuf, scene_key), outputs=(rays_key,), run=run_trace, stage="trace",
                      light=light)
         out = ctx.visibility_key(light)
-        front_key = ctx.front_fraction(light) if p.denoiser != "none" else None
+        front_key = ctx.front_fraction(light) if p.denoiser != "none" and not dome else None  # a dome's rays are all in front
 
         def run_denoise(res):
             gb, est = res[gbuf], res[rays_key]
@@ -364,7 +515,10 @@ class RTDenoise(Technique):
             if temporal and p.temporal_order == "after":
                 frac = accumulated(frac)
             vis = wp.empty(gb.count, dtype=float, device=ctx.device)
-            launch_chunked(times_front, gb.count, inputs=[frac, res[front_key]], outputs=[vis], device=ctx.device)
+            if dome:
+                launch_chunked(known_or_lit, gb.count, inputs=[frac], outputs=[vis], device=ctx.device)
+            else:
+                launch_chunked(times_front, gb.count, inputs=[frac, res[front_key]], outputs=[vis], device=ctx.device)
             return {out: ctx.visibility(vis)}
 
         inputs = (gbuf, rays_key) + ((front_key,) if front_key is not None else ())

@@ -57,7 +57,7 @@ def far_side_dark(ch, base=None, technique="") -> str | None:
 
 # techniques whose V is the light's central direction's, filtered by a kernel of fixed width (no penumbra
 # sized from the light: salzman's one blur width for every penumbra)
-CENTRAL = ("hard", "pcf", "vsm", "esm", "evsm", "msm", "izb", "salzman")
+CENTRAL = ("hard", "pcf", "vsm", "esm", "evsm", "msm", "izb", "salzman", "vsmap")
 
 
 def _sun_cone(n: int = 2048) -> np.ndarray:
@@ -132,3 +132,18 @@ def ground_dark(ch, base=None, technique="") -> str | None:
     """The ground's top is dark (the light lies in or below its plane)."""
     g = _covered(ch) & (np.abs(ch["P.Z"]) < 1e-4)
     return None if g.sum() > 100 and ch["V"][g].max() == 0.0 else f"max V {ch['V'][g].max() if g.any() else -1:.3f} on {g.sum()} ground pixels"
+
+
+def sky_over_square(ch, base=None, technique="") -> str | None:
+    """A uniform dome over the base's ground and its square occluder (half-side 1 at height 1): on
+    the ground, V = 1 - the form factor from the point to the square (the sky it hides); mean
+    |V - that| at most 0.05 over the ground's covered pixels."""
+    from wsoft.stages.light_cases import form_factor
+
+    g = _covered(ch) & (np.abs(ch["P.Z"]) < 1e-4)
+    if g.sum() <= 100:
+        return f"{int(g.sum())} ground pixels covered, want > 100"
+    xs, ys = ch["P.X"][g], ch["P.Y"][g]
+    truth = 1.0 - np.array([form_factor(float(x), float(y), (-1.0, 1.0, -1.0, 1.0)) for x, y in zip(xs, ys)])
+    d = float(np.abs(ch["V"][g] - truth).mean())
+    return None if d <= 0.05 else f"mean |V - (1 - form factor)| {d:.3f} on {int(g.sum())} ground pixels, want <= 0.05"
