@@ -4,7 +4,8 @@
 :class:`~wsoft.pipeline.technique_context.TechniqueContext`, :func:`report_unmapped` counts and
 warns about samples no page holds, :func:`virtual_config` reads the layout from a technique's
 parameters (``virtual_size``, ``page_size``, ``pool_pages``, ``clip_levels``, ``first_extent``,
-``lod_bias``)."""
+``lod_bias``), :func:`cylinder_refusal` and the ``*_REFUSAL`` texts say which lights a virtual map
+does not cover."""
 
 from __future__ import annotations
 
@@ -13,7 +14,17 @@ import warp as wp
 from wsoft.accel.virtual_pages import (VirtualConfig, VirtualPages, distant_layout, dynamic_corners, light_casters, local_layout,
                                        request_pages)
 from wsoft.lightspace.view import frame_extent
-from wsoft.scene.types import LIGHT_DISTANT
+from wsoft.scene.types import LIGHT_CYLINDER, LIGHT_DISTANT
+
+CYLINDER_REFUSAL = "virtual maps here cover distant, rect, disk and sphere lights: use pcss or the reference for this light"
+CYLINDER_MODEL = "none: a cylinder light is declined (virtual maps here cover distant, rect, disk and sphere lights)"
+DISTANCE_REFUSAL = "its pages keep the caster nearest the light only"
+
+
+def cylinder_refusal(light) -> str | None:
+    """Why a virtual map declines ``light`` before any other reason (a cylinder light: its kind), else
+    None (point lights and domes: the technique base's own reasons)."""
+    return CYLINDER_REFUSAL if light.kind == LIGHT_CYLINDER else None
 
 
 def virtual_config(p) -> VirtualConfig:

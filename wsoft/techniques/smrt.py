@@ -62,14 +62,14 @@ import numpy as np
 import warp as wp
 
 from wsoft.accel.virtual_pages import UNMAPPED, VirtualMapGPU, level_texel, level_view, virtual_depth
-from wsoft.accel.virtual_passes import add_page_pass, report_unmapped
+from wsoft.accel.virtual_passes import CYLINDER_MODEL, DISTANCE_REFUSAL, add_page_pass, cylinder_refusal, report_unmapped
 from wsoft.lightspace.light import LightGPU, light_center_dir, light_point
 from wsoft.lightspace.samples import counter_draw, pixel_key, to_light_coords
 from wsoft.lightspace.view import ViewGPU, map_coords, receiver_tap_depth, view_dir, view_of
 from wsoft.params import check_ranges
 from wsoft.parallel import launch_chunked
 from wsoft.raster.gbuffer import GBufferGPU
-from wsoft.scene.types import LIGHT_CYLINDER, LIGHT_DISTANT, LIGHT_RECT
+from wsoft.scene.types import LIGHT_RECT
 from wsoft.techniques.base import PassSpec, Quality, Technique, Tolerance, check, param
 
 
@@ -322,8 +322,8 @@ class SMRT(Technique):
     instancing_refusal = ""  # its pages are drawn by the shared rasterizer, instances included
     point_refusal = "a virtual map here is one perspective map a light; a point light needs six (use pcss or reference)"
     cube_refusal = "a virtual map here is one perspective map a light; receivers all around a light need a cube map (use pcss or reference)"
-    distance_refusal = "its pages keep the caster nearest the light only"
-    cylinder_model = "none: a cylinder light is declined (virtual maps here cover distant, rect, disk and sphere lights)"
+    distance_refusal = DISTANCE_REFUSAL
+    cylinder_model = CYLINDER_MODEL
 
     def bake_support(self) -> str | None:
         if self.params.footprint > 0.0:
@@ -331,9 +331,7 @@ class SMRT(Technique):
         return "smrt requests its pages at each pixel's footprint seen from the camera; a bake has no camera: set footprint= (world units)"
 
     def supports(self, scene, light):
-        if light.kind == LIGHT_CYLINDER:  # the light's kind first (points and domes: the base's own reasons)
-            return "virtual maps here cover distant, rect, disk and sphere lights: use pcss or the reference for this light"
-        return super().supports(scene, light)
+        return cylinder_refusal(light) or super().supports(scene, light)
 
     def add_passes(self, ctx, light):
         p = self.params
