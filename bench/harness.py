@@ -31,6 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
+from wsoft.bench.regress_rounds import DEFAULT_TIMER
+
 SWEEPS = {"foundation": "wsoft.bench.foundation", "filtered": "wsoft.bench.filtered", "essm": "wsoft.bench.essm",
           "essm-table1": "wsoft.bench.essm_table1", "essm-table2": "wsoft.bench.essm_table2", "ssm": "wsoft.bench.ssm", "izb": "wsoft.bench.izb",
           "ssm-table1": "wsoft.bench.ssm_table1", "ssm-table2": "wsoft.bench.ssm_table2", "pareto": "wsoft.bench.pareto",
@@ -294,7 +296,7 @@ def run_in_process(name: str, mod, todo: list[dict], ctx: dict, jsonl: Path) -> 
 def run_sweep(name: str, *, quick: bool = False, device: list[str] | None = None, out_dir: str = "reports", fresh: bool = False,
               scenes: str | None = None, workers: int | None = None, scheduler: str | None = None, resources: dict | None = None,
               threads_per_worker: int = 1, cache_dir: str | None = None, save: str | None = None, baseline: str | None = None,
-              time_threshold: float = 0.10, rounds: int = 16, timer: str = "cpu", page=None) -> int:
+              time_threshold: float = 0.10, rounds: int = 16, timer: str = DEFAULT_TIMER, page=None) -> int:
     """Run sweep ``name`` (see the module docstring). ``workers`` (an embedded Dask cluster of that many
     processes, ``threads_per_worker`` threads each) or ``scheduler`` (a running Dask scheduler's
     address) send its rows to Dask workers (:mod:`wsoft.bench.dist`); ``resources``: what each
@@ -304,7 +306,7 @@ def run_sweep(name: str, *, quick: bool = False, device: list[str] | None = None
     a rows file) compares them with it, writes ``<out_dir>/<sweep>-regress.md`` and returns 1 on a
     regression (a slowdown beyond ``1 + time_threshold`` that the rounds' spread confirms, an error
     grown beyond its floor and standard errors, a vanished row, a NaN); ``rounds``: the gate's timed
-    rounds per render row and ``timer`` the time judged, cpu or wall (:mod:`wsoft.bench.regress_rounds`). ``page``: called as
+    rounds per render row and ``timer`` the time judged, host, cpu or wall (:mod:`wsoft.bench.regress_rounds`). ``page``: called as
     ``page(stem, rows, out_dir, baseline_rows)`` after the report, returning the path it wrote (the
     command line passes :func:`wsoft.bench.html_report.write_html`: ``<out_dir>/<stem>.html``)."""
     from wsoft.bench import regress

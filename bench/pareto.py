@@ -19,6 +19,7 @@ registered later appears without editing this file.
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
@@ -60,11 +61,14 @@ def cases(quick: bool, devices: list[str]) -> list[dict]:
     return out
 
 
-def settings(scene, light, sizes: list[int], quick: bool) -> list[tuple[str, dict]]:
+def settings(scene, light, sizes: list[int], quick: bool, refused: list | None = None) -> list[tuple[str, dict]]:
     """(technique, params) of every registered technique that supports ``light``, over its quality
-    settings and the map sizes; the reference over its sample counts."""
+    settings and the map sizes; the reference over its sample counts. A combination the technique's
+    own parameters refuse (``skymaps``: 256 directions of 2048² maps exceed its memory cap) is left
+    out, and appended to ``refused`` as {technique, params, reason}."""
+    from wsoft.errors import ParameterError
     from wsoft.pipeline.build import refusal
-    from wsoft.techniques import TECHNIQUES
+    from wsoft.techniques import TECHNIQUES, create
 
     out = []
     for name in sorted(TECHNIQUES):
@@ -80,7 +84,15 @@ def settings(scene, light, sizes: list[int], quick: bool) -> list[tuple[str, dic
             out += [(name, {q.param: v, "seed": CURVE_SEED}) for v in values]
             continue
         maps = [{cls.size_param: size} for size in sizes] if cls.size_param else [{}]
-        out += [(name, {**m, **q}) for m in maps for q in qs]
+        for params in ({**m, **q} for m in maps for q in qs):
+            try:
+                create(name, params)
+            except ParameterError as exc:
+                if refused is not None:
+                    refused.append({"technique": name, "params": params, "reason": str(exc)})
+                continue
+            if (name, params) not in out:  # a quality knob on the map size itself repeats a map size's setting
+                out.append((name, params))
     return out
 
 
@@ -96,7 +108,8 @@ def run_case(case: dict, ctx: dict) -> dict:
     L = scene.find_light(light)
     ref = reference(name, width=case["width"], height=case["height"], light=light, samples=case["ground_truth"], device=case["device"])
     truth = ground_truth(name, ref, light)
-    techs = settings(scene, L, case["sizes"], case["quick"])
+    refused: list[dict] = []
+    techs = settings(scene, L, case["sizes"], case["quick"], refused)
     fs = measure(name, techs, device=case["device"], width=case["width"], height=case["height"], light=light, truth=truth)
     entries = []
     for (tech, params), (label, fr) in zip(techs, fs.items()):
@@ -108,7 +121,7 @@ def run_case(case: dict, ctx: dict) -> dict:
         })
     return {"scene": name, "light": L.path, "light_kind": L.kind_name, "device": case["device"], "width": case["width"], "height": case["height"],
             "ground_truth_samples": case["ground_truth"], "ground_truth_ms": float(ref["ms"]), "entries": entries,
-            "graph_passes": len(fs.stats["passes"]), "shared_pass_count": len(fs.stats["shared_passes"])}
+            "graph_passes": len(fs.stats["passes"]), "shared_pass_count": len(fs.stats["shared_passes"]), "refused_settings": refused}
 
 
 # -- report -------------------------------------------------------------------------------------------
@@ -375,6 +388,10 @@ def report(rows: list[dict], md: Path, ctx: dict) -> None:
             L.append("point to the light. The two part only on knife-edge rays, which pass within the offset of an edge; each")
             L.append("equals a brute force over every triangle on its own rays")
             L.append("(`tests/test_izb.py::test_none_differs_from_the_reference_only_where_their_ray_conventions_do`).")
+    refused = {(x["technique"], json.dumps(x["params"], sort_keys=True)): x["reason"] for r in rows for x in r.get("refused_settings", [])}
+    if refused:
+        L.append("Settings left out because the technique's own parameters refuse them (not measured): "
+                 + "; ".join(f"`{t}` {', '.join(f'{k}={v}' for k, v in json.loads(ps).items())} ({why})" for (t, ps), why in sorted(refused.items())) + ".")
     L.append("")
     L += choice_section(rows)
     L.append("## Time to reach penumbra MAE 0.05 and 0.02")

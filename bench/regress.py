@@ -23,7 +23,7 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from wsoft.bench.regress_rounds import ROUNDS, TIMERS, judged_time
+from wsoft.bench.regress_rounds import DEFAULT_TIMER, HOST_NOMINAL_MS, ROUNDS, TIMERS, judged_time
 from wsoft.bench.regress_rows import Source, check_name, describe, flatten, machine_of, other_machine, pairs, resolve, rows_of, save
 from wsoft.bench.regress_stats import ALPHA, FLOORS, TIME_THRESHOLD, Z, Verdict, accuracy_verdict, count_verdict, sidak, time_verdict
 
@@ -85,7 +85,7 @@ def _record(out: Comparison, f: Finding) -> None:
 
 
 def compare_rows(old: dict[str, dict], new: dict[str, dict], *, stem: str = "", fp_old: dict | None = None, fp_new: dict | None = None,
-                 time_threshold: float = TIME_THRESHOLD, timer: str = "cpu") -> Comparison:
+                 time_threshold: float = TIME_THRESHOLD, timer: str = DEFAULT_TIMER) -> Comparison:
     """Compare rows by key (``old`` and ``new``: key -> row); ``timer``: which of the gate's timed
     rounds are judged (:func:`~wsoft.bench.regress_rounds.judged_time`)."""
     out = Comparison(stem, len(old), len(new))
@@ -126,17 +126,21 @@ def compare_rows(old: dict[str, dict], new: dict[str, dict], *, stem: str = "", 
     return out
 
 
-def compare(old: Source, new: Source, time_threshold: float = TIME_THRESHOLD, timer: str = "cpu") -> list[Comparison]:
+def compare(old: Source, new: Source, time_threshold: float = TIME_THRESHOLD, timer: str = DEFAULT_TIMER) -> list[Comparison]:
     """Compare every rows file the two sources share (:func:`~wsoft.bench.regress_rows.pairs`)."""
     return [compare_rows(rows_of(fo), rows_of(fn), stem=stem, fp_old=old.fingerprint, fp_new=new.fingerprint, time_threshold=time_threshold,
                          timer=timer) for stem, fo, fn in pairs(old, new)]
 
 
-def report(results: list[Comparison], old: str, new: str, time_threshold: float = TIME_THRESHOLD, timer: str = "cpu") -> str:
+TIMER_TEXT = {"cpu": "CPU time, every thread of the process", "wall": "wall clock",
+              "host": f"CPU time over the host workload's just before it, in {HOST_NOMINAL_MS:g} ms host units"}
+
+
+def report(results: list[Comparison], old: str, new: str, time_threshold: float = TIME_THRESHOLD, timer: str = DEFAULT_TIMER) -> str:
     """The markdown report of :func:`compare`'s results."""
     L = [f"# Regression gate: `{new}` against `{old}`", ""]
-    L.append(f"Time ({'CPU time, every thread of the process' if timer == 'cpu' else 'wall clock'} of the gate's timed rounds, "
-             "where the rows have them): ratio of medians new/old over the per-round times; a change counts beyond x{1 + time_threshold:.2f} (or below "
+    L.append(f"Time ({TIMER_TEXT.get(timer, timer)} of the gate's timed rounds, "
+             f"where the rows have them): ratio of medians new/old over the per-round times; a change counts beyond x{1 + time_threshold:.2f} (or below "
              f"x{1 / (1 + time_threshold):.2f}) when a two-sided Mann-Whitney U test over the rounds also rejects, at a level Šidák-corrected "
              f"for the run's time comparisons (any false alarm in a run: {ALPHA:g}). Accuracy: a change counts beyond max(floor, {Z:g} x "
              "sqrt(se_old^2 + se_new^2)), floors " + ", ".join(f"{k} {v:g}" for k, v in FLOORS.items())
@@ -212,9 +216,9 @@ def add_gate_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"with --save or --baseline: time every render row N more times after the sweep, round by round across the "
                         f"rows in alternating order, for the gate's rank test (default {ROUNDS}; 0: the sweep's own 3 rounds, too few "
                         "for the test)")
-    parser.add_argument("--timer", choices=TIMERS, default="cpu", help="which time of the timed rounds the gate judges: cpu (the "
-                        "process's CPU time, what other jobs on the host add least to; default) or wall (the wall clock: on a runner "
-                        "that runs nothing else)")
+    parser.add_argument("--timer", choices=TIMERS, default=DEFAULT_TIMER, help="which time of the timed rounds the gate judges: host (the "
+                        "process's CPU time over a fixed host workload's, timed before each round; default), cpu (the CPU time alone, "
+                        "what other jobs on the host add least to) or wall (the wall clock: on a runner that runs nothing else)")
 
 
 def gate_kwargs(args) -> dict:
@@ -247,7 +251,7 @@ def before_sweep(save_name: str | None, baseline: str | None, out_dir: str | Pat
 
 
 def after_sweep(stem: str, jsonl: Path, keys: set[str], out_dir: str | Path, save_name: str | None, baseline: Source | None,
-                time_threshold: float, rounds: int = ROUNDS, timer: str = "cpu") -> int:
+                time_threshold: float, rounds: int = ROUNDS, timer: str = DEFAULT_TIMER) -> int:
     """After a sweep: time its render rows ``rounds`` more times (:func:`~wsoft.bench.regress_rounds.time_rounds`),
     compare its rows (those of ``keys`` in ``jsonl``) with ``baseline``, writing
     ``<out_dir>/<stem>-regress.md`` and printing it, then save them as ``save_name`` unless they
@@ -294,7 +298,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out-dir", default="reports", help="where saved baselines are looked up by name (<out-dir>/baselines/NAME; default ./reports)")
     p.add_argument("--time-threshold", type=float, default=TIME_THRESHOLD, metavar="F",
                    help=f"a slowdown counts beyond 1+F times the baseline (default {TIME_THRESHOLD}; inf: judge no time)")
-    p.add_argument("--timer", choices=TIMERS, default="cpu", help="which time of the gate's timed rounds to judge: cpu (default) or wall")
+    p.add_argument("--timer", choices=TIMERS, default=DEFAULT_TIMER, help="which time of the gate's timed rounds to judge: host (default), cpu or wall")
     p.add_argument("--output", metavar="FILE.md", help="also write the report there")
 
 

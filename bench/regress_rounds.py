@@ -12,10 +12,18 @@ run falls on every row alike. Each row keeps its rounds' frame totals in ``frame
 frame's passes' ``time.process_time``, every thread of the process); the sweep's own
 ``timings_ms_runs`` and report stay as they were.
 
-The gate judges one of the two (``--timer``, :func:`judged_time`): **cpu** (the default) counts
+Before each of a row's rounds, a fixed workload that no wsoft code takes part in (:func:`host_once`:
+one Warp kernel of hashes and square roots, the same on every run) is timed too, in
+``host_cpu_ms_rounds`` and ``host_ms_rounds``: how fast the host ran at that moment.
+
+The gate judges one of three (``--timer``, :func:`judged_time`): **cpu** counts
 what the frame's code spent on the CPU, which other processes on the host do not add to (they
-still slow it through shared caches, memory bandwidth and clocks); **wall** counts the time a user
-waits, parallel efficiency included, and is worth judging on a runner that runs nothing else. In
+still slow it through shared caches, memory bandwidth and clocks); **host** (the default) divides each round's
+CPU time by the host workload's CPU time just before it (scaled to :data:`HOST_NOMINAL_MS`), so
+that the host running slower or faster between two runs (its clocks, a neighbour on its caches)
+cancels, while wsoft's own code running slower does not (the host workload is none of its code);
+**wall** counts the time a user waits, parallel efficiency included, and is worth judging on a
+runner that runs nothing else. In
 the proof runs of ``docs/ci.md`` (``python -m wsoft.bench.regress_proof``, 2 cores, 1-minute load
 4-17) the baseline's 16 pcf rounds spread from 24 to 202 ms on the wall clock, and from 24 to 43 ms
 in CPU time.
@@ -32,7 +40,12 @@ from pathlib import Path
 ROUNDS = 16
 KEY = "frame_ms_rounds"  # each round's frame time on the wall clock (``timings_ms["total"]``)
 CPU_KEY = "frame_cpu_ms_rounds"  # each round's CPU time: the frame's passes' ``cpu_ms`` summed (``time.process_time``, every thread)
-TIMERS = ("cpu", "wall")
+HOST_KEY = "host_cpu_ms_rounds"  # the host workload's CPU time before each round (host_once)
+HOST_WALL_KEY = "host_ms_rounds"  # and its wall-clock time
+HOST_NOMINAL_MS = 10.0  # the host timer's unit: a round's CPU time on a host whose workload takes this long
+HOST_STEPS, HOST_THREADS = 256, 4096  # the host workload: about 14 ms of one core of the machine of docs/ci.md
+TIMERS = ("cpu", "host", "wall")
+DEFAULT_TIMER = "host"  # the gate's default (docs/ci.md: the proof's runs, where it caught the most slowdowns for as few false alarms)
 
 
 def timeable(row: dict) -> bool:
@@ -62,6 +75,18 @@ def time_once(case: dict) -> tuple[float, float]:
     return float(st["timings_ms"]["total"]), float(sum(st["cpu_ms"].values()))
 
 
+def host_once() -> tuple[float, float]:
+    """The host workload once (:mod:`wsoft.bench.regress_host`): (wall-clock ms, CPU ms of this process)."""
+    from wsoft.bench.regress_host import host_once as once
+
+    return once(HOST_STEPS, HOST_THREADS)
+
+
+def host_scaled(cpu: list, host: list) -> list[float]:
+    """Each round's CPU time in the host timer's unit: ``cpu[i] * HOST_NOMINAL_MS / host[i]``."""
+    return [c * HOST_NOMINAL_MS / h for c, h in zip(cpu, host) if h and h > 0]
+
+
 def time_rounds(jsonl: Path, keys: set[str], rounds: int = ROUNDS) -> int:
     """Time the timeable rows of ``jsonl`` whose key is in ``keys`` ``rounds`` times after a warm-up
     frame each, alternating the rows' order from round to round, and write each row's wall-clock
@@ -78,15 +103,19 @@ def time_rounds(jsonl: Path, keys: set[str], rounds: int = ROUNDS) -> int:
     if not todo:
         return 0
     for r in todo:
-        r[KEY], r[CPU_KEY] = [], []
+        r[KEY], r[CPU_KEY], r[HOST_KEY], r[HOST_WALL_KEY] = [], [], [], []
     print(f"gate: timing {len(todo)} rows x {rounds} rounds, alternating order", file=sys.stderr)
+    host_once()  # its kernel compiled or loaded
     for r in todo:  # a warm-up frame each, not kept (a scene loaded or a kernel compiled since the row ran)
         time_once(r["case"])
     for i in range(rounds):
         for r in todo if i % 2 == 0 else reversed(todo):
+            host_wall, host_cpu = host_once()
             wall, cpu = time_once(r["case"])
             r[KEY].append(wall)
             r[CPU_KEY].append(cpu)
+            r[HOST_WALL_KEY].append(host_wall)
+            r[HOST_KEY].append(host_cpu)
     tmp = Path(jsonl).with_suffix(".rounds.tmp")
     tmp.unlink(missing_ok=True)
     for r in rows:
@@ -104,15 +133,22 @@ def scaled(row: dict, factor: float) -> dict:
     return out
 
 
-def judged_time(name: str, names, timer: str = "cpu") -> bool:
+def judged_time(name: str, names, timer: str = DEFAULT_TIMER) -> bool:
     """Whether the gate judges the time metric ``name`` of a row whose metrics are ``names``: with
     ``timer`` cpu, a wall-clock ``frame_ms`` whose row also has ``frame_cpu_ms`` is left out (the
-    CPU rounds stand for it); with wall, the CPU metrics are left out. A time metric without its
-    counterpart (another sweep's rounds) is judged either way."""
+    CPU rounds stand for it); with host, ``frame_cpu_host_ms`` stands for both where the row has it;
+    with wall, the CPU metrics are left out. A time metric without its counterpart (another sweep's
+    rounds) is judged by every timer."""
     if timer not in TIMERS:
         from wsoft.errors import ParameterError
 
         raise ParameterError(f"--timer {timer}: give one of {', '.join(TIMERS)}")
     if timer == "wall":
-        return "frame_cpu_ms" not in name
-    return not ("frame_ms" in name and name.replace("frame_ms", "frame_cpu_ms") in names)
+        return "frame_cpu_ms" not in name and "frame_cpu_host_ms" not in name
+    if timer == "cpu":
+        return "frame_cpu_host_ms" not in name and not ("frame_ms" in name and name.replace("frame_ms", "frame_cpu_ms") in names)
+    if "frame_cpu_host_ms" in name:
+        return True
+    if "frame_cpu_ms" in name:
+        return name.replace("frame_cpu_ms", "frame_cpu_host_ms") not in names
+    return not ("frame_ms" in name and (name.replace("frame_ms", "frame_cpu_ms") in names or name.replace("frame_ms", "frame_cpu_host_ms") in names))

@@ -19,6 +19,7 @@ import platform
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from wsoft.bench.regress_rounds import CPU_KEY, HOST_KEY, host_scaled
 from wsoft.bench.regress_stats import FLOORS, spread_se
 
 BASELINES = "baselines"  # <out-dir>/baselines/NAME/ holds a saved baseline
@@ -30,7 +31,8 @@ TIME_NAMES = {"timings_ms_runs": "frame_ms", "frame_ms_runs": "frame_ms", "frame
 ROUNDS_OVER = {"frame_ms_rounds": "timings_ms_runs"}  # the gate's timed rounds, when a row has them, stand for the sweep's own
 TRANSPARENT = ("error", "temporal")  # containers whose metrics are the entry's own (no name part)
 SKIP = frozenset({"machine", "worker", "case", "key", "counters", "counters_last", "memory_bytes", "cpu_ms", "timings_ms", "timings_by_kind_ms",
-                  "by_kind_ms", "pass_kinds", "pass_stages", "passes", "warnings", "params", "facing", "not_facing", "worst_frame", "cost"})
+                  "by_kind_ms", "pass_kinds", "pass_stages", "passes", "warnings", "params", "facing", "not_facing", "worst_frame", "cost",
+                  "host_cpu_ms_rounds", "host_ms_rounds"})  # the host workload's rounds: a time of the host, not of a row (frame_cpu_host_ms)
 
 
 @dataclass
@@ -98,6 +100,10 @@ def flatten(row: dict) -> dict[str, Metric]:
                     walk(e, f"{prefix}{label}{'' if seen[label] == 1 else '#' + str(seen[label])}.", {})
             elif isinstance(v, dict):
                 walk(v, prefix if k in TRANSPARENT else f"{prefix}{k}.", context if k in TRANSPARENT else {})
+        if isinstance(obj.get(CPU_KEY), list) and isinstance(obj.get(HOST_KEY), list):
+            cpu, host = ([_number(x) for x in obj[k]] for k in (CPU_KEY, HOST_KEY))
+            pairs = [(c, h) for c, h in zip(cpu, host) if c is not None and h is not None]
+            put(prefix + "frame_cpu_host_ms", Metric("time", samples=host_scaled([c for c, _ in pairs], [h for _, h in pairs])))
 
     label = row.get("label") or row.get("technique")
     walk(row, f"{label}." if label else "", {})

@@ -9,7 +9,10 @@ frame graph (shared passes run once), timed as :func:`wsoft.bench.harness.measur
 against the reference at the preset's ground-truth samples (seed 0), cached on disk. Each entry
 keeps its technique's counters (``csm``: splits, texel sizes, cascade bytes; ``vsmap``/``smrt``: pages
 requested, rendered, reused, evicted, the pool) and ``csm``'s error in a band of :data:`BAND_PX`
-pixels around each cascade split against its error away from the splits (:func:`split_band_error`).
+pixels around each cascade split against its error away from the splits (:func:`split_band_error`),
+and, as its control, the same ratio of ``pcss`` and ``pcf`` (one map, no splits) on the pixels of the
+default ``csm``'s bands: the share of csm's ratio the split itself adds, apart from what lies in the
+band (a split falls where the frame's receivers are, and those pixels hold the shadow edges).
 
 Sequences (one row each): ``open_world_flyby`` (the camera flying 2 m above the ground, the sun
 still) and ``open_world_sunset`` (the same flight, the sun sinking), every frame a frame graph of the
@@ -33,10 +36,8 @@ from pathlib import Path
 import numpy as np
 
 from wsoft.bench.harness import ground_truth, load, measure, reference
-from wsoft.bench.worlds_report import PRESET_ENV, TECHNIQUES, registered, report  # noqa: F401  (the harness calls mod.report)
+from wsoft.bench.worlds_report import CONTEXT, CONTEXT_MAP, PRESET_ENV, TECHNIQUES, registered, report  # noqa: F401  (the harness calls mod.report)
 
-CONTEXT = ("pcss", "pcf")
-CONTEXT_MAP = 2048
 SUN = "/World/Lights/Sun"
 FRAMES = ("city", "open_world")
 SEQUENCES = ("open_world_flyby", "open_world_sunset")
@@ -226,6 +227,11 @@ def frame_row(case: dict, ctx: dict) -> dict:
         if tech == "csm" and counters.get("splits"):
             e["split_band"] = split_band_error(fr, ref["V"], counters["splits"])
         entries.append(e)
+    splits = next((e["counters"]["splits"] for e in entries if e["technique"] == "csm" and e["counters"].get("splits")), None)
+    if splits:  # the control: a map without splits, on the pixels of csm's (default) bands
+        for e, fr in zip(entries, fs.values()):
+            if e["technique"] in CONTEXT:
+                e["split_band"] = split_band_error(fr, ref["V"], splits)
     row = {"scene": Path(name).stem, "light": L.path, "device": case["device"], "width": case["width"], "height": case["height"],
            "ground_truth_samples": case["ground_truth"], "ground_truth_ms": float(ref["ms"]), "entries": entries,
            "triangles": int(scene.total_triangles), "instanced": bool(scene.instanced), "load_s": load_s, "build_s": build_s,

@@ -15,6 +15,8 @@ TARGET_MAE = 0.05
 PAGE_SHARE = 0.05      # vsmap: pages rendered per frame over a dense 16K² map's texels
 REUSE = 0.90           # vsmap: share of requested pages reused from the second frame on
 BAND_RATIO = 1.5       # csm: error near the splits over the error away from them
+CONTEXT = ("pcss", "pcf")  # the map techniques beside them (one map, no splits: the split band's control)
+CONTEXT_MAP = 2048
 
 
 def registered() -> tuple[list[str], list[str]]:
@@ -126,6 +128,12 @@ def target_rows(frames: list[dict], seqs: list[dict], techs: list[str]) -> list[
             got = (f"band MAE {sb['band_mae']:.4f} ({sb['band_pixels']} px) / away {sb['away_mae']:.4f} = {sb['ratio']:.2f}" if sb["ratio"] is not None
                    else f"{sb['band_pixels']} px within {8} px of a split, {sb['away_pixels']} px away: nothing to compare")
             L.append(f"| csm error within {16} px of a split ≤ {BAND_RATIO}x the error away from it | {r['scene']} | {got} | {_yes(ok)} |")
+            ctl = next((c for c in r["entries"] if c["technique"] in CONTEXT and (c.get("split_band") or {}).get("ratio")), None)
+            if ctl and sb["ratio"] is not None:
+                cr = ctl["split_band"]["ratio"]
+                L.append(f"| (control) the same band and away pixels in {ctl['label']}, one map without splits | {r['scene']} | "
+                         f"band MAE {ctl['split_band']['band_mae']:.4f} / away {ctl['split_band']['away_mae']:.4f} = {cr:.2f}: "
+                         f"csm's ratio is {sb['ratio'] / cr:.2f}x the control's | - |")
     for r in seqs:
         a, b = _first(r, "csm"), _entry(r, "csm(stable=False)")
         if a and b:

@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
+import sys
+import tempfile
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -24,6 +28,57 @@ def skip_if_no_local_lights(technique: str) -> None:
         pytest.skip(f"{technique} shadows DistantLights alone; this test's lights are local")
     if technique in SKY_ONLY:
         pytest.skip(f"{technique} shadows a DomeLight alone; this test's lights are local")
+
+
+_CUDA_FILE = "test_cuda_compile.py"
+_CUDA_NEWEST = "test_every_module_compiles_for_cuda[newest]"
+_BACKGROUND = pytest.StashKey[dict]()
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_collection_modifyitems(config, items):
+    """The CUDA compile's tests run last; when the newest architecture's compile is selected beside
+    other tests, it starts now in a process of its own (``tests/cuda_check.py``, on the cores but
+    one: NVRTC then works while the tests, mostly on one core, run), and its test reads the result
+    (:func:`background_result`)."""
+    cuda = [i for i in items if i.nodeid.split("::")[0].endswith(_CUDA_FILE)]
+    if not cuda or len(cuda) == len(items):
+        return
+    items[:] = [i for i in items if i not in cuda] + cuda
+    if not any(i.nodeid.endswith(_CUDA_NEWEST) for i in cuda):
+        return
+    folder = Path(tempfile.mkdtemp(prefix="wsoft-cuda-check-"))
+    out, log = folder / "newest.json", folder / "stderr.txt"
+    workers = max(1, min(4, (os.cpu_count() or 1) - 1))
+    with open(log, "wb") as err:
+        proc = subprocess.Popen([sys.executable, str(Path(__file__).with_name("cuda_check.py")), "newest", str(out), str(workers)],
+                                stdout=subprocess.DEVNULL, stderr=err)
+    config.stash[_BACKGROUND] = {"proc": proc, "out": out, "log": log}
+
+
+def background_result(config, timeout: float = 1800.0) -> dict | None:
+    """The result of the newest architecture's CUDA compile that the session started
+    (:func:`pytest_collection_modifyitems`), once it ends; None where none was started (the test
+    compiles in its own process then). A compile process that failed is an assertion naming its
+    exit code and its last lines; one that found no NVRTC skips the test with the reason."""
+    job = config.stash.get(_BACKGROUND, None)
+    if job is None:
+        return None
+    rc = job["proc"].wait(timeout=timeout)
+    if rc != 0 or not job["out"].is_file():
+        tail = job["log"].read_text(errors="replace").strip().splitlines()[-20:]
+        raise AssertionError(f"the CUDA compile process exited {rc}:\n" + "\n".join(tail))
+    result = json.loads(job["out"].read_text())
+    if "skip" in result:
+        pytest.skip(result["skip"])
+    return result
+
+
+def pytest_unconfigure(config):
+    job = config.stash.get(_BACKGROUND, None)
+    if job is not None and job["proc"].poll() is None:  # the session ended before its test read it
+        job["proc"].kill()
+        job["proc"].wait()
 
 
 def _devices():

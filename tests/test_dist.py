@@ -87,6 +87,7 @@ def test_bad_distributed_options_are_one_line_errors(dask_installed, tmp_path):
         assert p.returncode == 2 and p.stderr.count("\n") == 1 and says in p.stderr, (option, p.stderr)
 
 
+@pytest.mark.slow
 def test_local_cluster_rows_match_in_process_and_failures_are_rows(dask_installed, sweep, in_process, tmp_path, capsys):
     """--workers 2: the render rows equal the in-process run's; the first worker alone (MACHINE=1) times;
     the references land in --cache-dir; a row that raises and a row that kills its worker twice are
@@ -165,6 +166,7 @@ def wait_for(test, what: str, timeout: float = 60.0):
     raise AssertionError(f"waited {timeout:.0f} s for {what}")
 
 
+@pytest.mark.slow
 def test_real_cluster_survives_a_killed_worker_and_a_killed_driver(cluster, in_process, tmp_path):
     """Through ``dask scheduler`` + 2 ``dask worker``: kill the worker running the slow row (by its pid),
     then the driver; a second driver finishes the sweep: every row once, errors equal to in-process.

@@ -38,6 +38,7 @@ def test_vssm_parallel_rectangles_exact(device):
         assert mae < 0.001 and mae_pen < 0.015 and mx < 0.05
 
 
+@pytest.mark.slow
 def test_no_inf_or_nan_at_optimal_c_4096_contact():
     """At the optimal exponent with a 4096² map on the contact scene, for every SAT storage:
     the bases, the SATs and the output are finite (the float32 SAT's corner holds N² e^R)."""

@@ -75,3 +75,24 @@ def test_the_interiors_are_among_the_sweeps_frames(monkeypatch):
     swept = {c["scene"] for c in pareto.cases(False, ["cpu"])}
     assert {"room_lamp", "corridor_torch"} <= swept
     assert swept == set(usd_scenes.names()) - set(pareto.NOT_IN_PARETO)
+
+
+def test_settings_a_technique_refuses_are_left_out_and_reported(tmp_path):
+    """On a dome, skymaps's 256 directions of 2048² maps exceed its memory cap: that setting is left
+    out of the frame's graph (one refused setting does not fail the row), kept with its reason, and
+    the report names it; a quality knob on the map size itself does not repeat a setting."""
+    from wsoft.bench.harness import load
+
+    scene = load("dome_uniform")
+    refused: list = []
+    got = pareto.settings(scene, scene.lights[0], [1024, 2048], False, refused)
+    sky = [p for t, p in got if t == "skymaps"]
+    assert {"shadow_map_size": 2048, "directions": 256} not in sky and {"shadow_map_size": 2048, "directions": 16} in sky
+    assert len(got) == len(set((t, tuple(sorted(p.items()))) for t, p in got))
+    assert refused == [{"technique": "skymaps", "params": {"shadow_map_size": 2048, "directions": 256},
+                        "reason": refused[0]["reason"]}] and "exceeds" in refused[0]["reason"]
+    row = _row("contact", 500)
+    row["refused_settings"] = refused
+    md = tmp_path / "pareto.md"
+    pareto.report([row], md, {"quick": False, "command": "wsoft bench pareto", "stem": "pareto"})
+    assert "left out because the technique's own parameters refuse them (not measured): `skymaps` directions=256, shadow_map_size=2048" in md.read_text()

@@ -283,6 +283,7 @@ def test_timed_rounds_alternate_over_the_rows(tmp_path, monkeypatch):
     write(f, rows)
     seen = []
     monkeypatch.setattr(regress_rounds, "time_once", lambda case: seen.append(case["technique"]) or (10.0 * len(seen), 5.0 * len(seen)))
+    monkeypatch.setattr(regress_rounds, "host_once", lambda: (30.0, 20.0))
     assert regress_rounds.time_rounds(f, {r["key"] for r in rows}, rounds=3) == 2
     assert seen == ["pcf", "pcss", "pcf", "pcss", "pcss", "pcf", "pcf", "pcss"]  # warm-up, round 1, round 2 reversed, round 3
     kept = [json.loads(line) for line in f.read_text().splitlines()]
@@ -292,14 +293,18 @@ def test_timed_rounds_alternate_over_the_rows(tmp_path, monkeypatch):
     m = flatten(kept[0])
     assert m["pcf.frame_ms"].samples == [30.0, 60.0, 70.0] and "pcf.frame_ms#2" not in m  # the rounds stand for timings_ms_runs
     assert m["pcf.frame_cpu_ms"].samples == [15.0, 30.0, 35.0]
+    assert kept[0]["host_cpu_ms_rounds"] == [20.0] * 3 and kept[0]["host_ms_rounds"] == [30.0] * 3  # the host workload before each round
+    assert m["pcf.frame_cpu_host_ms"].samples == [7.5, 15.0, 17.5]  # the CPU rounds in 10 ms host units
+    assert not any(n.startswith("pcf.host") for n in m)  # the host's own rounds are no metric of the row
     assert regress_rounds.time_rounds(f, {r["key"] for r in rows}, rounds=0) == 0
     with pytest.raises(ParameterError, match="--rounds -1"):
         regress.check_rounds(-1)
 
 
 def test_the_timer_picks_cpu_or_wall_rounds(tmp_path):
-    """With CPU rounds a row's wall-clock rounds are not judged (--timer cpu, the default), and the
-    other way round with --timer wall; a time with no counterpart is judged either way."""
+    """With CPU rounds a row's wall-clock rounds are not judged (--timer cpu, and the default host
+    timer where a row has no host rounds), and the other way round with --timer wall; a time with
+    no counterpart is judged either way."""
     from wsoft.bench.regress_rounds import judged_time
 
     old, new = base_rows(), base_rows()
@@ -323,3 +328,30 @@ def test_the_timer_picks_cpu_or_wall_rounds(tmp_path):
     assert [n for n in sorted(names) if judged_time(n, names, "wall")] == ["esm.frame_ms", "pcf.frame_ms"]
     with pytest.raises(ParameterError, match="--timer gpu"):
         judged_time("pcf.frame_ms", names, "gpu")
+    names |= {"pcf.frame_cpu_host_ms"}
+    assert [n for n in sorted(names) if judged_time(n, names, "host")] == ["esm.frame_ms", "pcf.frame_cpu_host_ms"]
+    assert [n for n in sorted(names) if judged_time(n, names, "cpu")] == ["esm.frame_ms", "pcf.frame_cpu_ms"]
+
+
+def test_the_host_timer_cancels_the_host_and_keeps_the_code(tmp_path):
+    """--timer host: every row's CPU time 30 % longer with the host workload 30 % longer too (a slower
+    host) passes; one row 20 % slower while the host workload is unchanged (the code) fails."""
+    from wsoft.bench.regress_rounds import host_once
+
+    wall, cpu = host_once()  # the workload itself: a positive time on this host
+    assert wall > 0.0 and cpu > 0.0
+    old, new = base_rows(), base_rows()
+    for r in old + new:
+        if "timings_ms_runs" in r:
+            r["frame_ms_rounds"], r["frame_cpu_ms_rounds"] = list(ROUNDS), [t / 2 for t in ROUNDS]
+            r["host_cpu_ms_rounds"], r["host_ms_rounds"] = [10.0 + 0.1 * i for i in range(len(ROUNDS))], [12.0] * len(ROUNDS)
+    for r in new:
+        if "frame_cpu_ms_rounds" in r:
+            r["frame_cpu_ms_rounds"] = [t * 1.3 for t in r["frame_cpu_ms_rounds"]]
+            r["host_cpu_ms_rounds"] = [t * 1.3 for t in r["host_cpu_ms_rounds"]]
+    assert gate(tmp_path, old, new, "--timer", "cpu")[0] == 1  # the CPU timer sees every row slower
+    rc, text = gate(tmp_path, old, new)  # the host timer, the default
+    assert rc == 0 and "host workload" in text
+    new[0]["host_cpu_ms_rounds"] = [t / 1.3 for t in new[0]["host_cpu_ms_rounds"]]  # that row's host as before: its code 30 % slower
+    rc, text = gate(tmp_path, old, new, "--timer", "host")
+    assert rc == 1 and "| pcf.frame_cpu_host_ms |" in text

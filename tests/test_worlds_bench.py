@@ -79,6 +79,10 @@ def _frame_row(scene, techs):
                     "counters": {"splits": [0.1, 10.0, 100.0], "texel_size": [0.01, 0.1], "partition": "sdsm", "stable": True},
                     "memory": {"cascade_bytes": 8 << 20}, "warnings": [],
                     "split_band": {"band_pixels": 900, "away_pixels": 9000, "band_mae": 0.02, "away_mae": 0.01, "ratio": 2.0}})
+    if "pcss" in techs:
+        ent.append({"technique": "pcss", "label": "pcss(shadow_map_size=2048)", "params": {"shadow_map_size": 2048}, "frame_ms": 40.0,
+                    "error": {"mae_penumbra": 0.08, "mae": 0.02}, "counters": {}, "memory": {"map_bytes": 16 << 20}, "warnings": [],
+                    "split_band": {"band_pixels": 900, "away_pixels": 9000, "band_mae": 0.03, "away_mae": 0.02, "ratio": 1.5}})
     if "vsmap" in techs:
         ent.append({"technique": "vsmap", "label": "vsmap", "params": {}, "frame_ms": 80.0, "error": {"mae_penumbra": 0.2, "mae": 0.02},
                     "counters": {"requested": 300, "rendered": 300, "reused": 0, "dense_pages": 12 * 16384, "levels": 12},
@@ -89,7 +93,8 @@ def _frame_row(scene, techs):
 
 def test_report_states_the_targets_and_the_missing_techniques(tmp_path, monkeypatch):
     """With smrt and vsmap unregistered the report names them and still reports csm's rows: csm
-    reaches 0.05 faster than the reference (yes), its band ratio 2.0 misses 1.5 (no)."""
+    reaches 0.05 faster than the reference (yes), its band ratio 2.0 misses 1.5 (no), and pcss on the
+    same band and away pixels (no splits) is its control."""
     import wsoft.techniques as T
 
     for name in ("smrt", "vsmap"):
@@ -97,13 +102,15 @@ def test_report_states_the_targets_and_the_missing_techniques(tmp_path, monkeypa
             monkeypatch.delitem(T.TECHNIQUES, name)
     assert worlds.registered()[1] == ["vsmap", "smrt"]
     md = tmp_path / "worlds.md"
-    rows = [_frame_row("open_world", ("csm", "vsmap"))]
+    rows = [_frame_row("open_world", ("csm", "pcss", "vsmap"))]
     worlds_report.report(rows, md, {"quick": False, "command": "wsoft bench worlds", "stem": "worlds", "out_dir": tmp_path})
     text = md.read_text()
     assert "Not registered in this process, so not measured: `vsmap`, `smrt`" in text
     assert "`WSOFT_WORLDS=cpu wsoft bench worlds`" in text
     assert "| csm: 50 ms at 0.0450; reference 16 spp 200 ms at 0.0400 | yes |" in text
     assert "= 2.00 | no |" in text
+    assert "| (control) the same band and away pixels in pcss(shadow_map_size=2048), one map without splits | open_world | " \
+           "band MAE 0.0300 / away 0.0200 = 1.50: csm's ratio is 1.33x the control's | - |" in text
     assert "Warp's scalar CPU backend" in text
     assert (tmp_path / "images" / "worlds" / "open_world-Sun-mae.png").is_file()
 

@@ -18,6 +18,7 @@ table from the classes.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import importlib
 import pkgutil
 import warnings
@@ -28,6 +29,7 @@ from wsoft.techniques.base import LIGHT_MAP_KINDS, PassSpec, Quality, Technique,
 ENTRY_POINT_GROUP = "wsoft.techniques"
 _NOT_TECHNIQUES = frozenset({"base"})  # modules of this package that hold no technique
 _TECHNIQUES: dict[str, type[Technique]] | None = None
+_ENTRY_POINTS: list | None = None  # the plugins' entry points as read from the installed metadata (plugin_entry_points)
 
 
 class PluginWarning(UserWarning):
@@ -36,14 +38,24 @@ class PluginWarning(UserWarning):
 
 def bundled_names() -> list[str]:
     """The bundled techniques' names: the modules and packages of ``wsoft.techniques`` (not imported)."""
-    return sorted(m.name for m in pkgutil.iter_modules(__path__) if not m.name.startswith("_") and m.name not in _NOT_TECHNIQUES)
+    return list(_bundled())
+
+
+@functools.cache
+def _bundled() -> tuple[str, ...]:
+    return tuple(sorted(m.name for m in pkgutil.iter_modules(__path__) if not m.name.startswith("_") and m.name not in _NOT_TECHNIQUES))
 
 
 def plugin_entry_points() -> list:
-    """The installed entry points of :data:`ENTRY_POINT_GROUP` (read from the packages' metadata, not loaded)."""
-    from importlib.metadata import entry_points
+    """The installed entry points of :data:`ENTRY_POINT_GROUP` (read from the packages' metadata, not
+    loaded): read once a process, since every installed distribution's metadata is scanned for them;
+    :func:`reload_plugins` reads them again."""
+    global _ENTRY_POINTS
+    if _ENTRY_POINTS is None:
+        from importlib.metadata import entry_points
 
-    return sorted(entry_points(group=ENTRY_POINT_GROUP), key=lambda ep: ep.name)
+        _ENTRY_POINTS = sorted(entry_points(group=ENTRY_POINT_GROUP), key=lambda ep: ep.name)
+    return list(_ENTRY_POINTS)
 
 
 def names() -> tuple[str, ...]:
@@ -123,8 +135,10 @@ def _techniques() -> dict[str, type[Technique]]:
 def reload_plugins() -> dict[str, type[Technique]]:
     """Look up the installed plugins again (after one was installed or removed in a running
     process): ``TECHNIQUES`` (the same dict) then holds the bundled techniques and the plugins this lookup finds."""
+    global _ENTRY_POINTS
     techniques = _techniques()
     importlib.invalidate_caches()
+    _ENTRY_POINTS = None
     bundled = {n: techniques[n] for n in bundled_names()}
     techniques.clear()
     techniques.update({**bundled, **_load_plugins(bundled)})
