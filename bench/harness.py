@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from wsoft.bench.regress_rounds import DEFAULT_TIMER
+from wsoft.bench.regress_stats import DEFAULT_TIMER
 
 SWEEPS = {"foundation": "wsoft.bench.foundation", "filtered": "wsoft.bench.filtered", "essm": "wsoft.bench.essm",
           "essm-table1": "wsoft.bench.essm_table1", "essm-table2": "wsoft.bench.essm_table2", "ssm": "wsoft.bench.ssm", "izb": "wsoft.bench.izb",

@@ -35,6 +35,8 @@ import json
 import platform
 from pathlib import Path
 
+from wsoft.bench.regress_stats import DEFAULT_TIMER
+
 # 16 against 16 reach p = 2 / C(32, 16) = 3.3e-9, far below any run's corrected level; fewer lose power: for rounds spread
 # by 15 % of their mean, a 20 % slowdown reaches p ~ 0.01 over 8 rounds against 8 and ~ 0.0002 over 16 (normal approximation)
 ROUNDS = 16
@@ -45,7 +47,6 @@ HOST_WALL_KEY = "host_ms_rounds"  # and its wall-clock time
 HOST_NOMINAL_MS = 10.0  # the host timer's unit: a round's CPU time on a host whose workload takes this long
 HOST_STEPS, HOST_THREADS = 256, 4096  # the host workload: about 14 ms of one core of the machine of docs/ci.md
 TIMERS = ("cpu", "host", "wall")
-DEFAULT_TIMER = "host"  # the gate's default (docs/ci.md: the proof's runs, where it caught the most slowdowns for as few false alarms)
 
 
 def timeable(row: dict) -> bool:

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 ALPHA = 0.05  # the chance of any time false alarm in one comparison of two runs (Šidák-corrected per comparison)
 Z = 3.0  # standard errors an accuracy change must exceed
 TIME_THRESHOLD = 0.10  # default: a slowdown counts from 10 % on
+DEFAULT_TIMER = "host"  # the time the gate judges by default (wsoft.bench.regress_rounds; docs/ci.md: the proof's runs)
 # the smallest change of each accuracy metric that counts (absolute, in the metric's units):
 # MAE in the penumbra: half of one 8-bit display step (1/255 = 0.0039), a shift no 8-bit image
 # shows on average over the penumbra; ꟻLIP (the frame's mean, on its 0-1 scale) and flicker (the
