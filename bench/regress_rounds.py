@@ -23,10 +23,10 @@ CPU time by the host workload's CPU time just before it (scaled to :data:`HOST_N
 that the host running slower or faster between two runs (its clocks, a neighbour on its caches)
 cancels, while wsoft's own code running slower does not (the host workload is none of its code);
 **wall** counts the time a user waits, parallel efficiency included, and is worth judging on a
-runner that runs nothing else. In
-the proof runs of ``docs/ci.md`` (``python -m wsoft.bench.regress_proof``, 2 cores, 1-minute load
-4-17) the baseline's 16 pcf rounds spread from 24 to 202 ms on the wall clock, and from 24 to 43 ms
-in CPU time.
+runner that runs nothing else. In the proof runs of ``docs/ci.md``
+(``python -m wsoft.bench.regress_proof``, 2 cores, 1-minute load 2.8-4.6) the baseline's 16 pcf
+rounds spread from 18 to 28 ms on the wall clock, from 11 to 17 ms in CPU time and from 8.1 to
+11.6 in host units.
 """
 
 from __future__ import annotations

@@ -1,9 +1,11 @@
-"""Shared fixtures: in-memory stages, devices, small render sizes, the command line in-process."""
+"""Shared fixtures: in-memory stages, devices, small render sizes, the command line in-process, and
+the quick mode's CUDA compile started in a process of its own when the session begins."""
 
 from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -53,7 +55,7 @@ def pytest_collection_modifyitems(config, items):
     with open(log, "wb") as err:
         proc = subprocess.Popen([sys.executable, str(Path(__file__).with_name("cuda_check.py")), "newest", str(out), str(workers)],
                                 stdout=subprocess.DEVNULL, stderr=err)
-    config.stash[_BACKGROUND] = {"proc": proc, "out": out, "log": log}
+    config.stash[_BACKGROUND] = {"proc": proc, "out": out, "log": log, "folder": folder}
 
 
 def background_result(config, timeout: float = 1800.0) -> dict | None:
@@ -76,9 +78,12 @@ def background_result(config, timeout: float = 1800.0) -> dict | None:
 
 def pytest_unconfigure(config):
     job = config.stash.get(_BACKGROUND, None)
-    if job is not None and job["proc"].poll() is None:  # the session ended before its test read it
+    if job is None:
+        return
+    if job["proc"].poll() is None:  # the session ended before its test read it
         job["proc"].kill()
         job["proc"].wait()
+    shutil.rmtree(job["folder"], ignore_errors=True)
 
 
 def _devices():
