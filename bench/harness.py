@@ -166,21 +166,33 @@ def ground_truth(name: str, ref: dict, light: str | None):
 
 
 def measure(name: str, techniques: list, *, device: str, width: int, height: int, light: str | None, truth=None, repeats: int = 3,
-            pixel_samples: int = 1):
+            pixel_samples: int = 1, once_over_ms: float | None = None):
     """Render ``techniques`` (a list as :func:`wsoft.render` takes) in one graph, with their error
     against ``truth`` (a GroundTruth) when given: once to warm up (kernel compiles), measuring the
     errors (:func:`wsoft.compare`: the metric passes, ꟻLIP included, run once), then ``repeats``
     times without them. Returns the FrameSet whose frames carry each technique's median run (its
     ``timings_ms_runs`` lists every run's total) and the warm-up's errors (the techniques are
-    deterministic: every run gives the same V)."""
+    deterministic: every run gives the same V). ``once_over_ms``: a technique whose warm-up frame
+    took longer is not rendered again; its frame is the warm-up's, ``timings_ms_runs`` that one
+    total and ``stats["timed_once"]`` true (a setting minutes a frame would hold a sweep for hours)."""
     import wsoft
 
     scene = load(name)
     kw = dict(width=width, height=height, light=first_light(name, light), device=device, pixel_samples=pixel_samples)
     first = wsoft.render(scene, list(techniques), **kw) if truth is None else wsoft.compare(scene, list(techniques), ground_truth=truth, **kw)
-    runs = [wsoft.render(scene, list(techniques), **kw) for _ in range(repeats)]
-    out = runs[0]
-    for label in out:
+    labels = list(first)
+    slow = {lb for lb in labels if once_over_ms is not None and first[lb].stats["timings_ms"]["total"] > once_over_ms}
+    again = [t for t, lb in zip(techniques, labels) if lb not in slow]
+    runs = [wsoft.render(scene, again, **kw) for _ in range(repeats)] if again else []
+    if slow:
+        first = _relabelled(first, runs)
+    out = runs[0] if runs else first
+    for label in slow:
+        fr = first[label]
+        fr.stats["timings_ms_runs"] = [fr.stats["timings_ms"]["total"]]
+        fr.stats["timed_once"] = True
+        out.frames[label] = fr
+    for label in [lb for lb in labels if lb not in slow]:
         totals = [r[label].stats["timings_ms"]["total"] for r in runs]
         med = runs[totals.index(statistics.median_low(totals))][label]
         med.stats["timings_ms_runs"] = totals
@@ -189,7 +201,18 @@ def measure(name: str, techniques: list, *, device: str, width: int, height: int
                 med.stats[k] = first[label].stats[k]
         med.error_maps = first[label].error_maps
         out.frames[label] = med
+    out.frames = {lb: out.frames[lb] for lb in labels}  # the order of ``techniques``
     return out
+
+
+def _relabelled(first, runs):
+    """``first`` as it is: a graph without some of its techniques labels the rest as the full graph
+    did (labels come from each technique's name and parameters, not its place), which this checks."""
+    if runs:
+        missing = [lb for lb in runs[0] if lb not in first.frames]
+        if missing:
+            raise RuntimeError(f"the repeated graph labels {missing} that the warm-up's graph lacks")
+    return first
 
 
 def measure_render(name: str, technique: str, params: dict, *, device: str, width: int, height: int, light: str | None, repeats: int = 3,

@@ -96,3 +96,34 @@ def test_settings_a_technique_refuses_are_left_out_and_reported(tmp_path):
     md = tmp_path / "pareto.md"
     pareto.report([row], md, {"quick": False, "command": "wsoft bench pareto", "stem": "pareto"})
     assert "left out because the technique's own parameters refuse them (not measured): `skymaps` directions=256, shadow_map_size=2048" in md.read_text()
+
+
+def test_a_setting_slower_than_the_cap_is_timed_by_its_warm_up_frame_alone(monkeypatch, tmp_path):
+    """``measure(once_over_ms=...)``: a setting whose warm-up frame exceeds the cap is not rendered
+    again (its frame is the warm-up's, one run, flagged), the others get their repeats; the frames
+    keep the order of the settings."""
+    import wsoft
+    from wsoft.bench import harness
+
+    graphs = []
+    real = wsoft.render
+
+    def counting(scene, techniques, **kw):
+        graphs.append([t for t, _ in techniques])
+        return real(scene, techniques, **kw)
+
+    monkeypatch.setattr(wsoft, "render", counting)
+    techs = [("pcf", {"shadow_map_size": 256}), ("reference", {"samples": 4, "seed": 1})]
+    fs = harness.measure("box_plane", techs, device="cpu", width=32, height=24, light=None, repeats=2, once_over_ms=-1.0)
+    assert graphs == [["pcf", "reference"]]  # the warm-up only: both over a cap below zero
+    assert all(f.stats["timed_once"] and len(f.stats["timings_ms_runs"]) == 1 for f in fs.values())
+    graphs.clear()
+    fs = harness.measure("box_plane", techs, device="cpu", width=32, height=24, light=None, repeats=2, once_over_ms=1e9)
+    assert graphs == [["pcf", "reference"]] * 3 and not any(f.stats.get("timed_once") for f in fs.values())
+    assert [f.stats["technique"] for f in fs.values()] == ["pcf", "reference"]
+    row = _row("contact", 500)
+    row["entries"][0]["timed_once"] = True
+    row["entries"][0]["frame_ms"] = 90_000.0
+    md = tmp_path / "pareto.md"
+    pareto.report([row], md, {"quick": False, "command": "wsoft bench pareto", "stem": "pareto"})
+    assert "Timed by their warm-up frame alone (a frame over 60 s, not repeated): contact/Light hard (90 s)." in md.read_text()
