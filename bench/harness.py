@@ -180,12 +180,10 @@ def measure(name: str, techniques: list, *, device: str, width: int, height: int
     scene = load(name)
     kw = dict(width=width, height=height, light=first_light(name, light), device=device, pixel_samples=pixel_samples)
     first = wsoft.render(scene, list(techniques), **kw) if truth is None else wsoft.compare(scene, list(techniques), ground_truth=truth, **kw)
-    labels = list(first)
+    labels = list(first)[: len(techniques)]  # the techniques' frames, in their order
     slow = {lb for lb in labels if once_over_ms is not None and first[lb].stats["timings_ms"]["total"] > once_over_ms}
     again = [t for t, lb in zip(techniques, labels) if lb not in slow]
-    runs = [wsoft.render(scene, again, **kw) for _ in range(repeats)] if again else []
-    if slow:
-        first = _relabelled(first, runs)
+    runs = [wsoft.render(scene, again, **kw) for _ in range(repeats)] if again else []  # labels: name and parameters, not place
     out = runs[0] if runs else first
     for label in slow:
         fr = first[label]
@@ -203,16 +201,6 @@ def measure(name: str, techniques: list, *, device: str, width: int, height: int
         out.frames[label] = med
     out.frames = {lb: out.frames[lb] for lb in labels}  # the order of ``techniques``
     return out
-
-
-def _relabelled(first, runs):
-    """``first`` as it is: a graph without some of its techniques labels the rest as the full graph
-    did (labels come from each technique's name and parameters, not its place), which this checks."""
-    if runs:
-        missing = [lb for lb in runs[0] if lb not in first.frames]
-        if missing:
-            raise RuntimeError(f"the repeated graph labels {missing} that the warm-up's graph lacks")
-    return first
 
 
 def measure_render(name: str, technique: str, params: dict, *, device: str, width: int, height: int, light: str | None, repeats: int = 3,
