@@ -62,7 +62,7 @@ import numpy as np
 import warp as wp
 
 from wsoft.accel.virtual_pages import UNMAPPED, VirtualMapGPU, level_texel, level_view, virtual_depth
-from wsoft.accel.virtual_passes import CYLINDER_MODEL, DISTANCE_REFUSAL, add_page_pass, cylinder_refusal, report_unmapped
+from wsoft.accel.virtual_passes import add_page_pass, report_unmapped
 from wsoft.lightspace.light import LightGPU, light_center_dir, light_point
 from wsoft.lightspace.samples import counter_draw, pixel_key, to_light_coords
 from wsoft.lightspace.view import ViewGPU, map_coords, receiver_tap_depth, view_dir, view_of
@@ -70,7 +70,8 @@ from wsoft.params import check_ranges
 from wsoft.parallel import launch_chunked
 from wsoft.raster.gbuffer import GBufferGPU
 from wsoft.scene.types import LIGHT_RECT
-from wsoft.techniques.base import PassSpec, Quality, Technique, Tolerance, check, param
+from wsoft.techniques._virtual import VirtualMapTechnique
+from wsoft.techniques.base import PassSpec, Quality, Tolerance, check, param
 
 
 @dataclass(frozen=True)
@@ -304,7 +305,7 @@ def lattice_step(n: int) -> int:
     return s
 
 
-class SMRT(Technique):
+class SMRT(VirtualMapTechnique):
     """Shadow-map ray tracing over a virtual shadow map."""
 
     name = "smrt"
@@ -319,19 +320,8 @@ class SMRT(Technique):
     # at its defaults the penumbra cap (0.03 rad) narrows box_plane's penumbra (the light spans about
     # 0.17 rad from the ground) to a line: a hard shadow's error (tests/test_smrt.py lifts the cap)
     tolerance = Tolerance(mae=0.012, mae_penumbra=0.38)
-    instancing_refusal = ""  # its pages are drawn by the shared rasterizer, instances included
     point_refusal = "a virtual map here is one perspective map a light; a point light needs six (use pcss or reference)"
     cube_refusal = "a virtual map here is one perspective map a light; receivers all around a light need a cube map (use pcss or reference)"
-    distance_refusal = DISTANCE_REFUSAL
-    cylinder_model = CYLINDER_MODEL
-
-    def bake_support(self) -> str | None:
-        if self.params.footprint > 0.0:
-            return None
-        return "smrt requests its pages at each pixel's footprint seen from the camera; a bake has no camera: set footprint= (world units)"
-
-    def supports(self, scene, light):
-        return cylinder_refusal(light) or super().supports(scene, light)
 
     def add_passes(self, ctx, light):
         p = self.params

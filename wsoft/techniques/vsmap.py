@@ -42,12 +42,13 @@ from dataclasses import dataclass
 import warp as wp
 
 from wsoft.accel.virtual_pages import UNMAPPED, VirtualMapGPU, level_texel, level_view, virtual_depth
-from wsoft.accel.virtual_passes import CYLINDER_MODEL, DISTANCE_REFUSAL, add_page_pass, cylinder_refusal, report_unmapped
+from wsoft.accel.virtual_passes import add_page_pass, report_unmapped
 from wsoft.lightspace.view import map_coords, receiver_tap_depth, view_dir, view_of
 from wsoft.params import check_ranges
 from wsoft.parallel import launch_chunked
 from wsoft.raster.gbuffer import GBufferGPU
-from wsoft.techniques.base import PassSpec, Quality, Technique, Tolerance, check, param
+from wsoft.techniques._virtual import VirtualMapTechnique
+from wsoft.techniques.base import PassSpec, Quality, Tolerance, check, param
 
 
 @dataclass(frozen=True)
@@ -126,7 +127,7 @@ def shade_vsmap(
     vis[i] = lit / float(side * side)
 
 
-class VSMap(Technique):
+class VSMap(VirtualMapTechnique):
     """Virtual shadow maps (clipmaps / mips in pages, a cached physical pool) with a PCF lookup."""
 
     name = "vsmap"
@@ -140,19 +141,8 @@ class VSMap(Technique):
     # the light's centre filtered over a 3-texel kernel: a hard shadow's penumbra error
     tolerance = Tolerance(mae=0.006, mae_penumbra=0.2)
     horizon = "centre"
-    instancing_refusal = ""  # its pages are drawn by the shared rasterizer, instances included
     point_refusal = "a virtual map here is one perspective map a light; a point light needs six (use pcf or pcss)"
     cube_refusal = "a virtual map here is one perspective map a light; receivers all around a light need a cube map (use pcf or pcss)"
-    distance_refusal = DISTANCE_REFUSAL
-    cylinder_model = CYLINDER_MODEL
-
-    def bake_support(self) -> str | None:
-        if self.params.footprint > 0.0:
-            return None
-        return "vsmap requests its pages at each pixel's footprint seen from the camera; a bake has no camera: set footprint= (world units)"
-
-    def supports(self, scene, light):
-        return cylinder_refusal(light) or super().supports(scene, light)
 
     def add_passes(self, ctx, light):
         p = self.params
